@@ -1,0 +1,39 @@
+"""gift_theory: the core of gift.
+
+The paper's ONN model M_s with the physical effects of CONTRACTS §2, Monte-Carlo
+objectives with standard errors, in-silico training and data sets. Subpackages hold the
+larger parts: :mod:`gift_theory.effects`, :mod:`gift_theory.data`,
+:mod:`gift_theory.training`.
+"""
+
+from ._arch import ACTIVATIONS as ACTIVATIONS
+from ._arch import Architecture as Architecture
+from ._errors import GiftInputError as GiftInputError
+from ._model import Forward as Forward
+from ._model import forward as forward
+from ._model import sample_noise as sample_noise
+from ._model import simulate as simulate
+from ._model import squared_error as squared_error
+from ._objective import Estimate as Estimate
+from ._objective import accuracy as accuracy
+from ._objective import estimate_from_samples as estimate_from_samples
+from ._objective import eval_from_outputs as eval_from_outputs
+from ._objective import objective as objective
+from ._objective import paired_difference as paired_difference
+from ._objective import per_input_loss as per_input_loss
+from ._params import Box as Box
+from ._params import Layer as Layer
+from ._params import arch_of as arch_of
+from ._params import check_params as check_params
+from ._params import flatten as flatten
+from ._params import init_params as init_params
+from ._params import params_from_arrays as params_from_arrays
+from ._params import params_to_arrays as params_to_arrays
+from ._params import project as project
+from .effects import EFFECT_NAMES as EFFECT_NAMES
+from .effects import Physics as Physics
+from .effects import awgn as awgn
+from .effects import make_effect as make_effect
+from .effects import parse_effect as parse_effect
+
+__version__ = "0.1.0"

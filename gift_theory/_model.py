@@ -1,0 +1,139 @@
+"""The ONN model M_s and its generalisation with physical effects.
+
+Paper eqs. def:matrices-Ai and def:matrix-AL; CONTRACTS §1-2::
+
+    a_0 = x + n_a0
+    u_l = W_l^eff a_{l-1}
+    z_l = g_l u_l + b_l + n_wl                  l = 1..L
+    a_l = D(sigma(z_l) + n_al)                  l = 1..L-1
+    M_s(x, w, N) = a_L = D(z_L)
+
+Randomness enters only through a dict of *standard* draws (unit variance; the law of
+the additive ones set by the physics), which the forward pass scales: additive noise is
+``s * xi``. So the output is a deterministic, differentiable function of
+``(params, physics parameters, x, draws)`` -- pathwise derivatives in s or any effect
+parameter are plain autodiff, and common random numbers are reusing the same draws.
+Everything is batched over leading axes: ``x`` of shape (..., d_0) broadcasts against
+draws of shape (batch..., d_l), e.g. x of shape (K1, 1, d_0) with draws of shape
+(K1, K2, d_l) gives the hierarchical K1 x K2 design without copying x.
+"""
+
+from __future__ import annotations
+
+import zlib
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ._arch import Architecture
+from .effects import Physics
+
+
+def _site_key(key: jax.Array, name: str) -> jax.Array:
+    """A subkey that depends only on the draw's name (stable when effects are added)."""
+    return jax.random.fold_in(key, zlib.crc32(name.encode()) & 0x7FFFFFFF)
+
+
+def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_shape=(), dtype=jnp.float32) -> dict:
+    """Standard draws for ``batch_shape`` shots: ``{name: array of shape batch_shape + event}``.
+
+    Additive sites (``a0``, ``w{l}``, ``a{l}``) follow the physics' noise law with unit
+    variance; every other draw is standard normal. Each name has its own subkey, so the
+    draws of a site do not change when other effects are added (common random numbers).
+    """
+    batch_shape = tuple(batch_shape)
+    out = {}
+    additive = set(_additive_names(arch)) if "awgn" in physics else set()
+    for name, event in physics.draws(arch).items():
+        k = _site_key(key, name)
+        shape = batch_shape + tuple(event)
+        out[name] = physics.standard(k, shape, dtype) if name in additive else jax.random.normal(k, shape, dtype)
+    return out
+
+
+def _additive_names(arch: Architecture):
+    from .effects.awgn import additive_sites
+    return additive_sites(arch).keys()
+
+
+class Forward(NamedTuple):
+    """Output of :func:`forward`.
+
+    y : (..., d_L) the output a_L = M_s(x, w, N)
+    taps : tuple of L arrays, a_1 .. a_L (each (..., d_l)); empty unless asked
+    pre : tuple of L arrays, the pre-activations z_1 .. z_L; empty unless asked
+    """
+
+    y: jax.Array
+    taps: tuple = ()
+    pre: tuple = ()
+
+
+def forward(params, x, noise: dict, physics: Physics, arch: Architecture, *, t=None,
+            taps: bool = False) -> Forward:
+    """One pass of the generative process for given standard draws.
+
+    Parameters
+    ----------
+    params : tuple of Layer (W_l of shape (d_l, d_{l-1}), b_l of shape (d_l,))
+    x : array of shape (..., d_0)
+    noise : dict from :func:`sample_noise` (shapes broadcast against x's batch axes)
+    physics : Physics
+    arch : Architecture (static)
+    t : None or array of shape (...,): normalised acquisition time of each shot
+    taps : also return every layer's output and pre-activation
+
+    Returns
+    -------
+    Forward
+    """
+    s = physics.s
+    sigma = arch.sigma
+    L = arch.depth
+    a = x + s * noise["a0"] if "a0" in noise else x
+    outs, pres = [], []
+    for l, (W, b) in enumerate(params, start=1):
+        W = physics.effective_weights(W, l)
+        u = a @ W.T
+        g = physics.gain(noise, l, t, u.shape)
+        z = (u if g is None else g * u) + b
+        if f"w{l}" in noise:
+            z = z + s * noise[f"w{l}"]
+        if l < L:
+            a = sigma(z)
+            if f"a{l}" in noise:
+                a = a + s * noise[f"a{l}"]
+        else:
+            a = z
+        a = physics.readout(a, noise, l)
+        if taps:
+            outs.append(a)
+            pres.append(z)
+    return Forward(a, tuple(outs), tuple(pres))
+
+
+def simulate(key: jax.Array, params, x, physics: Physics, arch: Architecture, shots: int = 1, *, t=None,
+             taps: bool = False) -> Forward:
+    """``shots`` independent noisy passes per input.
+
+    Parameters
+    ----------
+    key : PRNG key
+    x : (n, d_0)
+    shots : r
+    t : None or (n, r) acquisition times
+
+    Returns
+    -------
+    Forward with ``y`` of shape (n, r, d_L) and taps of shape (n, r, d_l).
+    """
+    x = jnp.asarray(x)
+    dtype = params[0].W.dtype
+    noise = sample_noise(key, arch, physics, (x.shape[0], shots), dtype)
+    return forward(params, x[:, None, :].astype(dtype), noise, physics, arch, t=t, taps=taps)
+
+
+def squared_error(y_pred, y):
+    """The loss (y - M)^2 summed over outputs; shape (...,)."""
+    return jnp.sum((y - y_pred) ** 2, axis=-1)

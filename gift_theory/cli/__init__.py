@@ -1,0 +1,1 @@
+"""The ``gift`` command: a thin shell that parses, calls the library, prints."""

@@ -1,0 +1,128 @@
+"""``gift``: the console entry point (CONTRACTS §4).
+
+Each subcommand lives in its own module ``gift_theory.cli._<name>`` with two functions::
+
+    add_arguments(parser)      # add the subcommand's options to an argparse parser
+    run(args) -> dict | int    # do the work; return the JSON object (or an exit code)
+
+and an optional ``render(result) -> str`` for the human-readable form. Only the module
+of the command that runs is imported, so ``gift --help`` stays fast. Every subcommand
+takes ``--json``: one JSON object on stdout and nothing else there; progress goes to
+stderr. Exit status: 0 done, 1 the work failed, 2 bad input -- one line, no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import os
+import sys
+
+from .._errors import GiftInputError
+
+#: subcommand -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("_demo", "the main job: train, fine-tune with GIFT and its rivals, print a table, draw a figure"),
+    "train": ("_train", "train an ONN in silico at noise level s0 (cached)"),
+    "finetune": ("_finetune", "fine-tune trained weights against a simulated chip (GIFT and rivals)"),
+    "bench": ("_bench", "benchmarks: estimator speed against the machine's matmul rate"),
+    "check": ("_check", "every claim of the paper as a computed verdict"),
+    "simulate": ("_simulate", "write a measurement file from a simulated chip"),
+    "compare": ("_compare", "compare a model with a measurement file"),
+    "diagnose": ("_diagnose", "find the physical effect the model is missing"),
+    "fit": ("_fit", "add effects to the model, fit them, report the error before and after"),
+    "figures": ("_figures", "regenerate the paper's figures (sweeps, then drawing)"),
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a bad argument as one line and exit status 2."""
+
+    def error(self, message):
+        raise GiftInputError(f"{self.prog}: {message}")
+
+
+def _jsonable(obj):
+    """Plain JSON types; NaN/inf become null (JSON has no NaN)."""
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.generic,)):
+        obj = obj.item()
+    if hasattr(obj, "shape") and hasattr(obj, "tolist"):
+        return _jsonable(np.asarray(obj).tolist())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def emit(result, as_json: bool, render=None) -> None:
+    """Print ``result``: one JSON object on stdout, or its human form."""
+    if as_json:
+        sys.stdout.write(json.dumps(_jsonable(result)) + "\n")
+    elif render is not None:
+        sys.stdout.write(render(result).rstrip("\n") + "\n")
+    else:
+        sys.stdout.write(json.dumps(_jsonable(result), indent=2) + "\n")
+    sys.stdout.flush()
+
+
+def _top_help() -> str:
+    width = max(len(n) for n in COMMANDS)
+    lines = ["usage: gift COMMAND [options]   (gift COMMAND --help for a command's options)", "",
+             "Verify, reproduce and use GIFT (in situ fine-tuning of in silico trained ONNs).", "", "commands:"]
+    lines += [f"  {n:<{width}}  {h}" for n, (_, h) in COMMANDS.items()]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = os.environ.get("GIFT_DEBUG") == "1"
+    if not argv or argv[0] in ("-h", "--help"):
+        sys.stdout.write(_top_help())
+        return 0
+    if argv[0] == "--version":
+        from .. import __version__
+        sys.stdout.write(f"gift {__version__}\n")
+        return 0
+    name = argv[0]
+    try:
+        if name not in COMMANDS:
+            raise GiftInputError(f"gift: unknown command {name!r}; commands: {', '.join(COMMANDS)}")
+        module_name, help_text = COMMANDS[name]
+        try:
+            module = importlib.import_module(f"gift_theory.cli.{module_name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"gift_theory.cli.{module_name}":
+                sys.stderr.write(f"gift {name}: not available in this version\n")
+                return 1
+            raise
+        parser = _Parser(prog=f"gift {name}", description=help_text)
+        parser.add_argument("--json", action="store_true", help="print one JSON object on stdout, nothing else")
+        module.add_arguments(parser)
+        args = parser.parse_args(argv[1:])
+        result = module.run(args)
+        if isinstance(result, int):
+            return result
+        emit(result, args.json, getattr(module, "render", None))
+        return 0
+    except GiftInputError as exc:
+        sys.stderr.write(f"{exc}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write("gift: interrupted\n")
+        return 130
+    except Exception as exc:  # the work failed: one line unless debugging
+        if debug:
+            raise
+        sys.stderr.write(f"gift {name}: failed: {type(exc).__name__}: {exc} (GIFT_DEBUG=1 shows the traceback)\n")
+        return 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

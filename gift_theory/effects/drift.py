@@ -1,0 +1,26 @@
+"""``drift``: gain g_l = 1 + r t, t in [0, 1] the shot's normalised acquisition time.
+Without acquisition times t = 0 and the effect is silent."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from ._base import Effect, register
+
+
+@register
+class Drift(Effect):
+    r: float | jax.Array = 0.05
+
+    name = "drift"
+    params = ("r",)
+    defaults = {"r": 0.05}
+    stage = "gain"
+    order = 2
+    description = "gain 1 + r t drifting linearly with the acquisition time t"
+
+    def gain(self, noise, layer, t, shape):
+        if t is None:
+            return 1.0
+        return 1.0 + self.r * jnp.asarray(t)[..., None]

@@ -1,0 +1,21 @@
+"""``laplace``: the additive noise n_* is Laplace with standard deviation s (scale
+s / sqrt(2)) instead of Gaussian. No parameter of its own: it uses ``awgn``'s s."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from ._base import Effect, register
+
+
+@register
+class Laplace(Effect):
+    name = "laplace"
+    stage = "law"
+    description = "additive noise drawn from a Laplace law with standard deviation s"
+
+    @staticmethod
+    def standard(key, shape, dtype):
+        """Unit-variance Laplace draws."""
+        return jax.random.laplace(key, shape, dtype) / jnp.sqrt(2.0).astype(dtype)

@@ -1,0 +1,26 @@
+"""``multiplicative``: gain g_l = 1 + m xi, one xi per neuron per shot (phase-shifter
+or modulator noise scaling the optical weighted sum)."""
+
+from __future__ import annotations
+
+import jax
+
+from ._base import Effect, register
+
+
+@register
+class Multiplicative(Effect):
+    m: float | jax.Array = 0.05
+
+    name = "multiplicative"
+    params = ("m",)
+    bounds = {"m": (0.0, float("inf"))}
+    defaults = {"m": 0.05}
+    stage = "gain"
+    description = "per-neuron per-shot gain 1 + m xi on the weighted sum"
+
+    def draws(self, arch):
+        return {f"mult{l}": (arch.widths[l],) for l in range(1, arch.depth + 1)}
+
+    def gain(self, noise, layer, t, shape):
+        return 1.0 + self.m * noise[f"mult{layer}"]

@@ -1,0 +1,24 @@
+"""``saturation``: the readout maps v to v_max tanh(v / v_max) (first link of D)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from ._base import Effect, register
+
+
+@register
+class Saturation(Effect):
+    v_max: float | jax.Array = 2.0
+
+    name = "saturation"
+    params = ("v_max",)
+    bounds = {"v_max": (1e-12, float("inf"))}
+    defaults = {"v_max": 2.0}
+    stage = "readout"
+    order = 0
+    description = "soft readout saturation v_max tanh(v / v_max)"
+
+    def readout(self, v, noise, layer):
+        return self.v_max * jnp.tanh(v / self.v_max)

@@ -1,0 +1,23 @@
+"""``uniform``: the additive noise n_* is Uniform(-sqrt(3) s, sqrt(3) s) (standard
+deviation s). No parameter of its own: it uses ``awgn``'s s."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from ._base import Effect, register
+
+
+@register
+class Uniform(Effect):
+    name = "uniform"
+    stage = "law"
+    order = 1
+    description = "additive noise drawn uniformly with standard deviation s"
+
+    @staticmethod
+    def standard(key, shape, dtype):
+        """Unit-variance uniform draws on (-sqrt 3, sqrt 3)."""
+        r = jnp.sqrt(3.0).astype(dtype)
+        return jax.random.uniform(key, shape, dtype, -r, r)

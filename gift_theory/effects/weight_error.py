@@ -1,0 +1,33 @@
+"""``weight_error``: W_eff = W + E_l, E_l iid N(0, e^2) drawn once per device and fixed
+(fabrication / mapping error). The device is named by ``seed`` (static): the same seed
+is the same device, another seed another device."""
+
+from __future__ import annotations
+
+import jax
+
+from ._base import Effect, register
+
+
+def device_draw(seed: int, layer: int, shape, dtype):
+    """The standard-normal E_l / e of device ``seed`` (fixed for the device's life)."""
+    key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), 1_000_003 + layer)
+    return jax.random.normal(key, shape, dtype)
+
+
+@register
+class WeightError(Effect):
+    e: float | jax.Array = 0.02
+    seed: int = 0
+
+    name = "weight_error"
+    params = ("e",)
+    bounds = {"e": (0.0, float("inf"))}
+    defaults = {"e": 0.02}
+    stage = "weights"
+    order = 1
+    static_fields = ("seed",)
+    description = "a fixed per-device error E ~ N(0, e^2) added to every weight"
+
+    def weights(self, W, layer):
+        return W + self.e * device_draw(self.seed, layer, W.shape, W.dtype)

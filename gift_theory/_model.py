@@ -21,6 +21,7 @@ draws of shape (batch..., d_l), e.g. x of shape (K1, 1, d_0) with draws of shape
 from __future__ import annotations
 
 import zlib
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -115,7 +116,7 @@ def forward(params, x, noise: dict, physics: Physics, arch: Architecture, *, t=N
 
 def simulate(key: jax.Array, params, x, physics: Physics, arch: Architecture, shots: int = 1, *, t=None,
              taps: bool = False) -> Forward:
-    """``shots`` independent noisy passes per input.
+    """``shots`` independent noisy passes per input (jitted).
 
     Parameters
     ----------
@@ -128,7 +129,12 @@ def simulate(key: jax.Array, params, x, physics: Physics, arch: Architecture, sh
     -------
     Forward with ``y`` of shape (n, r, d_L) and taps of shape (n, r, d_l).
     """
-    x = jnp.asarray(x)
+    return _simulate(key, params, jnp.asarray(x), physics, arch, int(shots), None if t is None else jnp.asarray(t),
+                     bool(taps))
+
+
+@partial(jax.jit, static_argnames=("arch", "shots", "taps"))
+def _simulate(key, params, x, physics, arch, shots, t, taps):
     dtype = params[0].W.dtype
     noise = sample_noise(key, arch, physics, (x.shape[0], shots), dtype)
     return forward(params, x[:, None, :].astype(dtype), noise, physics, arch, t=t, taps=taps)

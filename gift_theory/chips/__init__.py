@@ -1,0 +1,11 @@
+"""Devices: the Chip protocol, the shot ledger, and a simulated chip with hidden physics.
+
+See ``docs/hardware.md`` for wrapping real hardware in the same protocol.
+"""
+
+from ._base import BudgetExceeded as BudgetExceeded
+from ._base import Chip as Chip
+from ._base import Ledger as Ledger
+from ._base import Measurement as Measurement
+from ._base import chip_eval as chip_eval
+from ._simulated import SimulatedChip as SimulatedChip

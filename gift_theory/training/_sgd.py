@@ -14,6 +14,7 @@ inner loops as ``jax.lax.scan`` under ``jit``.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import sys
 import time
 from functools import partial
@@ -107,7 +108,9 @@ def _epoch(params, opt_state, key, x, y, physics, arch, batch_size, tx):
     return params, opt_state, jnp.mean(losses)
 
 
+@functools.lru_cache(maxsize=64)
 def _transform(config: TrainConfig):
+    """The optax transform of ``config`` (cached: the same object keeps the compiled epoch)."""
     if config.method == "minibatch":
         return optax.sgd(config.lr, momentum=config.momentum or None)
     name = config.optimizer

@@ -37,3 +37,18 @@ from .effects import make_effect as make_effect
 from .effects import parse_effect as parse_effect
 
 __version__ = "0.1.0"
+
+#: subpackages, imported on first use (``gt.estimators``, ``gt.lab``, ...) to keep start-up fast
+_SUBPACKAGES = ("chips", "data", "effects", "estimators", "finetune", "lab", "training")
+
+
+def __getattr__(name):
+    if name in _SUBPACKAGES:
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + list(_SUBPACKAGES))

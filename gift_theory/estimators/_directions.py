@@ -157,7 +157,8 @@ def rbg_key(key):
     machine, the RngBitGenerator ones in ~2 s; same key, same draws.
     """
     if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        if jax.random.key_impl(key).name == "rbg":
+        impl = jax.random.key_impl(key)
+        if str(getattr(impl, "name", impl)) == "rbg":
             return key
         data = jax.random.key_data(key)
     else:

@@ -1,0 +1,171 @@
+"""Algorithm 1 (GIFT) as printed, and the repaired line search used by ``gift`` and the
+direction rivals.
+
+Printed (alg:GIFT): L^[0] = Eval(w0); repeat w^[i+1,+-] = w^[i] +- eta D^[0], evaluate both,
+i <- i + 1, until L^[i,+] v L^[i,-] >= L^[0] (v = max: stop as soon as either side is no
+better than L^[0]); return the argmin of Eval over {w^[c,.] : c in [i]} -- w0 is not a
+candidate. The iterate w^[i] is never defined for i >= 1; we read the line as the ray
+w^[c,+-] = w0 +- c eta D^[0].
+
+Repaired (``paired_line_search``): a unit direction u; the loss change along it is
+predicted to second order, dJ(a) = J(w0) - J(w0 + a u) ~ a C1 - a^2 C2 / 2, with C2 =
+u^T H u from the model (in silico, free) and C1 measured on the chip from a symmetric
+pair of probes; eta = argmax = C1 / C2, refined by a weighted least-squares fit of
+(C1, C2) to every point measured. All chip evaluations use the same inputs, so each
+comparison with w0 is a paired difference over inputs (the input-to-input spread cancels).
+The best measured point is then confirmed on fresh shots against a fresh Eval of w0 and
+accepted only if the paired improvement is significant (z > z_accept); otherwise w0 is
+returned -- no winner's curse, never worse than w0 except with small probability.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._objective import per_input_loss
+from ..estimators import rbg_key
+from ._tree import axpy, norm, unit, vdot
+
+
+def _mean_se(d):
+    d = np.asarray(d, np.float64)
+    return float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.shape[0]))
+
+
+def gift_printed(problem, D0, eta: float, *, max_iter: int = 1000):
+    """Algorithm 1 exactly as printed (ray reading, see module docstring).
+
+    Stops also when the chip budget cannot pay for the next pair of evaluations.
+
+    Returns
+    -------
+    params, info (iterations, the Eval values, whether the budget stopped it)
+    """
+    w0 = problem.w0
+    L0 = float(np.mean(problem.eval_chip(w0)))
+    cands, i, stopped_by_budget = [], 0, False
+    while i < max_iter:
+        if problem.evaluations_left() < 2 - 1e-9:
+            stopped_by_budget = True
+            break
+        wp = axpy((i + 1) * eta, D0, w0)
+        wm = axpy(-(i + 1) * eta, D0, w0)
+        Lp = float(np.mean(problem.eval_chip(wp)))
+        Lm = float(np.mean(problem.eval_chip(wm)))
+        cands += [(Lp, wp, +(i + 1)), (Lm, wm, -(i + 1))]
+        i += 1
+        if max(Lp, Lm) >= L0:  # the printed stopping rule L^[i,+] v L^[i,-] >= L^[0]
+            break
+    if not cands:  # no budget for even one pair: the printed algorithm cannot run
+        return w0, {"iterations": 0, "L0": L0, "stopped_by_budget": True, "chosen_step": 0}
+    L, w, c = min(cands, key=lambda t: t[0])  # argmin over c in [i]: w0 is not a candidate
+    return w, {"iterations": i, "L0": L0, "evals": [(c_, l_) for l_, _, c_ in cands], "chosen_step": c,
+               "eta": eta, "stopped_by_budget": stopped_by_budget}
+
+
+def pair_se_model(problem, *, seed: int = 0) -> float:
+    """In-silico standard error of a paired Eval difference at w0 (two fresh shot sets, same inputs)."""
+    k = rbg_key(jax.random.fold_in(problem.key, 500 + seed))
+    la = per_input_loss(jax.random.fold_in(k, 0), problem.w0, problem.x_ft, problem.y_ft, problem.model,
+                        problem.arch, problem.K2)
+    lb = per_input_loss(jax.random.fold_in(k, 1), problem.w0, problem.x_ft, problem.y_ft, problem.model,
+                        problem.arch, problem.K2)
+    return _mean_se(la - lb)[1]
+
+
+def curvature_model(problem, u, *, K2: int = 8) -> float:
+    """u^T Hess_w J_s0(w0) u in silico."""
+    from ._directions import hvp_operator
+    return float(vdot(u, hvp_operator(problem, K2=K2)(u)))
+
+
+def fit_quadratic(alphas, means, ses, C2_prior=None):
+    """Weighted least squares of dJ(a) = a C1 - a^2 C2 / 2 on measured points (a != 0).
+
+    Falls back to C2 = ``C2_prior`` (fitting C1 only) when the fitted curvature is not positive.
+    """
+    a = np.asarray(alphas, np.float64)
+    m = np.asarray(means, np.float64)
+    w = 1.0 / np.maximum(np.asarray(ses, np.float64), 1e-12) ** 2
+    A = np.stack([a, -0.5 * a * a], axis=1)
+    if len(a) >= 2:
+        coef = np.linalg.lstsq(A * np.sqrt(w)[:, None], m * np.sqrt(w), rcond=None)[0]
+        if coef[1] > 0 or C2_prior is None:
+            return float(coef[0]), float(coef[1])
+    C2 = float(C2_prior)
+    C1 = float(np.sum(w * a * (m + 0.5 * a * a * C2)) / np.sum(w * a * a))
+    return C1, C2
+
+
+def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int = 4, z_accept: float = 2.5,
+                       confirm_rounds: int = 4, probe_z: float = 4.0):
+    """The repaired GIFT line search along ``direction`` (see module docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+    direction : pytree like the weights (normalised here)
+    C2 : u^T H u of the unit direction (default: in silico at s0)
+    se_pair : standard error of one paired Eval difference (default: in silico at s0)
+    refine : fitted steps after the two probes
+    z_accept : the confirmation must show improvement / se > z_accept
+    confirm_rounds : at most this many fresh (w0, candidate) pairs, stopping once accepted
+    probe_z : probes at +-a with a^2 C2 / 2 = probe_z * se_pair (a measurable rise)
+
+    Returns
+    -------
+    params, info with the measured curve (alphas, observed dJ and se) and the prediction.
+    """
+    u, u_norm = unit(direction)
+    w0 = problem.w0
+    C2_model = curvature_model(problem, u) if C2 is None else float(C2)
+    se_pair = pair_se_model(problem) if se_pair is None else float(se_pair)
+    a = math.sqrt(2 * probe_z * se_pair / C2_model) if C2_model > 0 else 0.01 * float(norm(w0))
+    info = {"C2_model": C2_model, "se_pair_model": se_pair, "probe": a, "accepted": False}
+    if problem.evaluations_left() < 3 - 1e-9:
+        info["reason"] = "budget below 3 evaluations"
+        return w0, info
+    l0 = problem.eval_chip(w0)
+    alphas, means, ses = [], [], []
+
+    def measure(alpha):
+        d = l0 - problem.eval_chip(axpy(alpha, u, w0))
+        m, s = _mean_se(d)
+        alphas.append(float(alpha))
+        means.append(m)
+        ses.append(s)
+
+    measure(a)
+    measure(-a)
+    C1, C2_fit = fit_quadratic(alphas, means, ses, C2_model)
+    for _ in range(refine):
+        if problem.evaluations_left() < 3 - 1e-9:  # keep two for the confirmation
+            break
+        C1, C2_fit = fit_quadratic(alphas, means, ses, C2_model)
+        span = max(abs(x) for x in alphas)
+        alpha = float(np.clip(C1 / C2_fit, -2 * span, 2 * span))  # trust region: at most double the span
+        if min(abs(alpha - x) for x in alphas) < 0.05 * span:
+            break  # the fit asks for a point already measured
+        measure(alpha)
+    C1, C2_fit = fit_quadratic(alphas, means, ses, C2_model)
+    best = int(np.argmax(means))
+    alpha_best = alphas[best]
+    info.update({"alphas": alphas, "observed": means, "observed_se": ses, "C1": C1, "C2_fit": C2_fit,
+                 "alpha_predicted": C1 / C2_fit if C2_fit > 0 else None, "alpha_best": alpha_best,
+                 "direction_norm": float(u_norm)})
+    w_best = axpy(alpha_best, u, w0)
+    diffs = []
+    for _ in range(confirm_rounds):
+        if problem.evaluations_left() < 2 - 1e-9 or means[best] <= 0:
+            break
+        diffs.append(problem.eval_chip(w0) - problem.eval_chip(w_best))
+        m, s = _mean_se(np.mean(diffs, axis=0))
+        info["confirm_mean"], info["confirm_se"] = m, s
+        if m > z_accept * s:
+            info["accepted"] = True
+            return w_best, info
+    return w0, info

@@ -1,0 +1,151 @@
+"""The rivals of GIFT under the same chip budget: SPSA, hybrid physics-aware training (PAT),
+identify-then-retrain, and the retrain oracle."""
+
+from __future__ import annotations
+
+import math
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .._model import forward, sample_noise, squared_error
+from .._params import flatten
+from ..effects import Physics, awgn
+from ..estimators import rbg_key
+from ..training import TrainConfig, train
+
+#: warm-start retraining from w0 (oracle and identify-retrain use the same recipe)
+RETRAIN = TrainConfig(method="minibatch", epochs=20, lr=0.01, momentum=0.9, batch_size=32)
+
+
+def retrain(problem, physics: Physics, *, config: TrainConfig = RETRAIN, seed: int = 0):
+    """Noise-aware mini-batch SGD in silico under ``physics``, starting from w0 (no chip use)."""
+    key = rbg_key(jax.random.fold_in(problem.key, 700 + seed))
+    return train(key, problem.arch, problem.x, problem.y, physics, config, params=problem.w0)
+
+
+# ------------------------------------------------------------------------ identify-retrain
+@partial(jax.jit, static_argnames=("arch",))
+def _shot_variance(s, key, params, x, physics, arch, shots_like):
+    shots = shots_like.shape[0]
+    noise = sample_noise(key, arch, physics, (x.shape[0], shots), params[0].W.dtype)
+    y = forward(params, x[:, None, :], noise, physics.replace(s=s), arch).y
+    return jnp.mean(jnp.sum(jnp.var(y, axis=1, ddof=1), axis=-1))
+
+
+def identify_noise_level(problem, *, shots: int = 8, evaluations: float = 1.0, draws: int = 4):
+    """Estimate the chip's additive noise level from repeated shots at w0 (method of moments).
+
+    The within-input variance of the outputs over ``shots`` repeats, summed over outputs and
+    averaged over inputs, is matched to the model's (common random numbers, bisection in s).
+    Uses ``evaluations`` units of chip budget.
+
+    Returns
+    -------
+    s_hat, info (measured variance and its standard error, s_hat's delta-method se)
+    """
+    n = int(min(problem.K1, max(2, math.floor(evaluations * problem.unit_shots / shots))))
+    m = problem.chip.measure(problem.w0, problem.x_ft[:n], shots)
+    v_i = np.sum(np.var(np.asarray(m.y, np.float64), axis=1, ddof=1), axis=-1)
+    V, V_se = float(v_i.mean()), float(v_i.std(ddof=1) / math.sqrt(n))
+    x = jnp.asarray(problem.x_ft[:n])
+    key = rbg_key(jax.random.fold_in(problem.key, 801))
+    like = jnp.zeros((shots,))
+
+    def model_V(s):
+        return float(np.mean([_shot_variance(jnp.float32(s), jax.random.fold_in(key, d), problem.w0, x,
+                                             problem.model, problem.arch, like) for d in range(draws)]))
+
+    lo, hi = 0.0, max(problem.s0, 1e-3)
+    while model_V(hi) < V and hi < 100:
+        lo, hi = hi, 2 * hi
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if model_V(mid) < V:
+            lo = mid
+        else:
+            hi = mid
+    s_hat = 0.5 * (lo + hi)
+    ds = 1e-3 * max(s_hat, 1e-3)
+    slope = (model_V(s_hat + ds) - model_V(max(s_hat - ds, 0.0))) / (2 * ds)
+    return s_hat, {"s_hat": s_hat, "s_hat_se": V_se / slope if slope > 0 else None, "variance": V,
+                   "variance_se": V_se, "inputs": n, "shots": shots}
+
+
+def identify_retrain(problem, **kw):
+    """Spend the budget measuring the chip, estimate s, retrain in silico at the estimate from w0."""
+    s_hat, info = identify_noise_level(problem, **kw)
+    return retrain(problem, awgn(s_hat)), info
+
+
+# ------------------------------------------------------------------------------- SPSA
+def spsa(problem, *, batch: int = 64, c: float = 0.01, step: float = 2e-3, alpha: float = 0.602,
+         gamma: float = 0.101):
+    """Simultaneous-perturbation stochastic approximation in situ (Spall's gains).
+
+    Each iteration sends one mini-batch of the fine-tuning set through the chip at
+    w + c_k Delta and w - c_k Delta (Delta Rademacher; the same inputs for both sides), and
+    steps w <- w - a_k (L+ - L-) / (2 c_k) Delta. ``a`` is calibrated on the first
+    iteration so that the first step moves each weight by about ``step``.
+    """
+    vec0, unravel = flatten(problem.w0)
+    vec = np.asarray(vec0, np.float64)
+    per_iter = 2 * batch * problem.K2
+    n_iter = int(problem.chip.ledger.remaining() // per_iter) if math.isfinite(problem.chip.ledger.remaining()) \
+        else 100
+    rng = np.random.default_rng(int(jax.random.randint(problem.key, (), 0, 2**31 - 1)))
+    A = 0.1 * max(n_iter, 1)
+    a = None
+
+    def loss(v, idx):
+        out = problem.chip.measure(unravel(jnp.asarray(v, jnp.float32)), problem.x_ft[idx], problem.K2).y
+        return float(np.mean(np.sum((np.asarray(out, np.float64) - problem.y_ft[idx][:, None, :]) ** 2, axis=-1)))
+
+    for k in range(n_iter):
+        idx = rng.choice(problem.K1, size=min(batch, problem.K1), replace=False)
+        delta = rng.choice([-1.0, 1.0], size=vec.shape)
+        ck = c / (k + 1) ** gamma
+        g = (loss(vec + ck * delta, idx) - loss(vec - ck * delta, idx)) / (2 * ck)
+        if a is None:
+            a = step * (A + 1) ** alpha / max(abs(g), 1e-8)
+        vec = vec - a / (k + 1 + A) ** alpha * g * delta
+    return unravel(jnp.asarray(vec, jnp.float32)), {"iterations": n_iter, "batch": batch}
+
+
+# ------------------------------------------------------------------------------- PAT
+@partial(jax.jit, static_argnames=("arch", "tx"))
+def _pat_step(params, opt_state, key, x, y, y_chip, physics, arch, tx):
+    def loss(p):
+        noise = sample_noise(key, arch, physics, y_chip.shape[:2], p[0].W.dtype)
+        out = forward(p, x[:, None, :], noise, physics, arch).y
+        out = out + jax.lax.stop_gradient(y_chip - out)  # forward value from the chip, backward through the model
+        return jnp.mean(squared_error(out, y[:, None, :]))
+
+    g = jax.grad(loss)(params)
+    updates, opt_state = tx.update(g, opt_state, params)
+    return optax.apply_updates(params, updates), opt_state
+
+
+def pat(problem, *, batch: int = 32, lr: float = 0.01, momentum: float = 0.9):
+    """Hybrid physics-aware training: forward passes on the chip, gradients through the model.
+
+    Mini-batch SGD on the fine-tuning set until the chip budget is spent; the output of each
+    step's forward pass is the chip's measurement, its derivative the model's (at s0).
+    """
+    tx = optax.sgd(lr, momentum=momentum)
+    params = problem.w0
+    opt_state = tx.init(params)
+    per_step = batch * problem.K2
+    remaining = problem.chip.ledger.remaining()
+    n_steps = int(remaining // per_step) if math.isfinite(remaining) else 100
+    rng = np.random.default_rng(int(jax.random.randint(jax.random.fold_in(problem.key, 3), (), 0, 2**31 - 1)))
+    key = rbg_key(jax.random.fold_in(problem.key, 901))
+    for k in range(n_steps):
+        idx = rng.choice(problem.K1, size=min(batch, problem.K1), replace=False)
+        y_chip = jnp.asarray(problem.chip.measure(params, problem.x_ft[idx], problem.K2).y, jnp.float32)
+        params, opt_state = _pat_step(params, opt_state, jax.random.fold_in(key, k), jnp.asarray(problem.x_ft[idx]),
+                                      jnp.asarray(problem.y_ft[idx]), y_chip, problem.model, problem.arch, tx)
+    return params, {"steps": n_steps, "batch": batch, "lr": lr}

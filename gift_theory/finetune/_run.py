@@ -1,0 +1,156 @@
+"""``run_finetune``: one method on one misspecified pair, scored by the referee (CONTRACTS §4)."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._arch import Architecture
+from .._errors import GiftInputError, require
+from .._params import cast
+from ..effects import Physics
+from ._directions import direction
+from ._linesearch import gift_printed, paired_line_search
+from ._problem import make_problem, referee
+from ._rivals import identify_retrain, pat, retrain, spsa
+from ._tree import norm
+
+#: every method `gift finetune --method` accepts, plus "none" (no fine-tuning)
+METHODS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "spsa", "pat", "identify-retrain",
+           "retrain", "none")
+
+
+def _line(kind):
+    def run(problem, **kw):
+        u, dinfo = direction(problem, kind, K2=kw.pop("direction_K2", 16))
+        w, info = paired_line_search(problem, u, **kw)
+        info["direction"] = dict(dinfo, kind=kind)
+        return w, info
+    return run
+
+
+def _printed(problem, eta=None, rel_step: float = 0.01, direction_K2: int = 16):
+    D0, dinfo = direction(problem, "score_paper", K2=direction_K2)
+    if eta is None:  # the paper gives no eta: a step of 1 % of |w0| along D^[0]
+        eta = rel_step * float(norm(problem.w0)) / max(float(norm(D0)), 1e-30)
+    w, info = gift_printed(problem, D0, float(eta))
+    info["direction"] = dinfo
+    return w, info
+
+
+def _none(problem):
+    return problem.w0, {}
+
+
+def _retrain(problem):
+    return retrain(problem, problem.chip.physics), {"physics": problem.chip.physics.describe()}
+
+
+RUNNERS = {
+    "gift": _line("score"),
+    "gift-printed": _printed,
+    "pathwise": _line("pathwise"),
+    "ift": _line("ift"),
+    "gradient": _line("gradient"),
+    "random": _line("random"),
+    "spsa": spsa,
+    "pat": pat,
+    "identify-retrain": identify_retrain,
+    "retrain": _retrain,
+    "none": _none,
+}
+
+
+def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = True):
+    """``(ds, arch, w0)``: the data set and weights trained in silico at s0 (cached)."""
+    from ..data import load_dataset
+    from ..training import load_or_train
+
+    arch = Architecture.parse(arch) if isinstance(arch, str) else (
+        arch if isinstance(arch, Architecture) else Architecture(tuple(arch)))
+    require(s0 > 0, f"--s0 {s0}: the assumed noise level must be positive")
+    ds = load_dataset(dataset)
+    w0, _ = load_or_train(dataset, arch, s0=float(s0), seed=int(seed), progress=progress)
+    return ds, arch, cast(w0, jnp.float32)
+
+
+def true_physics(st: float, true_effects=()) -> Physics:
+    require(st >= 0, f"--st {st}: the true noise level must be non-negative")
+    return Physics.parse(list(true_effects), s=float(st), where="--true-effect")
+
+
+def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gift", seed: int = 0,
+                budget: float = 20, K1=None, K2: int = 1, referee_K2: int = 32, chip=None, **options) -> dict:
+    """Run ``method`` on a prepared setting; the CONTRACTS §4 finetune keys plus ``info``."""
+    require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
+    problem = make_problem(arch, w0, ds.x_train, ds.y_train, s0=s0, true_physics=physics, budget=budget, K1=K1,
+                           K2=K2, seed=seed, chip=chip)
+    t0 = time.perf_counter()
+    params, info = RUNNERS[method](problem, **options)
+    params = jax.block_until_ready(cast(params, jnp.float32))
+    seconds = time.perf_counter() - t0
+    out = {"method": method, "s0": float(s0), "st": float(physics.s), "in_situ_evaluations": problem.evaluations_used(),
+           "seconds": seconds}
+    for split, x, y, lab in (("", ds.x_train, ds.y_train, ds.labels_train),
+                             ("test_", ds.x_test, ds.y_test, ds.labels_test)):
+        before = referee(w0, x, y, lab, physics, arch, K2=referee_K2)
+        after = referee(params, x, y, lab, physics, arch, K2=referee_K2)
+        out[f"{split}loss_before"], out[f"{split}loss_after"] = before["loss"], after["loss"]
+        out[f"{split}accuracy_before"], out[f"{split}accuracy_after"] = before["accuracy"], after["accuracy"]
+    out["info"] = info
+    out["params"] = params
+    return out
+
+
+def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),
+                 method: str = "gift", seed: int = 0, **options) -> dict:
+    """Fine-tune weights trained in silico at ``s0`` against a simulated chip at ``st``.
+
+    Parameters
+    ----------
+    dataset, arch : the setting (weights trained once at s0, then cached)
+    s0 : assumed noise level; st : the chip's true level
+    true_effects : CONTRACTS §2 effect specs the chip also has (``"shot=0.01"``, ...)
+    method : one of :data:`METHODS`
+    seed : names the trained weights, the chip's noise and the method's randomness
+    options : budget (chip evaluations, default 20), K1 (fine-tuning inputs, default all
+        training inputs), K2 (shots per input per Eval, default 1), referee_K2, and the
+        method's own keywords
+
+    Returns
+    -------
+    dict with exactly the CONTRACTS §4 finetune keys, plus ``info`` (what the method did).
+    """
+    require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
+    ds, arch_, w0 = load_setting(dataset, arch, s0, seed)
+    out = finetune_on(ds, arch_, w0, s0=s0, physics=true_physics(st, true_effects), method=method, seed=seed,
+                      **options)
+    out.pop("params")
+    return {"dataset": dataset, "arch": list(arch_.widths), **out}
+
+
+def compare_methods(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),
+                    methods=METHODS, seed: int = 0, progress=None, **options) -> list[dict]:
+    """Every method in ``methods`` on the same w0 and the same (fresh, equally seeded) chip.
+
+    Adds ``oracle_fraction``: (loss_before - loss_after) / (loss_before - loss_after of retrain).
+    """
+    ds, arch_, w0 = load_setting(dataset, arch, s0, seed)
+    physics = true_physics(st, true_effects)
+    rows = []
+    for m in methods:
+        r = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=m, seed=seed, **options)
+        r.pop("params")
+        rows.append({"dataset": dataset, "arch": list(arch_.widths), **r})
+        if progress:
+            progress(rows[-1])
+    oracle = [r for r in rows if r["method"] == "retrain"]
+    if oracle:
+        gain = oracle[0]["loss_before"] - oracle[0]["loss_after"]
+        for r in rows:
+            r["oracle_fraction"] = (r["loss_before"] - r["loss_after"]) / gain if gain != 0 else float("nan")
+    return rows

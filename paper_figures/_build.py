@@ -1,0 +1,230 @@
+"""Rebuild the figures: run the sweeps they need (resumable, through Dask), then draw from saved data.
+
+``python -m paper_figures [--scale quick|paper] [--only NAME] [--scheduler ADDRESS]`` and
+``gift figures`` both call :func:`build`. Data go to ``paper_figures/data/<scale>/`` (one
+netCDF file per sweep, one JSON file per finished point), figures to
+``paper_figures/figures/<scale>/<name>.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from ._jobs import unavailable
+from ._scales import SCALES, get_scale, sweeps
+from ._sweep import open_dataset, run_sweep
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+#: every figure script, in the paper's order, then ours
+FIGURES = (
+    "performance_gift",
+    "performance_gift_shallow",
+    "performance_gift_violated_noise_assumption",
+    "performance_gift_test_data",
+    "performance_gift_test_data_violated_awgn",
+    "abs_performance_gift",
+    "example_fine_tuning",
+    "rivals",
+    "estimator_convergence",
+    "bound_region",
+    "error_ladder",
+)
+
+
+def _save_png(fig, path: str) -> None:
+    """Save atomically: a temp file in the same folder, then ``os.replace``."""
+    import matplotlib.pyplot as plt
+
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".png", dir=folder)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=120)
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _sweep_summary(name, ds) -> dict:
+    sec = np.asarray(ds["seconds"].values, float)
+    sec = sec[np.isfinite(sec)]
+    return {"name": name, "points_done": int(ds.attrs.get("points_done", 0)),
+            "points_total": int(ds.attrs.get("points_total", 0)), "failed": int(ds.attrs.get("failed", 0)),
+            "seconds_per_point_mean": float(sec.mean()) if sec.size else None,
+            "seconds_per_point_max": float(sec.max()) if sec.size else None,
+            "seconds_jobs_total": float(sec.sum())}
+
+
+def build(scale: str = "quick", *, only: str | None = None, scheduler: str | None = None, n_workers: int = 2,
+          mnist_folder: str | None = None, data_dir: str | None = None, figure_dir: str | None = None,
+          compute: bool = True, progress: bool = True, options: dict | None = None) -> dict:
+    """Run the sweeps behind the chosen figures, then draw each figure from the saved data.
+
+    Parameters
+    ----------
+    scale : "quick" | "paper" | "tiny"
+    only : one figure name (see :data:`FIGURES`), default all
+    scheduler : None (local process pool), "synchronous", or a Dask scheduler address
+    n_workers : worker processes of the local pool
+    mnist_folder : an MNIST IDX folder (paper scale on full MNIST instead of mnist5k)
+    data_dir, figure_dir : default ``paper_figures/data/<scale>``, ``paper_figures/figures/<scale>``
+    compute : False draws from existing data only
+    options : extra keyword arguments for every fine-tuning job
+
+    Returns
+    -------
+    dict with ``scale``, ``seconds`` (wall), ``sweeps`` (points done/total, seconds per point)
+    and ``figures`` (name, label, path, status "drawn" or the reason it is not).
+    """
+    t0 = time.perf_counter()
+    sc = get_scale(scale)
+    data_dir = data_dir or os.path.join(HERE, "data", sc.name)
+    figure_dir = figure_dir or os.path.join(HERE, "figures", sc.name)
+    names = FIGURES if only is None else (only,)
+    mods = {n: importlib.import_module(f"paper_figures.{n}") for n in names}
+    all_sweeps = sweeps(sc, mnist_folder=mnist_folder, options=options)
+    needed = []
+    for m in mods.values():
+        needed += [s for s in m.SWEEPS if s not in needed]
+
+    sweep_info, sweep_problem = [], {}
+    for sname in needed:
+        sw = all_sweeps[sname]
+        path = os.path.join(data_dir, f"{sname}.nc")
+        problem = unavailable(sw.job) if compute else None
+        if problem:
+            sweep_problem[sname] = problem
+            if progress:
+                sys.stderr.write(f"[figures] sweep {sname} not run: {problem}\n")
+            if not os.path.isfile(path):
+                sweep_info.append({"name": sname, "error": problem})
+                continue
+        if compute and not problem:
+            ds = run_sweep(sw, data_dir, scheduler=scheduler, n_workers=n_workers, progress=progress)
+        elif os.path.isfile(path):
+            ds = open_dataset(path)
+        else:
+            sweep_problem[sname] = f"no saved data {path}; run without --draw-only"
+            sweep_info.append({"name": sname, "error": sweep_problem[sname]})
+            continue
+        sweep_info.append(_sweep_summary(sname, ds))
+
+    figures = []
+    for name, mod in mods.items():
+        entry = {"name": name, "label": mod.LABEL, "path": os.path.join(figure_dir, f"{name}.png")}
+        try:
+            if compute and hasattr(mod, "compute"):
+                mod.compute(sc, data_dir)
+            missing = [s for s in mod.SWEEPS if not os.path.isfile(os.path.join(data_dir, f"{s}.nc"))]
+            if missing:
+                raise RuntimeError("; ".join(sweep_problem.get(s, f"no data for sweep {s}") for s in missing))
+            data = {s: open_dataset(os.path.join(data_dir, f"{s}.nc")) for s in mod.SWEEPS}
+            _save_png(mod.draw(data), entry["path"])
+            entry["status"] = "drawn"
+        except Exception as exc:  # one figure's failure must not stop the others
+            entry["status"] = f"{type(exc).__name__}: {exc}"
+            entry["path"] = None
+        if progress:
+            sys.stderr.write(f"[figures] {name}: {entry['status']}\n")
+        figures.append(entry)
+
+    result = {"scale": sc.name, "data_dir": data_dir, "figure_dir": figure_dir, "sweeps": sweep_info,
+              "figures": figures, "seconds": time.perf_counter() - t0}
+    try:
+        from .claims import summarise
+
+        result["claims"] = summarise(data_dir)
+    except Exception as exc:  # claims need the GIFT sweeps; say why they are absent
+        result["claims"] = {"error": f"{type(exc).__name__}: {exc}"}
+    return result
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--scale", default="quick", choices=tuple(SCALES),
+                        help="quick (digits, small nets, 2 seeds: minutes) | paper (the paper's nets, mnist5k, "
+                             "10 seeds: hours) | tiny (tests)")
+    parser.add_argument("--only", default=None, choices=FIGURES, metavar="NAME",
+                        help=f"one figure: {', '.join(FIGURES)}")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="Dask scheduler address (tcp://host:8786) to spread the sweeps over a cluster; "
+                             "'synchronous' runs in this process; default: a local pool of --workers processes")
+    parser.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    parser.add_argument("--mnist-folder", default=None, metavar="DIR",
+                        help="folder with the MNIST IDX files: fine-tune on full MNIST instead of mnist5k")
+    parser.add_argument("--data-dir", default=None, metavar="DIR", help="where the sweep data go")
+    parser.add_argument("--figure-dir", default=None, metavar="DIR", help="where the PNGs go")
+    parser.add_argument("--draw-only", action="store_true", help="draw from saved data, run no sweep")
+
+
+def check_arguments(args) -> None:
+    """Bad input -> one-line GiftInputError (CONTRACTS §4)."""
+    from gift_theory import GiftInputError
+
+    if args.workers < 1:
+        raise GiftInputError(f"--workers {args.workers}: must be at least 1")
+    if args.mnist_folder is not None and not os.path.isdir(args.mnist_folder):
+        raise GiftInputError(f"--mnist-folder {args.mnist_folder}: no such folder")
+    for flag, d in (("--data-dir", args.data_dir), ("--figure-dir", args.figure_dir)):
+        if d is not None and os.path.exists(d) and not os.path.isdir(d):
+            raise GiftInputError(f"{flag} {d}: exists and is not a folder")
+
+
+def run_args(args) -> dict:
+    check_arguments(args)
+    return build(args.scale, only=args.only, scheduler=args.scheduler, n_workers=args.workers,
+                 mnist_folder=args.mnist_folder, data_dir=args.data_dir, figure_dir=args.figure_dir,
+                 compute=not args.draw_only)
+
+
+def render(result: dict) -> str:
+    lines = [f"scale {result['scale']}: {result['seconds']:.0f} s wall"]
+    for s in result["sweeps"]:
+        if "error" in s:
+            lines.append(f"  sweep {s['name']}: {s['error']}")
+        else:
+            per = s["seconds_per_point_mean"]
+            lines.append(f"  sweep {s['name']}: {s['points_done']}/{s['points_total']} points"
+                         + (f", {per:.1f} s per point" if per is not None else ""))
+    for f in result["figures"]:
+        lines.append(f"  {f['label']}: {f['path'] if f['status'] == 'drawn' else f['status']}")
+    claims = result.get("claims", {})
+    if "error" not in claims:
+        for k, v in claims.items():
+            lines.append(f"  claim {k}: {v.get('summary', '')}")
+    return "\n".join(lines)
+
+
+def failed(result: dict) -> bool:
+    return any(f["status"] != "drawn" for f in result["figures"])
+
+
+def main(argv=None, only: str | None = None) -> int:
+    """``python -m paper_figures`` (or a figure script with ``only``): build, print a summary."""
+    parser = argparse.ArgumentParser(prog="python -m paper_figures" + (f".{only}" if only else ""),
+                                     description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    args = parser.parse_args(argv)
+    if only is not None:
+        args.only = only
+    from gift_theory import GiftInputError
+
+    try:
+        result = run_args(args)
+    except GiftInputError as exc:
+        sys.stderr.write(f"{exc}\n")
+        return 2
+    sys.stdout.write((json.dumps(result, default=float) if args.json else render(result)) + "\n")
+    return 1 if failed(result) else 0

@@ -1,0 +1,125 @@
+"""The sweeps behind the figures, at three scales.
+
+* ``quick`` -- digits (8x8, 1437 train / 360 test), a deeper 64-48-32-32-16-10 and a shallower
+  64-32-32-10 net, 2 seeds, s0, st in {0.05, 0.1, 0.2} (under-estimation s0 < st, over-
+  estimation s0 > st and s0 = st): minutes on 2 cores.
+* ``paper`` -- the paper's 784-500-250-250-100-50-10 and 784-500-100-100-10 on mnist5k (or full
+  MNIST with an IDX folder), 10 seeds per s0 as in the paper, s0, st in {0.02, 0.05, 0.1,
+  0.15, 0.2}.
+* ``tiny`` -- a few points of every sweep, for the test suite.
+
+Every figure script names the sweeps it reads (``SWEEPS``); :func:`sweeps` builds them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from ._sweep import Sweep
+
+RIVALS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "spsa", "pat", "identify-retrain",
+          "retrain")
+
+
+@dataclasses.dataclass(frozen=True)
+class Scale:
+    """Everything that differs between scales."""
+
+    name: str
+    dataset: str
+    nets: dict                      # label -> architecture string
+    seeds: tuple
+    s0: tuple
+    st: tuple
+    violated_s0: tuple
+    violated_st: tuple
+    rival_methods: tuple
+    rival_s0: tuple
+    rival_st: tuple
+    rival_seeds: tuple
+    est_arch: str
+    est_K1: tuple
+    est_K2: tuple
+    est_reps: int
+    est_methods: tuple = ("score_paper", "score", "pathwise", "fd")
+    est_ref_K2: int = 64
+    est_train_epochs: int | None = None
+    options: dict = dataclasses.field(default_factory=dict)
+
+
+SCALES = {
+    "quick": Scale(
+        name="quick", dataset="digits",
+        nets={"deep": "64-48-32-32-16-10", "shallow": "64-32-32-10"},
+        seeds=(0, 1), s0=(0.05, 0.1, 0.2), st=(0.05, 0.1, 0.2),
+        violated_s0=(0.05, 0.1, 0.2), violated_st=(0.05, 0.1, 0.2),
+        rival_methods=RIVALS, rival_s0=(0.05, 0.2), rival_st=(0.05, 0.2), rival_seeds=(0, 1),
+        est_arch="64-32-32-10", est_K1=(32, 128, 512), est_K2=(2, 16), est_reps=3),
+    "paper": Scale(
+        name="paper", dataset="mnist5k",
+        nets={"deep": "784-500-250-250-100-50-10", "shallow": "784-500-100-100-10"},
+        seeds=tuple(range(10)), s0=(0.02, 0.05, 0.1, 0.15, 0.2), st=(0.02, 0.05, 0.1, 0.15, 0.2),
+        violated_s0=(0.02, 0.05, 0.1, 0.15, 0.2), violated_st=(0.02, 0.05, 0.1, 0.15, 0.2),
+        rival_methods=RIVALS, rival_s0=(0.05, 0.1, 0.2), rival_st=(0.05, 0.1, 0.2), rival_seeds=tuple(range(10)),
+        est_arch="784-500-250-250-100-50-10", est_K1=(64, 256, 1024, 4096), est_K2=(2, 8, 32), est_reps=5),
+    "tiny": Scale(
+        name="tiny", dataset="digits",
+        nets={"deep": "64-12-10-10-10", "shallow": "64-12-10"},
+        seeds=(0,), s0=(0.1,), st=(0.05, 0.2),
+        violated_s0=(0.1,), violated_st=(0.2,),
+        rival_methods=("gift", "random"), rival_s0=(0.1,), rival_st=(0.2,), rival_seeds=(0,),
+        est_arch="64-12-10", est_K1=(16, 64), est_K2=(2,), est_reps=1, est_methods=("pathwise", "score"),
+        est_ref_K2=8, est_train_epochs=2, options={"train_epochs": 2}),
+}
+
+
+def get_scale(name: str) -> Scale:
+    if name not in SCALES:
+        raise ValueError(f"scale {name!r} unknown; known: {', '.join(SCALES)}")
+    return SCALES[name]
+
+
+def _gift_fixed(scale: Scale, mnist_folder: str | None, options: dict | None) -> dict:
+    opts = dict(scale.options, **(options or {}))
+    dataset = scale.dataset
+    if mnist_folder:
+        dataset = "mnist"
+        opts["folder"] = mnist_folder
+    return {"dataset": dataset, "options": opts}
+
+
+def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict | None = None) -> dict[str, Sweep]:
+    """All sweeps of a scale by name.
+
+    ``gift_awgn``: GIFT under AWGN, dims (net, s0, st, seed) -- fig:performance_gift,
+    fig:performance_gift_shallow, fig:performance_gift_test_data, fig:abs_performance_gift.
+    ``gift_violated``: GIFT on the deeper net, true noise laplace / multiplicative / uniform,
+    dims (noise_kind, s0, st, seed) -- fig:performance_gift_violated_noise_assumption,
+    fig:performance_gift_test_data_violated_awgn.
+    ``rivals``: every finetune method on the shallower net, dims (method, s0, st, seed).
+    ``estimators``: d/ds grad J estimators, dims (method, K1, K2, rep).
+    """
+    scale = get_scale(scale) if isinstance(scale, str) else scale
+    fixed = _gift_fixed(scale, mnist_folder, options)
+    job = "paper_figures._jobs:gift_job"
+    out = {}
+    # one sweep per net so that the arch string travels with the point (it is a function of net)
+    for net, arch in scale.nets.items():
+        out[f"gift_awgn_{net}"] = Sweep(f"gift_awgn_{net}", {"s0": scale.s0, "st": scale.st, "seed": scale.seeds},
+                                        job, dict(fixed, net=net, arch=arch, noise_kind="awgn", method="gift"))
+    out["gift_violated"] = Sweep(
+        "gift_violated", {"noise_kind": ("laplace", "multiplicative", "uniform"), "s0": scale.violated_s0,
+                          "st": scale.violated_st, "seed": scale.seeds},
+        job, dict(fixed, net="deep", arch=scale.nets["deep"], method="gift"))
+    out["rivals"] = Sweep(
+        "rivals", {"method": scale.rival_methods, "s0": scale.rival_s0, "st": scale.rival_st,
+                   "seed": scale.rival_seeds},
+        job, dict(fixed, net="shallow", arch=scale.nets["shallow"], noise_kind="awgn"))
+    out["estimators"] = Sweep(
+        "estimators", {"method": scale.est_methods, "K1": scale.est_K1, "K2": scale.est_K2,
+                       "rep": tuple(range(scale.est_reps))},
+        "paper_figures._jobs:estimator_job",
+        {"dataset": "digits" if scale.dataset == "digits" else scale.dataset, "arch": scale.est_arch,
+         "s0": 0.1, "seed": 0, "ref_K2": scale.est_ref_K2,
+         **({} if scale.est_train_epochs is None else {"train_epochs": scale.est_train_epochs})})
+    return out

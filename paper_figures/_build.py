@@ -100,6 +100,13 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
         needed += [s for s in m.SWEEPS if s not in needed]
 
     sweep_info, sweep_problem = [], {}
+    loaded = {}  # sweep name -> Dataset, read once per build
+
+    def data_of(sname):
+        if sname not in loaded:
+            loaded[sname] = open_dataset(os.path.join(data_dir, f"{sname}.nc"))
+        return loaded[sname]
+
     for sname in needed:
         sw = all_sweeps[sname]
         path = os.path.join(data_dir, f"{sname}.nc")
@@ -112,9 +119,10 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
                 sweep_info.append({"name": sname, "error": problem})
                 continue
         if compute and not problem:
-            ds = run_sweep(sw, data_dir, scheduler=scheduler, n_workers=n_workers, progress=progress)
+            ds = loaded[sname] = run_sweep(sw, data_dir, scheduler=scheduler, n_workers=n_workers,
+                                           progress=progress)
         elif os.path.isfile(path):
-            ds = open_dataset(path)
+            ds = data_of(sname)
         else:
             sweep_problem[sname] = f"no saved data {path}; run without --draw-only"
             sweep_info.append({"name": sname, "error": sweep_problem[sname]})
@@ -130,7 +138,7 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
             missing = [s for s in mod.SWEEPS if not os.path.isfile(os.path.join(data_dir, f"{s}.nc"))]
             if missing:
                 raise RuntimeError("; ".join(sweep_problem.get(s, f"no data for sweep {s}") for s in missing))
-            data = {s: open_dataset(os.path.join(data_dir, f"{s}.nc")) for s in mod.SWEEPS}
+            data = {s: data_of(s) for s in mod.SWEEPS}
             _save_png(mod.draw(data), entry["path"])
             entry["status"] = "drawn"
         except Exception as exc:  # one figure's failure must not stop the others
@@ -145,7 +153,7 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
     try:
         from .claims import summarise
 
-        result["claims"] = summarise(data_dir)
+        result["claims"] = summarise(data_dir, loaded)
     except Exception as exc:  # claims need the GIFT sweeps; say why they are absent
         result["claims"] = {"error": f"{type(exc).__name__}: {exc}"}
     return result

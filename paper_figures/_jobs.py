@@ -90,7 +90,9 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     run_finetune = _run_finetune()
     res = run_finetune(dataset=dataset, arch=arch, s0=float(s0), st=s_true, true_effects=effects, method=method,
                        seed=int(seed), **(options or {}))
-    out = {k: v for k, v in res.items() if isinstance(v, (int, float, bool, np.number)) and not isinstance(v, str)}
+    # "s0"/"st" are grid dimensions here; run_finetune's "st" is the chip's awgn level, kept as s_true
+    out = {k: v for k, v in res.items()
+           if isinstance(v, (int, float, bool, np.number)) and not isinstance(v, str) and k not in ("s0", "st")}
     out["s_true"] = s_true
     return out
 

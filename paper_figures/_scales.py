@@ -53,7 +53,7 @@ SCALES = {
         nets={"deep": "64-48-32-32-16-10", "shallow": "64-32-32-10"},
         seeds=(0, 1), s0=(0.05, 0.1, 0.2), st=(0.05, 0.1, 0.2),
         violated_s0=(0.05, 0.1, 0.2), violated_st=(0.05, 0.1, 0.2),
-        rival_methods=RIVALS, rival_s0=(0.05, 0.2), rival_st=(0.05, 0.2), rival_seeds=(0, 1),
+        rival_methods=RIVALS, rival_s0=(0.1,), rival_st=(0.05, 0.2), rival_seeds=(0, 1),
         est_arch="64-32-32-10", est_K1=(32, 128, 512), est_K2=(2, 16), est_reps=3),
     "paper": Scale(
         name="paper", dataset="mnist5k",
@@ -65,11 +65,11 @@ SCALES = {
     "tiny": Scale(
         name="tiny", dataset="digits",
         nets={"deep": "64-12-10-10-10", "shallow": "64-12-10"},
-        seeds=(0,), s0=(0.1,), st=(0.05, 0.2),
+        seeds=(0, 1), s0=(0.1, 0.2), st=(0.1, 0.2),
         violated_s0=(0.1,), violated_st=(0.2,),
         rival_methods=("gift", "random"), rival_s0=(0.1,), rival_st=(0.2,), rival_seeds=(0,),
         est_arch="64-12-10", est_K1=(16, 64), est_K2=(2,), est_reps=1, est_methods=("pathwise", "score"),
-        est_ref_K2=8, est_train_epochs=2, options={"train_epochs": 2}),
+        est_ref_K2=8, options={"budget": 6, "referee_K2": 4}),
 }
 
 

@@ -175,7 +175,7 @@ def assemble(folder: str, sweep: Sweep):
     keys: list[str] = []
     for rec in records.values():
         for k, v in rec["result"].items():
-            if _numeric(v) and k not in keys:
+            if _numeric(v) and k not in keys and k not in sweep.dims:  # a dim name cannot be a variable too
                 keys.append(k)
     data = {k: np.full(shape, np.nan) for k in keys + ["seconds"]}
     done = np.zeros(shape, bool)
@@ -336,10 +336,12 @@ def run_sweep(sweep: Sweep, folder: str, *, scheduler: str | None = None, n_work
     return ds
 
 
-def toy_job(a, b, seconds: float = 0.0, fail_on=None, **_):
-    """A stand-in job for tests and demonstrations: ``a * b`` and ``a + b`` after a sleep."""
+def toy_job(a, b, seconds: float = 0.0, fail_on=None, fail_flag: str | None = None, **_):
+    """A stand-in job for tests and demonstrations: ``a * b`` and ``a + b`` after a sleep.
+
+    Raises at ``a == fail_on`` (only while the file ``fail_flag`` exists, if one is named).
+    """
     time.sleep(seconds)
-    if fail_on is not None and a == fail_on:
+    if fail_on is not None and a == fail_on and (fail_flag is None or os.path.exists(fail_flag)):
         raise RuntimeError(f"toy failure at a={a}")
     return {"prod": a * b, "sum": a + b, "label": f"{a}-{b}", "pid": os.getpid()}
-

@@ -40,15 +40,18 @@ def _fmt(m, h) -> str:
     return f"{m:.2f}" + (f" ± {h:.2f}" if np.isfinite(h) else "")
 
 
-def _load(data_dir, name):
+def _load(data_dir, name, loaded=None):
+    if loaded is not None and name in loaded:
+        return loaded[name]
     path = os.path.join(data_dir, f"{name}.nc")
     return open_dataset(path) if os.path.isfile(path) else None
 
 
-def summarise(data_dir: str) -> dict:
-    """Claims -> {numbers..., verdict, rule, summary} from the sweeps saved in ``data_dir``."""
+def summarise(data_dir: str, loaded: dict | None = None) -> dict:
+    """Claims -> {numbers..., verdict, rule, summary} from the sweeps saved in ``data_dir``
+    (``loaded``: sweeps already read, by name)."""
     out = {}
-    deep, shallow, viol = (_load(data_dir, n) for n in ("gift_awgn_deep", "gift_awgn_shallow", "gift_violated"))
+    deep, shallow, viol = (_load(data_dir, n, loaded) for n in ("gift_awgn_deep", "gift_awgn_shallow", "gift_violated"))
     if deep is None:
         raise FileNotFoundError(f"no gift_awgn_deep.nc in {data_dir}: run the GIFT sweeps first")
     imp_d = improvements(deep, "train")

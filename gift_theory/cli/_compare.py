@@ -1,0 +1,73 @@
+"""``gift compare MEAS [--effect NAME=VALUE ...]``: one discrepancy number of a model
+against a measurement file, with its noise floor and p-value.
+
+With ``--effect`` the model is exactly the physics given (nothing fitted, every input
+scored); without, the awgn model is fitted on half the inputs and scored on the other half.
+"""
+
+from __future__ import annotations
+
+from ._labargs import add_common, figure_dir, key, load
+
+
+def add_arguments(parser):
+    add_common(parser)
+    parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
+                        help="the model's physics (CONTRACTS §2), e.g. awgn=0.1 shot=0.01; default: fit awgn")
+
+
+def run(args):
+    import jax
+
+    import gift_theory as gt
+    from ..lab import Model, compare, one_step_check, where_it_fails
+    from ..lab._figures import heatmaps
+    from ..lab._fit import fit_model, split_inputs
+
+    meas = load(args)
+    k = key(args)
+    k_split, k_fit, k_cmp, k_ref, k_step = jax.random.split(k, 5)
+    if args.effect:
+        specs = list(args.effect)
+        if not any(s.strip().split("=")[0].strip() == "awgn" for s in specs):
+            raise gt.GiftInputError("--effect: the model needs awgn=S among its effects (the baseline noise level)")
+        if any(s.strip().startswith("weight_error") for s in specs):
+            raise gt.GiftInputError("--effect weight_error: a model cannot know the device's E; "
+                                    "use gift fit --add weight_error (fitted offsets)")
+        model = Model(gt.Physics.parse(specs, where="--effect"))
+        scored, fitted = meas, False
+    else:
+        train, test = split_inputs(k_split, meas.n)
+        model = fit_model(k_fit, meas.subset(train), (), K=args.shots)
+        scored, fitted = meas.subset(test), True
+    c = compare(k_cmp, model, scored, shots=args.shots)
+    out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": fitted},
+           "discrepancy": c.discrepancy, "se": c.se, "noise_floor": c.noise_floor, "floor_se": c.floor_se,
+           "p_value": c.p_value, "inputs_scored": scored.n,
+           "per_layer": {f"layer{l}": float(v) for l, v in zip(c.layer_ids, c.per_layer)},
+           "where": one_step_check(k_step, model, meas) if meas.has_taps else []}
+    folder = figure_dir(args)
+    where = where_it_fails(k, model, scored)
+    out["worst_cells"] = where["worst"][:10]
+    if folder:
+        out["figures"] = [heatmaps(where, f"{folder}/where.png")]
+    return out
+
+
+def render(out) -> str:
+    m = out["model"]
+    ps = ", ".join(f"{k}={v:.4g}" for k, v in m["params"].items())
+    lines = [f"model {' + '.join(m['effects'])} ({ps}){' fitted on half the inputs' if m['fitted'] else ''}",
+             f"discrepancy {out['discrepancy']:.4g} +- {out['se']:.2g} on {out['inputs_scored']} inputs; "
+             f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}; p = {out['p_value']:.3g}"
+             + ("  -> the model FAILS (p < 0.01)" if out["p_value"] < 0.01 else "  -> consistent with the data"),
+             "per layer: " + ", ".join(f"{k} {v:.3g}" for k, v in out["per_layer"].items())]
+    for w in out.get("where", []):
+        lines.append(f"  one-step layer {w['layer']}: {w['discrepancy']:.4g} (z = {w['z']:.1f}, p = {w['p_value']:.3g})")
+    if out.get("worst_cells"):
+        lines.append("worst cells:")
+        for w in out["worst_cells"][:5]:
+            lines.append(f"  layer {w['layer']} neuron {w['neuron']} input {w['input']}: {w['statistic']} z = {w['z']:.1f}")
+    if out.get("figures"):
+        lines.append("figures: " + ", ".join(out["figures"]))
+    return "\n".join(lines)

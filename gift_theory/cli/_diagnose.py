@@ -1,0 +1,74 @@
+"""``gift diagnose MEAS``: is a physical effect missing from the model, and which one?
+
+Fits the awgn baseline and every candidate effect on half the inputs, scores them on the
+other half (CONTRACTS §4 JSON with ``--json``; a text report and a figure folder without).
+"""
+
+from __future__ import annotations
+
+import sys
+
+from ._labargs import add_common, figure_dir, key, load
+
+
+def add_arguments(parser):
+    add_common(parser)
+    parser.add_argument("--candidates", default=None,
+                        help="comma-separated effects to try (default: all of CONTRACTS §2 but awgn)")
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def run(args):
+    from .._errors import GiftInputError
+    from ..effects import EFFECT_NAMES
+    from ..lab import diagnose, signatures, where_it_fails
+    from ..lab._figures import error_ladder, heatmaps
+
+    meas = load(args)
+    cands = None
+    if args.candidates:
+        cands = [c.strip() for c in args.candidates.split(",") if c.strip()]
+        for c in cands:
+            for e in c.split("+"):
+                if e not in EFFECT_NAMES or e == "awgn":
+                    raise GiftInputError(f"--candidates: unknown effect {e!r}; known: {', '.join(EFFECT_NAMES[1:])}")
+    k = key(args)
+    res = diagnose(k, meas, candidates=cands, shots=args.shots, verbose=not args.quiet)
+    out = res.as_json()
+    sig = signatures(k, res.baseline, meas)
+    out["signatures"] = sig
+    folder = figure_dir(args)
+    if folder:
+        where = where_it_fails(k, res.baseline, meas)
+        out["worst_cells"] = where["worst"][:10]
+        c = res.baseline_comparison
+        rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
+            (f"awgn + {cand.effects[0]}", cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
+            for cand in res.ranking[:3]]
+        out["figures"] = [error_ladder(rungs, c.noise_floor, c.floor_se, f"{folder}/ladder.png",
+                                       title="baseline and best candidates"),
+                          heatmaps(where, f"{folder}/where.png", title="baseline: where it fails")]
+    return out
+
+
+def render(out) -> str:
+    b = out["baseline"]
+    lines = [f"baseline awgn (s = {b['params'].get('s', float('nan')):.4g}): held-out discrepancy "
+             f"{b['discrepancy']:.4g} +- {b['se']:.2g}, noise floor {b['noise_floor']:.4g} +- {b['floor_se']:.2g}, "
+             f"p = {b['p_value']:.3g}",
+             "missing effect detected: " + ("YES (p < 0.01)" if out["missing_effect_detected"] else "no (the baseline passes)")]
+    lines.append("ranking (held-out discrepancy after fitting, parsimony-penalised):")
+    for i, r in enumerate(out["ranking"], 1):
+        ps = ", ".join(f"{k}={v:.4g}" for k, v in r["params"].items())
+        lines.append(f"  {i:2d}. {r['effect']:<15s} {r['discrepancy_after']:10.4g}  p = {r['p_value_after']:<9.3g} {ps}")
+    if out.get("where"):
+        lines.append("one-step check per layer (layer fed the measured layer before):")
+        for w in out["where"]:
+            lines.append(f"  layer {w['layer']}: discrepancy {w['discrepancy']:.4g} (z = {w['z']:.1f}, p = {w['p_value']:.3g})")
+    if out.get("signatures"):
+        lines.append("signatures against the baseline (z > 3 stands out):")
+        for name, s in out["signatures"].items():
+            lines.append(f"  {name:<15s} z = {s['z']:7.2f}  {s['statistic']}")
+    if out.get("figures"):
+        lines.append("figures: " + ", ".join(out["figures"]))
+    return "\n".join(lines)

@@ -1,0 +1,49 @@
+"""``gift fit MEAS --add NAME [--add NAME ...]``: add effects, fit them, report the error
+before and after (CONTRACTS §4 JSON with ``--json``; text and an error-ladder figure without)."""
+
+from __future__ import annotations
+
+from ._labargs import add_common, figure_dir, key, load
+
+
+def add_arguments(parser):
+    add_common(parser)
+    parser.add_argument("--add", action="append", required=True, metavar="NAME",
+                        help="an effect of CONTRACTS §2 to add to the model (repeatable, in order)")
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def run(args):
+    from .._errors import GiftInputError
+    from ..effects import EFFECT_NAMES
+    from ..lab import fit_effects
+    from ..lab._figures import error_ladder
+
+    for e in args.add:
+        if e not in EFFECT_NAMES:
+            raise GiftInputError(f"--add: unknown effect {e!r}; known: {', '.join(EFFECT_NAMES)}")
+    meas = load(args)
+    if "drift" in args.add and meas.t is None:
+        raise GiftInputError(f"--add drift: {args.measurement} has no acquisition times t; drift is silent without them")
+    res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
+    out = res.as_json()
+    folder = figure_dir(args)
+    if folder:
+        rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in res.ladder]
+        out["figures"] = [error_ladder(rungs, res.comparison_after.noise_floor, res.comparison_after.floor_se,
+                                       f"{folder}/ladder.png")]
+    return out
+
+
+def render(out) -> str:
+    ps = ", ".join(f"{k}={v:.4g}" for k, v in out["params"].items())
+    lines = [f"model: {' + '.join(out['effects'])} ({ps})",
+             f"held-out discrepancy: before {out['discrepancy_before']:.4g} (p = {out['p_value_before']:.3g}) -> "
+             f"after {out['discrepancy_after']:.4g} +- {out['se_after']:.2g} (p = {out['p_value_after']:.3g}); "
+             f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}"]
+    lines.append("error ladder:")
+    for r in out["ladder"]:
+        lines.append(f"  {r['model']:<40s} {r['discrepancy']:10.4g} +- {r['se']:.2g}  p = {r['p_value']:.3g}")
+    if out.get("figures"):
+        lines.append("figures: " + ", ".join(out["figures"]))
+    return "\n".join(lines)

@@ -1,0 +1,85 @@
+"""``gift simulate``: write a measurement file (CONTRACTS §3) from a simulated chip.
+
+The hidden-effect data generator: choose the architecture, the programmed weights, the
+inputs, the shots and the chip's effects; the file never exists half-written.
+"""
+
+from __future__ import annotations
+
+import os
+
+import jax
+import numpy as np
+
+from .._errors import GiftInputError, require
+
+
+def add_arguments(parser):
+    parser.add_argument("--arch", help="widths d_0-...-d_L, e.g. 16-32-16-8 (default: from --weights)")
+    parser.add_argument("--weights", help=".npz with W1..WL, b1..bL to program (default: random, from --seed)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random weights, inputs and shots")
+    parser.add_argument("--activation", default=None, help="tanh (default), identity, sigmoid, sin")
+    parser.add_argument("--gain", type=float, default=1.5, help="scale of the random weights (Glorot x gain)")
+    parser.add_argument("--inputs", type=int, default=240, help="number of inputs n (uniform in [0, 1]^d_0)")
+    parser.add_argument("--shots", type=int, default=64, help="repeated shots r per input")
+    parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
+                        help="a chip effect (CONTRACTS §2), repeatable: awgn=0.1 shot=0.01 laplace "
+                             "quantization=6,2.0 weight_error=e:0.05,seed:3 (default awgn=0.1)")
+    parser.add_argument("--taps", action="store_true", help="also record the hidden layers a1..a{L-1}")
+    parser.add_argument("--times", action="store_true", help="also record acquisition times t (drift needs them)")
+    parser.add_argument("--csv", action="store_true", help="write the long CSV format (weights go to OUT.weights.npz)")
+    parser.add_argument("--out", required=True, help="the measurement file to write (.npz)")
+
+
+def run(args):
+    import gift_theory as gt
+    from ..lab import save_csv, save_measurement, simulate_measurement
+
+    require(args.inputs >= 1, f"--inputs {args.inputs}: needs at least 1")
+    require(args.shots >= 2, f"--shots {args.shots}: needs at least 2")
+    out = args.out
+    folder = os.path.dirname(os.path.abspath(out))
+    require(os.path.isdir(folder), f"--out {out}: folder {folder} does not exist")
+    specs = list(args.effect) or ["awgn=0.1"]
+    if not any(s.strip().split("=")[0].strip() == "awgn" for s in specs):
+        specs = ["awgn=0.1"] + specs
+    physics = gt.Physics.parse(specs, where="--effect")
+    key = jax.random.PRNGKey(args.seed)
+    activation = args.activation
+    if args.weights:
+        from ..lab._measurement import _load_weights
+        w = _load_weights(args.weights)
+        params = gt.params_from_arrays(w, where=args.weights)
+        if activation is None and "activation" in w:
+            activation = str(np.asarray(w["activation"]).item())
+        arch = gt.arch_of(params, activation or "tanh")
+        if args.arch:
+            want = gt.Architecture.parse(args.arch)
+            require(want.widths == arch.widths, f"--arch {args.arch} does not match the weights in {args.weights} ({arch})")
+    else:
+        require(args.arch is not None, "gift simulate: give --arch (e.g. 16-32-16-8) or --weights FILE")
+        arch = gt.Architecture.parse(args.arch, activation=activation or "tanh")
+        params = gt.init_params(jax.random.fold_in(key, 11), arch, gain=args.gain)
+    activation = activation or "tanh"
+    require(activation in gt.ACTIVATIONS, f"--activation {activation!r}: known {', '.join(gt.ACTIVATIONS)}")
+    x = np.asarray(jax.random.uniform(jax.random.fold_in(key, 12), (args.inputs, arch.widths[0])), np.float64)
+    meas = simulate_measurement(jax.random.fold_in(key, 13), params, x, physics, shots=args.shots,
+                                activation=activation, taps=args.taps, times=args.times)
+    if args.csv:
+        save_csv(out, meas)
+        wpath = os.path.splitext(out)[0] + ".weights.npz"
+        from ..lab._measurement import _atomic_write
+        arrays = {k: v for k, v in meas.arrays().items() if k[:1] in "Wb" or k == "activation"}
+        _atomic_write(wpath, lambda fh: np.savez(fh, **arrays))
+    else:
+        save_measurement(out, meas)
+    return {"out": out, "n": meas.n, "r": meas.r, "arch": list(meas.arch.widths), "activation": activation,
+            "effects": list(physics.names), "params": physics.params_json(), "taps": bool(args.taps),
+            "times": bool(args.times)}
+
+
+def render(result) -> str:
+    return (f"wrote {result['out']}: {result['n']} inputs x {result['r']} shots, arch "
+            f"{'-'.join(map(str, result['arch']))} ({result['activation']}), chip effects "
+            f"{', '.join(f'{k}={v:g}' for k, v in result['params'].items()) or ''} "
+            f"[{', '.join(result['effects'])}]" + (", taps" if result["taps"] else "") + (", times" if result["times"] else ""))

@@ -1,0 +1,179 @@
+"""Which effect is missing: fit every candidate extension, rank by held-out discrepancy.
+
+The inputs are split at random into a fitting half and a held-out half. The baseline
+(awgn, s fitted) and every candidate ``awgn + effect`` are fitted on the first half and
+scored on the second with :func:`gift_theory.lab.compare`. Candidates are ranked by
+``discrepancy_after + 2 se * (number of parameters the effect adds)``: an extra parameter
+must buy two standard errors of held-out discrepancy, so a one-parameter effect that
+explains the data beats a many-parameter one that also does (CONTRACTS §4).
+``missing_effect_detected`` is the baseline's goodness-of-fit test, ``p_value < 0.01``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+
+import jax
+import numpy as np
+
+from .._errors import GiftInputError
+from ._compare import Comparison, Model, compare, one_step_check, reference
+from ._fit import CANDIDATES, N_PARAMS, fit_model, split_inputs
+from ._measurement import Measurement
+
+#: the significance level of the goodness-of-fit test (CONTRACTS §4)
+ALPHA = 0.01
+
+
+@dataclasses.dataclass(frozen=True)
+class Candidate:
+    """One fitted extension of the model, scored on held-out inputs."""
+
+    effects: tuple
+    model: Model
+    comparison: Comparison
+    score: float
+    seconds: float
+
+    def as_json(self) -> dict:
+        name = self.effects[0] if len(self.effects) == 1 else "+".join(self.effects)
+        return {"effect": name, "discrepancy_after": self.comparison.discrepancy,
+                "p_value_after": self.comparison.p_value, "params": self.model.params_json(),
+                "se": self.comparison.se, "score": self.score}
+
+
+@dataclasses.dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose`."""
+
+    baseline: Model
+    baseline_comparison: Comparison
+    ranking: tuple
+    one_step: tuple
+    held_out: np.ndarray
+    seconds: float
+
+    @property
+    def missing_effect_detected(self) -> bool:
+        return bool(self.baseline_comparison.p_value < ALPHA)
+
+    def as_json(self) -> dict:
+        """The CONTRACTS §4 object of ``gift diagnose --json`` (plus a few extra keys)."""
+        c = self.baseline_comparison
+        return {"baseline": {"effects": self.baseline.effects, "params": self.baseline.params_json(),
+                             "discrepancy": c.discrepancy, "noise_floor": c.noise_floor, "p_value": c.p_value,
+                             "se": c.se, "floor_se": c.floor_se},
+                "missing_effect_detected": self.missing_effect_detected,
+                "ranking": [cand.as_json() for cand in self.ranking],
+                "where": list(self.one_step),
+                "held_out_inputs": int(len(self.held_out)),
+                "seconds": self.seconds}
+
+
+def _log(msg, verbose):
+    if verbose:
+        sys.stderr.write(msg + "\n")
+        sys.stderr.flush()
+
+
+def penalised_score(cmp: Comparison, n_params: int) -> float:
+    """Held-out discrepancy plus 2 standard errors per added parameter."""
+    return float(cmp.discrepancy + 2.0 * cmp.se * n_params)
+
+
+def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, verbose: bool = False) -> Diagnosis:
+    """Fit the baseline and every candidate effect; rank them on held-out inputs.
+
+    Parameters
+    ----------
+    key : PRNG key (split into ``split``, ``fit``, ``compare``, ``floor`` subkeys)
+    meas : Measurement
+    candidates : effect names to try (default: every CONTRACTS §2 effect except awgn;
+        drift only when the file has acquisition times)
+    shots : model shots per input (default r)
+
+    Returns
+    -------
+    Diagnosis
+    """
+    t0 = time.time()
+    k_split, k_fit, k_cmp, k_ref, k_step = jax.random.split(key, 5)
+    train, test = split_inputs(k_split, meas.n)
+    mtr, mte = meas.subset(train), meas.subset(test)
+    ref = reference(k_ref, mte)
+    base = fit_model(k_fit, mtr, (), K=shots)
+    base_cmp = compare(k_cmp, base, mte, shots=shots, ref=ref)
+    _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
+         f"(floor {ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
+    if candidates is None:
+        candidates = [c for c in CANDIDATES if c != "drift" or meas.t is not None]
+    ranking = []
+    for name in candidates:
+        if name == "drift" and meas.t is None:
+            raise GiftInputError("candidate drift needs acquisition times t in the measurement")
+        t1 = time.time()
+        effects = tuple(name.split("+"))
+        model = fit_model(k_fit, mtr, effects, start=base, K=shots)
+        cmp = compare(k_cmp, model, mte, shots=shots, ref=ref)
+        score = penalised_score(cmp, sum(N_PARAMS.get(e, 1) for e in effects))
+        ranking.append(Candidate(effects, model, cmp, score, time.time() - t1))
+        _log(f"  + {name:<15s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g} "
+             f"({time.time() - t1:.1f} s)", verbose)
+    ranking.sort(key=lambda c: c.score)
+    steps = tuple(one_step_check(k_step, base, meas)) if meas.has_taps else ()
+    return Diagnosis(base, base_cmp, tuple(ranking), steps, test, time.time() - t0)
+
+
+@dataclasses.dataclass(frozen=True)
+class FitResult:
+    """Result of :func:`fit_effects`: the model before and after adding effects."""
+
+    before: Model
+    after: Model
+    comparison_before: Comparison
+    comparison_after: Comparison
+    ladder: tuple  # ((label, Comparison), ...) one rung per added effect
+
+    def as_json(self) -> dict:
+        """The CONTRACTS §4 object of ``gift fit --json`` (plus a few extra keys)."""
+        a, b = self.comparison_after, self.comparison_before
+        return {"effects": self.after.effects, "params": self.after.params_json(),
+                "discrepancy_before": b.discrepancy, "discrepancy_after": a.discrepancy,
+                "noise_floor": a.noise_floor, "p_value_after": a.p_value,
+                "p_value_before": b.p_value, "se_before": b.se, "se_after": a.se, "floor_se": a.floor_se,
+                "ladder": [{"model": lab, "discrepancy": c.discrepancy, "se": c.se, "p_value": c.p_value}
+                           for lab, c in self.ladder]}
+
+
+def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, verbose: bool = False) -> FitResult:
+    """Add ``effects`` to the awgn model one at a time, fit on half the inputs, score the
+    other half: the error ladder awgn -> +effect -> +effect.
+
+    Parameters
+    ----------
+    key : PRNG key (the same subkeys as :func:`diagnose`, so the numbers agree)
+    meas : Measurement
+    effects : names of CONTRACTS §2 effects to add
+    """
+    effects = [e for e in effects if e != "awgn"]
+    for e in effects:
+        if effects.count(e) > 1:
+            raise GiftInputError(f"--add {e} given twice")
+    k_split, k_fit, k_cmp, k_ref, _ = jax.random.split(key, 5)
+    train, test = split_inputs(k_split, meas.n)
+    mtr, mte = meas.subset(train), meas.subset(test)
+    ref = reference(k_ref, mte)
+    base = fit_model(k_fit, mtr, (), K=shots)
+    base_cmp = compare(k_cmp, base, mte, shots=shots, ref=ref)
+    ladder = [("awgn", base_cmp)]
+    _log(f"awgn: {base.describe()} discrepancy {base_cmp.discrepancy:.3g} (floor {ref.noise_floor:.3g})", verbose)
+    model, cmp, added = base, base_cmp, []
+    for e in effects:
+        added.append(e)
+        model = fit_model(k_fit, mtr, (e,), start=model, K=shots)
+        cmp = compare(k_cmp, model, mte, shots=shots, ref=ref)
+        ladder.append(("awgn + " + " + ".join(added), cmp))
+        _log(f"+{e}: {model.describe()} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g}", verbose)
+    return FitResult(base, model, base_cmp, cmp, tuple(ladder))

@@ -1,0 +1,357 @@
+"""Fit a model's physical parameters to measurements.
+
+One method for every effect: *simulated moment matching with common random numbers*.
+The model's shots for the fitting inputs are a deterministic function of the physics
+parameters once the standard draws are fixed (the core's explicit-noise forward pass), so
+the per-cell moments of the model -- mean and log variance per neuron, log variance of
+the layer sum (cross-neuron correlation: common mode), slope against acquisition time
+(drift) -- are smooth in the parameters except through the rounding of quantization. The
+loss is the sum of the standardised squared moment differences over every measured cell
+(taps and output). It is minimised by a one-dimensional grid over each new parameter
+followed by Nelder-Mead on all of them (no gradient needed, so quantization's rounding is
+no obstacle). Two effects need more than moments:
+
+* quantization: the lattice spacing is read off the measured values (they sit on the
+  multiples of ``step``); ``bits`` is the smallest integer with ``step 2^(bits-1)`` at least
+  the largest measured magnitude, ``v_range = step 2^(bits-1)``.
+* weight_error: a model cannot know the device's E, so it is fitted as fixed offsets
+  ``E_hat`` (ridge regression of the measured means through the differentiable forward
+  pass, prior N(0, e^2), e re-estimated once); the fitted model uses ``W + E_hat`` and
+  reports ``e``. Held-out inputs judge whether the offsets generalise.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy import optimize
+
+from .._errors import GiftInputError
+from .._model import forward, sample_noise
+from .._params import Layer
+from ..effects import REGISTRY, Physics, make_effect
+from ._compare import Model, draws, layer_outputs
+from ._measurement import Measurement
+
+#: candidate effects a diagnosis can add (awgn is the baseline)
+CANDIDATES = ("laplace", "uniform", "multiplicative", "common_mode", "drift", "crosstalk",
+              "weight_error", "shot", "saturation", "quantization")
+
+#: grids for the one-dimensional scan of each new parameter: (kind, values)
+_GRIDS = {
+    "s": ("log", np.geomspace(1e-4, 3.0, 25)),
+    "m": ("log", np.geomspace(1e-3, 1.0, 13)),
+    "c": ("log", np.geomspace(1e-3, 1.0, 13)),
+    "q": ("log", np.geomspace(1e-5, 1.0, 16)),
+    "r": ("lin", np.linspace(-0.6, 0.6, 25)),
+    "k": ("lin", np.linspace(-0.3, 0.3, 25)),
+    "v_max": ("log", None),  # set from the data's magnitude
+}
+
+#: number of free parameters each candidate adds (for the parsimony penalty)
+N_PARAMS = {"laplace": 0, "uniform": 0, "multiplicative": 1, "common_mode": 1, "drift": 1, "crosstalk": 1,
+            "weight_error": 3, "shot": 1, "saturation": 1, "quantization": 2, "awgn": 1}
+
+
+def split_inputs(key, n: int, frac: float = 0.5):
+    """Random disjoint (fit, held-out) index arrays over ``n`` inputs."""
+    if n < 4:
+        raise GiftInputError(f"measurement has {n} inputs; fitting and held-out scoring need at least 4")
+    perm = np.asarray(jax.random.permutation(key, n))
+    k = int(round(n * frac))
+    k = min(max(k, 2), n - 2)
+    return np.sort(perm[:k]), np.sort(perm[k:])
+
+
+# ---- moments ---------------------------------------------------------------------------
+
+def _moments(A, t):
+    """Per-cell moments of shots A (n, K, d) with times t (n, K) or None."""
+    K = A.shape[1]
+    m = jnp.mean(A, 1)
+    v = jnp.var(A, 1) * K / (K - 1)
+    sv = jnp.var(jnp.sum(A, -1), 1) * K / (K - 1)
+    out = {"m": m, "v": v, "sv": sv}
+    if t is not None:
+        tc = t - jnp.mean(t, 1, keepdims=True)
+        vt = jnp.mean(tc ** 2, 1)
+        out["beta"] = jnp.einsum("nk,nkd->nd", tc, A - m[:, None, :]) / K / jnp.maximum(vt, 1e-12)[:, None]
+        out["vt"] = vt
+    return out
+
+
+def _moment_loss(mod, dat, r, K):
+    """Mean standardised squared difference of the moments (one layer)."""
+    vfloor = 1e-6 * jnp.mean(dat["v"]) + 1e-20
+    lv = jnp.log(mod["v"] + vfloor) - jnp.log(dat["v"] + vfloor)
+    lsv = jnp.log(mod["sv"] + vfloor) - jnp.log(dat["sv"] + vfloor)
+    var_lv = 2.0 / (r - 1) + 2.0 / (K - 1)
+    terms = [jnp.mean((mod["m"] - dat["m"]) ** 2 / (dat["v"] / r + mod["v"] / K + vfloor)),
+             jnp.mean(lv ** 2) / var_lv, jnp.mean(lsv ** 2) / var_lv]
+    if "beta" in dat:
+        vt = jnp.maximum(dat["vt"], 1e-12)[:, None]
+        se2 = (dat["v"] / r + mod["v"] / K) / vt + vfloor
+        # cells whose shots span no time carry no slope information
+        w = (dat["vt"] > 1e-10)[:, None]
+        terms.append(jnp.sum(w * (mod["beta"] - dat["beta"]) ** 2 / se2) / jnp.maximum(jnp.sum(w) * dat["m"].shape[1], 1))
+    return sum(terms)
+
+
+def data_moments(meas: Measurement):
+    t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
+    return tuple(_moments(jnp.asarray(Y, jnp.float32), t) for Y in meas.layers())
+
+
+# ---- quantization lattice --------------------------------------------------------------
+
+def lattice_step(meas: Measurement):
+    """The spacing of the lattice the measured values sit on, or None if they do not.
+
+    The candidate step is the smallest clear gap between distinct measured values; the
+    values are on the lattice when every one is within 1e-4 step of a multiple of it.
+    """
+    vals = np.concatenate([np.ravel(a) for a in meas.layers()])
+    u = np.unique(np.round(vals, 9))
+    if len(u) > 0.5 * len(vals) or len(u) < 2:
+        return None
+    gaps = np.diff(u)
+    scale = max(np.max(np.abs(u)), 1e-12)
+    gaps = gaps[gaps > 1e-7 * scale]
+    if len(gaps) == 0:
+        return None
+    step = float(np.min(gaps))
+    # refine with the median of gaps that are one step wide
+    one = gaps[np.abs(gaps / step - 1.0) < 0.01]
+    step = float(np.median(one)) if len(one) else step
+    resid = np.abs(u / step - np.round(u / step))
+    if np.max(resid) > 1e-3:
+        return None
+    return step
+
+
+def quantization_from_lattice(meas: Measurement):
+    """``(bits, v_range)`` read off the measured lattice, or None."""
+    step = lattice_step(meas)
+    if step is None:
+        return None
+    vmax = max(float(np.max(np.abs(a))) for a in meas.layers())
+    bits = max(1, int(np.ceil(np.log2(max(vmax / step, 1.0) - 1e-6))) + 1)
+    bits = min(bits, 32)
+    return float(bits), float(step * 2.0 ** (bits - 1))
+
+
+# ---- the fit ---------------------------------------------------------------------------
+
+def _transforms_static(physics, free, theta):
+    vals = {}
+    for i, p in enumerate(free):
+        eff = next(e for e in physics.effects if p in e.params)
+        lo, _ = type(eff).bounds.get(p, (-np.inf, np.inf))
+        vals[p] = jnp.exp(theta[i]) if lo >= 0 else theta[i]
+    return vals
+
+
+class _Problem:
+    """The fitting data of one measurement, shared by every candidate model."""
+
+    def __init__(self, key, meas: Measurement, K: int | None = None):
+        self.meas = meas
+        self.key = key
+        self.arch = meas.arch
+        self.K = meas.r if K is None else int(K)
+        self.x = jnp.asarray(meas.x, jnp.float32)
+        self.t = None
+        if meas.t is not None:
+            reps = -(-self.K // meas.r)
+            self.t = jnp.asarray(np.tile(meas.t, (1, reps))[:, :self.K], jnp.float32)
+        self.dat = data_moments(meas) if self.K == meas.r else None
+        if self.dat is None:
+            t = self.t[:, :meas.r] if self.t is not None else None
+            self.dat = tuple(_moments(jnp.asarray(Y, jnp.float32), t) for Y in meas.layers())
+        ids = meas.layer_ids()
+        # forward returns every layer; only measured ones enter the loss
+        self.dat_full = tuple(self.dat[ids.index(l)] if l in ids else None for l in range(1, self.arch.depth + 1))
+
+    def params32(self, params):
+        return tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+
+    def loss(self, physics, params, free):
+        """``theta -> moment loss`` for the free parameters (common random numbers)."""
+        noise = draws(self.key, physics, self.arch, (self.meas.n, self.K))
+        dat = self.dat_full
+        p32 = self.params32(params)
+        r, K, t = self.meas.r, self.K, self.t
+
+        def f(theta):
+            phys = physics.replace(**_transforms_static(physics, tuple(free), jnp.asarray(theta, jnp.float32)))
+            outs = layer_outputs(p32, self.x, noise, phys, self.arch, t)
+            return _loss_of_outputs(outs, dat, t, (r, K))
+        return f
+
+
+@functools.partial(jax.jit, static_argnames=("rK",))
+def _loss_of_outputs(outs, dat, t, rK):
+    r, K = rK
+    total = 0.0
+    for A, d in zip(outs, dat):
+        if d is not None:
+            total = total + _moment_loss(_moments(A, t), d, r, K)
+    return total
+
+
+def _optimise(f, theta0, grids):
+    """Grid scan over each coordinate listed in ``grids`` (index -> theta values), then
+    Nelder-Mead on all coordinates."""
+    theta = np.array(theta0, dtype=np.float64)
+    for i, values in grids.items():
+        best, bv = None, np.inf
+        for v in values:
+            th = theta.copy()
+            th[i] = v
+            val = float(f(th))
+            if np.isfinite(val) and val < bv:
+                best, bv = v, val
+        if best is not None:
+            theta[i] = best
+    res = optimize.minimize(lambda th: float(f(th)), theta, method="Nelder-Mead",
+                            options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 80 * len(theta),
+                                     "initial_simplex": _simplex(theta)})
+    th = res.x if res.fun <= float(f(theta)) else theta
+    return th, float(f(th))
+
+
+def _simplex(theta, step=0.25):
+    pts = [theta.copy()]
+    for i in range(len(theta)):
+        p = theta.copy()
+        p[i] += step if abs(theta[i]) < 1 else step * abs(theta[i])
+        pts.append(p)
+    return np.array(pts)
+
+
+def _theta_of(physics, free):
+    th = []
+    for p in free:
+        eff = next(e for e in physics.effects if p in e.params)
+        lo, _ = type(eff).bounds.get(p, (-np.inf, np.inf))
+        v = float(eff.param_dict()[p])
+        th.append(np.log(max(v, 1e-12)) if lo >= 0 else v)
+    return np.array(th)
+
+
+def _grid_theta(name, physics, meas):
+    kind, values = _GRIDS[name]
+    if name == "v_max":
+        vmax = max(float(np.max(np.abs(a))) for a in meas.layers())
+        values = np.geomspace(0.3 * vmax, 30 * vmax, 17)
+    return np.log(values) if kind == "log" else values
+
+
+def _fit_weight_offsets(problem: _Problem, physics: Physics, params, steps: int = 250):
+    """Ridge-regularised offsets E_hat per layer matching the measured means (taps and y)."""
+    import optax
+
+    meas = problem.meas
+    noise = draws(jax.random.fold_in(problem.key, 17), physics, problem.arch, (meas.n, problem.K))
+    p32 = problem.params32(params)
+    dat = problem.dat_full
+    arch, t, x = problem.arch, problem.t, problem.x
+    r, K = meas.r, problem.K
+    n_obs = sum(meas.n * a.shape[2] for a in meas.layers())
+
+    def loss(delta, inv_e2):
+        ps = tuple(Layer(W + dW, b) for (W, b), dW in zip(p32, delta))
+        out = forward(ps, x[:, None, :], noise, physics, arch, t=t, taps=True)
+        chi2 = 0.0
+        for A, d in zip(out.taps, dat):
+            if d is not None:
+                m = jnp.mean(A, 1)
+                v = jnp.var(A, 1)
+                chi2 = chi2 + jnp.sum((m - d["m"]) ** 2 / (d["v"] / r + v / K + 1e-12))
+        ridge = sum(jnp.sum(dW ** 2) for dW in delta)
+        return (0.5 * chi2 + 0.5 * inv_e2 * ridge) / n_obs
+
+    opt = optax.adam(3e-3)
+
+    @jax.jit
+    def run(delta, inv_e2):
+        def step(carry, _):
+            dl, st = carry
+            g = jax.grad(loss)(dl, inv_e2)
+            upd, st = opt.update(g, st, dl)
+            return (optax.apply_updates(dl, upd), st), None
+        (dl, _), _ = jax.lax.scan(step, (delta, opt.init(delta)), None, length=steps)
+        return dl
+
+    delta = tuple(jnp.zeros_like(W) for W, _ in p32)
+    rms_w = float(np.sqrt(np.mean(np.concatenate([np.ravel(W) ** 2 for W, _ in params]))))
+    e = 0.05 * rms_w
+    for _ in range(2):
+        delta = run(delta, jnp.float32(1.0 / e ** 2))
+        e = max(float(np.sqrt(np.mean(np.concatenate([np.ravel(np.asarray(d)) ** 2 for d in delta])))), 1e-4 * rms_w)
+    new = tuple(Layer(np.asarray(W, np.float64) + np.asarray(d, np.float64), np.asarray(b, np.float64))
+                for (W, b), d in zip(params, delta))
+    return new, e
+
+
+def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None, K: int | None = None) -> Model:
+    """Fit awgn's ``s`` and the parameters of ``effects`` (names of CONTRACTS §2) to ``meas``.
+
+    Parameters
+    ----------
+    key : PRNG key (the common random numbers of the fit)
+    meas : Measurement (the fitting inputs)
+    effects : effect names to include besides awgn (and those of ``start``)
+    start : a model whose physics and values start the fit (default: awgn only)
+    K : model shots per input (default r)
+
+    Returns
+    -------
+    Model with fitted parameters
+    """
+    problem = _Problem(key, meas, K)
+    physics = start.physics if start is not None else Physics.create(s=0.1)
+    params = meas.params if start is None or start.params is None else start.params
+    extra = dict(start.extra) if start is not None else {}
+    new = [e for e in effects if e not in physics.names and not (e == "weight_error" and "weight_error" in extra)]
+    for name in new:
+        if name not in REGISTRY:
+            raise GiftInputError(f"--add: unknown effect {name!r}; known: {', '.join(REGISTRY)}")
+        if name == "awgn":
+            continue
+        if name in ("laplace", "uniform") and physics.law != "gaussian":
+            raise GiftInputError(f"--add {name}: the model already has the noise law {physics.law}")
+    grid_params = ["s"] if start is None else []
+    if "weight_error" in new:
+        params, e = _fit_weight_offsets(problem, physics, params)
+        extra["weight_error"] = e
+    for name in new:
+        if name in ("awgn", "weight_error"):
+            continue
+        if name == "quantization":
+            q = quantization_from_lattice(meas)
+            bits, v_range = q if q is not None else (16.0, max(float(np.max(np.abs(a))) for a in meas.layers()))
+            physics = physics.with_effect(make_effect("quantization", bits=bits, v_range=v_range))
+            continue
+        if name == "drift" and meas.t is None:
+            raise GiftInputError("--add drift: the measurement has no acquisition times t, drift is silent without them")
+        eff = make_effect(name)
+        physics = physics.with_effect(eff)
+        grid_params += list(eff.params)
+    free = tuple(p for p in physics.params() if p not in ("bits", "v_range"))
+    f = problem.loss(physics, params, free)
+    theta0 = _theta_of(physics, free)
+    grids = {free.index(p): _grid_theta(p, physics, meas) for p in grid_params if p in free}
+    theta, _ = _optimise(f, theta0, grids)
+    vals = {p: float(v) for p, v in zip(free, [np.exp(th) if lo >= 0 else th for th, lo in
+                                                  zip(theta, [_lower(physics, p) for p in free])])}
+    physics = physics.replace(**vals)
+    return Model(physics, None if params is meas.params else params, extra)
+
+
+def _lower(physics, p):
+    eff = next(e for e in physics.effects if p in e.params)
+    return type(eff).bounds.get(p, (-np.inf, np.inf))[0]

@@ -1,0 +1,68 @@
+"""``gift finetune``: fine-tune in-silico trained weights against a simulated chip (CONTRACTS §4)."""
+
+from __future__ import annotations
+
+import math
+
+from .._errors import GiftInputError
+
+
+def add_arguments(parser):
+    from ..finetune import METHODS
+
+    parser.add_argument("--dataset", default="digits", help="digits (default), mnist5k, teacher")
+    parser.add_argument("--arch", default="64-32-32-10", help="widths d0-...-dL (default 64-32-32-10)")
+    parser.add_argument("--s0", type=float, required=True, help="the noise level assumed in training")
+    parser.add_argument("--st", type=float, required=True, help="the chip's true noise level")
+    parser.add_argument("--true-effect", action="append", default=[], metavar="NAME=VALUE",
+                        help="a CONTRACTS §2 effect the chip also has (repeatable), e.g. shot=0.01")
+    parser.add_argument("--method", default="gift", help=f"one of: {', '.join(METHODS)}")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--budget", type=float, default=20, help="chip evaluations allowed (units of Eval(K1, K2))")
+    parser.add_argument("--K1", type=int, default=None, help="fine-tuning inputs (default: all training inputs)")
+    parser.add_argument("--K2", type=int, default=1, help="shots per input per Eval (default 1)")
+
+
+def run(args) -> dict:
+    from ..finetune import METHODS, run_finetune
+
+    if args.method not in METHODS:
+        raise GiftInputError(f"--method {args.method!r}: unknown; known: {', '.join(METHODS)}")
+    for name, v in (("--s0", args.s0), ("--st", args.st), ("--budget", args.budget)):
+        if not math.isfinite(v) or v < 0:
+            raise GiftInputError(f"{name} {v}: must be a non-negative number")
+    if args.s0 <= 0:
+        raise GiftInputError(f"--s0 {args.s0}: must be positive")
+    if args.K2 < 1 or (args.K1 is not None and args.K1 < 2):
+        raise GiftInputError("--K1 must be at least 2 and --K2 at least 1")
+    out = run_finetune(dataset=args.dataset, arch=args.arch, s0=args.s0, st=args.st,
+                       true_effects=tuple(args.true_effect), method=args.method, seed=args.seed,
+                       budget=args.budget, K1=args.K1, K2=args.K2)
+    out["info"] = _plain(out.get("info", {}))
+    return out
+
+
+def _plain(obj):
+    """Keep the JSON-friendly part of a method's info."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (bool, int, str)) or obj is None:
+        return obj
+    try:
+        return float(obj)
+    except (TypeError, ValueError):
+        return str(obj)
+
+
+def render(r: dict) -> str:
+    lines = [f"gift finetune  {r['dataset']} {'-'.join(map(str, r['arch']))}  s0={r['s0']:g} -> st={r['st']:g}  "
+             f"method={r['method']}",
+             f"{'':14}{'before':>10}{'after':>10}",
+             f"{'train loss':14}{r['loss_before']:10.4f}{r['loss_after']:10.4f}",
+             f"{'train acc':14}{r['accuracy_before']:10.4f}{r['accuracy_after']:10.4f}",
+             f"{'test loss':14}{r['test_loss_before']:10.4f}{r['test_loss_after']:10.4f}",
+             f"{'test acc':14}{r['test_accuracy_before']:10.4f}{r['test_accuracy_after']:10.4f}",
+             f"chip evaluations: {r['in_situ_evaluations']}   seconds: {r['seconds']:.1f}"]
+    return "\n".join(lines)

@@ -20,7 +20,7 @@ import numpy as np
 
 from ._jobs import unavailable
 from ._scales import SCALES, get_scale, sweeps
-from ._sweep import open_dataset, run_sweep
+from ._sweep import load_points, open_client, open_dataset, run_sweep
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -99,6 +99,22 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
     for m in mods.values():
         needed += [s for s in m.SWEEPS if s not in needed]
 
+    client, close = None, None
+    if compute and scheduler != "synchronous":
+        # one pool for all sweeps: workers keep their compiled functions and loaded weights
+        pending = [s for s in needed if not unavailable(all_sweeps[s].job, all_sweeps[s].fixed)
+                   and len(load_points(data_dir, all_sweeps[s])) < all_sweeps[s].size]
+        if pending:
+            client, close = open_client(scheduler, n_workers)
+    try:
+        return _build(sc, mods, all_sweeps, needed, data_dir, figure_dir, compute, progress, scheduler, n_workers,
+                      client, t0)
+    finally:
+        if close is not None:
+            close()
+
+
+def _build(sc, mods, all_sweeps, needed, data_dir, figure_dir, compute, progress, scheduler, n_workers, client, t0):
     sweep_info, sweep_problem = [], {}
     loaded = {}  # sweep name -> Dataset, read once per build
 
@@ -110,7 +126,7 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
     for sname in needed:
         sw = all_sweeps[sname]
         path = os.path.join(data_dir, f"{sname}.nc")
-        problem = unavailable(sw.job) if compute else None
+        problem = unavailable(sw.job, sw.fixed) if compute else None
         if problem:
             sweep_problem[sname] = problem
             if progress:
@@ -120,7 +136,7 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
                 continue
         if compute and not problem:
             ds = loaded[sname] = run_sweep(sw, data_dir, scheduler=scheduler, n_workers=n_workers,
-                                           progress=progress)
+                                           progress=progress, client=client)
         elif os.path.isfile(path):
             ds = data_of(sname)
         else:

@@ -168,7 +168,7 @@ def estimator_job(method: str, K1: int, K2: int, rep: int, *, dataset: str = "di
             "samples": int(K1) * int(K2)}
 
 
-def unavailable(job: str) -> str | None:
+def unavailable(job: str, fixed: dict | None = None) -> str | None:
     """Why ``job`` cannot run in this checkout (a missing input), or None; checked once per sweep
     so that a missing dependency is one message, not one failure per point."""
     if job.endswith(":gift_job"):
@@ -176,6 +176,14 @@ def unavailable(job: str) -> str | None:
             from gift_theory.finetune import run_finetune  # noqa: F401
         except ImportError:
             return "needs gift_theory.finetune.run_finetune (the GIFT issue's job function)"
+        if "folder" in (fixed or {}).get("options", {}):
+            import inspect
+
+            from gift_theory.finetune import _run
+
+            if "folder" not in inspect.signature(_run.load_setting).parameters:
+                return ("needs run_finetune(folder=...) for an MNIST IDX folder (its load_setting takes no "
+                        "folder); use mnist5k (the default of --scale paper) meanwhile")
     if job.endswith(":estimator_job"):
         try:
             from gift_theory.estimators import d_ds_grad  # noqa: F401

@@ -262,8 +262,23 @@ def _client(scheduler, n_workers: int):
     return Client(scheduler), None
 
 
+def open_client(scheduler: str | None = None, n_workers: int = 2):
+    """A Dask client for several sweeps: ``(client, close)``; call ``close()`` when done.
+
+    None/"local": a new ``LocalCluster`` of ``n_workers`` single-threaded processes; otherwise
+    the address of a running scheduler."""
+    client, cluster = _client(scheduler, n_workers)
+
+    def close():
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+    return client, close
+
+
 def run_sweep(sweep: Sweep, folder: str, *, scheduler: str | None = None, n_workers: int = 2,
-              progress: bool = True, save: bool = True, max_new: int | None = None):
+              progress: bool = True, save: bool = True, max_new: int | None = None, client=None):
     """Run the missing points of ``sweep``, persisting each as it finishes; return the Dataset.
 
     Parameters
@@ -279,6 +294,9 @@ def run_sweep(sweep: Sweep, folder: str, *, scheduler: str | None = None, n_work
         Worker processes of the local cluster.
     max_new : int, optional
         Stop after this many new points (a partial run; rerun to continue).
+    client : dask.distributed.Client, optional
+        Use this client (e.g. from :func:`open_client`, shared by several sweeps so that workers
+        keep their compiled functions and cached weights); ``scheduler`` is then ignored.
 
     Returns
     -------
@@ -290,10 +308,11 @@ def run_sweep(sweep: Sweep, folder: str, *, scheduler: str | None = None, n_work
     if max_new is not None:
         todo = todo[:max_new]
     prog = _Progress(sweep.name, sweep.size, len(records), progress)
-    prog.log(f"{len(records)}/{sweep.size} points already done, {len(todo)} to run "
-             f"({'in process' if scheduler == 'synchronous' else scheduler or f'local cluster, {n_workers} workers'})")
+    where = ("in process" if scheduler == "synchronous" and client is None else
+             "shared client" if client is not None else scheduler or f"local cluster, {n_workers} workers")
+    prog.log(f"{len(records)}/{sweep.size} points already done, {len(todo)} to run ({where})")
     failed = 0
-    if todo and scheduler == "synchronous":
+    if todo and scheduler == "synchronous" and client is None:
         for p in todo:
             try:
                 out = _call(sweep.job, p, sweep.fixed)
@@ -307,7 +326,9 @@ def run_sweep(sweep: Sweep, folder: str, *, scheduler: str | None = None, n_work
     elif todo:
         from dask.distributed import as_completed
 
-        client, cluster = _client(scheduler, n_workers)
+        close = None
+        if client is None:
+            client, close = open_client(scheduler, n_workers)
         try:
             futures = {}
             for p in todo:
@@ -326,9 +347,8 @@ def run_sweep(sweep: Sweep, folder: str, *, scheduler: str | None = None, n_work
                 _persist(folder, sweep, p, out)
                 prog.tick(p, out["seconds"])
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            if close is not None:
+                close()
     ds = assemble(folder, sweep)
     ds.attrs["failed"] = failed
     if save:

@@ -35,8 +35,8 @@ def fake_run_finetune(dataset, arch, s0, st, true_effects, method, seed, **optio
 @pytest.fixture
 def fake_finetune(monkeypatch):
     monkeypatch.setattr(_jobs, "_run_finetune", lambda: fake_run_finetune)
-    monkeypatch.setattr(_jobs, "unavailable", lambda job: None)
-    monkeypatch.setattr(paper_figures._build, "unavailable", lambda job: None)
+    monkeypatch.setattr(_jobs, "unavailable", lambda job, fixed=None: None)
+    monkeypatch.setattr(paper_figures._build, "unavailable", lambda job, fixed=None: None)
 
 
 def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(tmp_path, fake_finetune,
@@ -77,7 +77,7 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
 
 
 def test_figures_without_their_inputs_say_what_they_need(tmp_path, monkeypatch):
-    monkeypatch.setattr(paper_figures._build, "unavailable", lambda job: "needs gift_theory.finetune.run_finetune")
+    monkeypatch.setattr(paper_figures._build, "unavailable", lambda job, fixed=None: "needs gift_theory.finetune.run_finetune")
     res = build("tiny", only="performance_gift", data_dir=str(tmp_path), figure_dir=str(tmp_path), progress=False)
     assert res["figures"][0]["status"].startswith("RuntimeError: needs gift_theory.finetune.run_finetune")
     assert res["figures"][0]["path"] is None and not os.listdir(tmp_path)

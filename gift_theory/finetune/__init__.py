@@ -20,7 +20,10 @@ from ._rivals import identify_retrain as identify_retrain
 from ._rivals import pat as pat
 from ._rivals import retrain as retrain
 from ._rivals import spsa as spsa
+from ._run import GRID as GRID
 from ._run import METHODS as METHODS
+from ._run import oracle_grid as oracle_grid
+from ._run import true_physics as true_physics
 from ._run import compare_methods as compare_methods
 from ._run import finetune_on as finetune_on
 from ._run import load_setting as load_setting

@@ -29,6 +29,7 @@ def _line(kind):
         u, dinfo = direction(problem, kind, K2=kw.pop("direction_K2", 16))
         w, info = paired_line_search(problem, u, **kw)
         info["direction"] = dict(dinfo, kind=kind)
+        info["_u"] = u  # the direction itself, for curves and figures (not part of the JSON)
         return w, info
     return run
 
@@ -101,6 +102,7 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
         after = referee(params, x, y, lab, physics, arch, K2=referee_K2)
         out[f"{split}loss_before"], out[f"{split}loss_after"] = before["loss"], after["loss"]
         out[f"{split}accuracy_before"], out[f"{split}accuracy_after"] = before["accuracy"], after["accuracy"]
+    out["direction"] = info.pop("_u", None)
     out["info"] = info
     out["params"] = params
     return out
@@ -130,21 +132,25 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
     out = finetune_on(ds, arch_, w0, s0=s0, physics=true_physics(st, true_effects), method=method, seed=seed,
                       **options)
     out.pop("params")
+    out.pop("direction")
     return {"dataset": dataset, "arch": list(arch_.widths), **out}
 
 
 def compare_methods(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),
-                    methods=METHODS, seed: int = 0, progress=None, **options) -> list[dict]:
+                    methods=METHODS, seed: int = 0, progress=None, keep: bool = False, **options) -> list[dict]:
     """Every method in ``methods`` on the same w0 and the same (fresh, equally seeded) chip.
 
     Adds ``oracle_fraction``: (loss_before - loss_after) / (loss_before - loss_after of retrain).
+    ``keep``: also return each method's ``params`` and line-search ``direction``.
     """
     ds, arch_, w0 = load_setting(dataset, arch, s0, seed)
     physics = true_physics(st, true_effects)
     rows = []
     for m in methods:
         r = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=m, seed=seed, **options)
-        r.pop("params")
+        if not keep:
+            r.pop("params")
+            r.pop("direction")
         rows.append({"dataset": dataset, "arch": list(arch_.widths), **r})
         if progress:
             progress(rows[-1])
@@ -153,4 +159,18 @@ def compare_methods(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1
         gain = oracle[0]["loss_before"] - oracle[0]["loss_after"]
         for r in rows:
             r["oracle_fraction"] = (r["loss_before"] - r["loss_after"]) / gain if gain != 0 else float("nan")
+    return rows
+
+
+#: the report's grid: misspecified pairs of the issue, and s0 = st
+GRID = ((0.05, 0.2), (0.2, 0.05), (0.1, 0.3), (0.3, 0.1), (0.1, 0.1))
+
+
+def oracle_grid(pairs=GRID, methods=METHODS, *, dataset: str = "digits", arch="64-32-32-10", seed: int = 0,
+                progress=None, **options) -> list[dict]:
+    """:func:`compare_methods` over (s0, st) pairs; every row carries ``oracle_fraction``."""
+    methods = ("retrain",) + tuple(m for m in methods if m != "retrain")
+    rows = []
+    for s0, st in pairs:
+        rows += compare_methods(dataset, arch, s0, st, methods=methods, seed=seed, progress=progress, **options)
     return rows

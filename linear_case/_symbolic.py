@@ -1,0 +1,36 @@
+"""The paper's linear example in sympy: a scalar chain of depth L (widths 1-1-..-1),
+y = V x, E[x^2] = m2, noise on the input only (paper Example ex: linear network)."""
+
+from __future__ import annotations
+
+import sympy as sp
+
+
+def example(L: int):
+    """Symbols and closed forms: J_s, grad J, d/ds grad J, d2/ds2 grad J, at the balanced
+    critical point w_l = c^{1/L}, c = m2 V / (m2 + s0^2) (V > 0).
+
+    Returns
+    -------
+    dict with keys s, s0, st, V, m2, w (symbols), J, v, u, C1, printed_rhs, corrected_rhs,
+    example_rhs (sympy expressions in s0, st, V, m2 after substituting w0).
+    """
+    s, s0, st, V, m2 = sp.symbols("s s0 st V m2", positive=True)
+    w = sp.symbols(f"w1:{L + 1}", positive=True)
+    W = sp.Mul(*w)
+    J = m2 * (V - W) ** 2 + s ** 2 * W ** 2
+    grad = sp.Matrix([sp.diff(J, wi) for wi in w])
+    c = m2 * V / (m2 + s0 ** 2)
+    w0 = {wi: c ** sp.Rational(1, L) for wi in w}
+    crit = sp.simplify(grad.subs(s, s0).subs(w0))
+    v = sp.simplify(sp.diff(grad, s).subs(s, s0).subs(w0))
+    u = sp.simplify(sp.diff(grad, s, 2).subs(w0))             # independent of zeta
+    gst = grad.subs(s, st).subs(w0)
+    C1 = sp.factor(sp.simplify((gst.T * v)[0]))
+    vv = sp.simplify((v.T * v)[0])
+    uv = sp.simplify((u.T * v)[0])
+    printed = sp.simplify(sp.sqrt(vv) / (uv / 2))
+    corrected = sp.simplify(vv / (uv / 2))
+    example_rhs = (1 + s0 ** 2 / m2) / (2 * V)
+    return dict(s=s, s0=s0, st=st, V=V, m2=m2, w=w, J=J, critical_residual=crit, v=v, u=u, C1=C1,
+                printed_rhs=printed, corrected_rhs=corrected, example_rhs=example_rhs)

@@ -1,0 +1,173 @@
+"""Per-input Monte-Carlo samples of J_s, grad J_s and its s-derivatives for small ONNs.
+
+Each input k carries its own K2 standard noise draws; the per-input average over those
+draws is one independent unit, so an estimate is the mean over K1 units with its
+standard error (lem:Hierarchical-sampling-is-unbiased). Derivatives in s are pathwise
+(autodiff through ``s * xi`` with the standard draws xi held fixed), so the same draws
+at two noise levels give common random numbers. The printed estimator D^[0]
+(eqs. sample_D0_Wi / sample_D0_bi) comes from :mod:`gift_theory.estimators`
+(``method="score_paper"``) when that package is installed, else from the local
+transcription :func:`d0_printed_samples`.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+import gift_theory as gt
+
+_WHAT = ("loss", "grad", "ds", "ds2", "hvp", "d0_printed")
+
+
+@partial(jax.jit, static_argnames=("arch", "what"))
+def _per_input(params, s, x, y, noise, physics, arch, what, vec=None):
+    def loss(p, s_, x1, y1, n1):
+        out = gt.forward(p, x1[None, :], n1, physics.replace(s=s_), arch).y
+        return jnp.mean(jnp.sum((y1 - out) ** 2, axis=-1))
+
+    g = jax.grad(loss)
+
+    def flat(f):
+        return lambda *a: ravel_pytree(f(*a))[0]
+
+    if what == "loss":
+        fn = loss
+    elif what == "grad":
+        fn = flat(g)
+    elif what == "ds":
+        fn = flat(jax.jacfwd(g, argnums=1))
+    elif what == "ds2":
+        fn = flat(jax.jacfwd(jax.jacfwd(g, argnums=1), argnums=1))
+    elif what == "hvp":
+        _, unravel = ravel_pytree(params)
+        tangent = unravel(vec)
+        fn = flat(lambda p, s_, x1, y1, n1: jax.jvp(lambda q: g(q, s_, x1, y1, n1), (p,), (tangent,))[1])
+    elif what == "d0_printed":
+        def fn(p, s_, x1, y1, n1):
+            # printed D^[0]: (sum_alpha (s0^-2 |N^alpha|^2 - d_alpha)) R A^T with R A^T = -1/2 grad of the loss
+            def one(n_one):
+                gi = ravel_pytree(jax.grad(lambda q: loss(q, s_, x1, y1, jax.tree_util.tree_map(
+                    lambda a: a[None], n_one)))(p))[0]
+                weight = sum(jnp.sum(v ** 2) - v.size for v in n_one.values())  # N = s0 xi
+                return weight * (-0.5) * gi
+            return jnp.mean(jax.vmap(one)(n1), axis=0)
+    else:
+        raise ValueError(what)
+    return jax.vmap(fn, in_axes=(None, None, 0, 0, 0))(params, s, x, y, noise)
+
+
+def per_input(what: str, params, s, x, y, noise, physics, arch, vec=None) -> np.ndarray:
+    """Per-input samples of ``what`` in {"loss", "grad", "ds", "ds2", "hvp", "d0_printed"}.
+
+    Parameters
+    ----------
+    params : tuple of gt.Layer
+    s : noise level at which to evaluate (the physics' other parameters are kept)
+    x : (K1, d_0), y : (K1, d_L)
+    noise : dict of standard draws with leaves (K1, K2, d)
+    vec : (P,) flat direction, for ``what="hvp"`` (Hessian of J_s times vec)
+
+    Returns
+    -------
+    ndarray (K1,) for "loss", else (K1, P) with P the number of parameters (flattened
+    in the order of ``jax.flatten_util.ravel_pytree(params)``).
+    """
+    dtype = params[0].W.dtype
+    s = jnp.asarray(s, dtype)
+    vec = None if vec is None else jnp.asarray(vec, dtype)
+    return np.asarray(_per_input(params, s, jnp.asarray(x, dtype), jnp.asarray(y, dtype), noise, physics, arch,
+                                 what, vec), dtype=np.float64)
+
+
+def draws(key, arch, physics, K1, K2, dtype=jnp.float64) -> dict:
+    """Standard draws with leaves (K1, K2, d) (same key, same draws)."""
+    return gt.sample_noise(key, arch, physics, (K1, K2), dtype)
+
+
+def estimate(samples) -> gt.Estimate:
+    """Mean and standard error over the K1 independent per-input units."""
+    return gt.estimate_from_samples(samples)
+
+
+def d0_printed(key, params, x, y, physics, arch, K2) -> gt.Estimate:
+    """The printed D^[0](K1, K2) (eqs. sample_D0_Wi / sample_D0_bi) with its standard error.
+
+    Uses ``gift_theory.estimators.d_ds_grad(method="score_paper")`` when available.
+    """
+    try:
+        from gift_theory.estimators import d_ds_grad  # the shared implementation
+    except ImportError:
+        d_ds_grad = None
+    if d_ds_grad is not None:
+        est = d_ds_grad(key, params, x, y, physics, arch, method="score_paper", K2=K2)
+        mean = np.asarray(ravel_pytree(est.mean)[0], dtype=np.float64)
+        se = np.asarray(ravel_pytree(est.se)[0], dtype=np.float64)
+        samples = est.samples
+        if samples is not None:
+            samples = np.asarray(jax.vmap(lambda t: ravel_pytree(t)[0])(samples)) if not isinstance(
+                samples, np.ndarray) else samples
+        return gt.Estimate(mean, se, est.n, samples)
+    noise = draws(key, arch, physics, x.shape[0], K2, params[0].W.dtype)
+    return estimate(per_input("d0_printed", params, physics.s, x, y, noise, physics, arch))
+
+
+class Problem(NamedTuple):
+    """A small ONN learning task: data (the empirical measure mu), architecture, physics."""
+
+    x: np.ndarray
+    y: np.ndarray
+    arch: gt.Architecture
+    physics: gt.Physics
+
+
+def teacher_problem(key, arch: gt.Architecture, n: int = 256, s: float = 0.1) -> Problem:
+    """Inputs uniform in [0, 1]^{d_0}, targets from a random noiseless tanh teacher of ``arch``.
+
+    The data distribution mu is the empirical measure of these n points, so J_s is an
+    expectation over the noise only and K1 = n covers mu exactly.
+    """
+    kx, kt = jax.random.split(key)
+    x = jax.random.uniform(kx, (n, arch.widths[0]), jnp.float64)
+    teacher = gt.init_params(kt, arch, dtype=jnp.float64, gain=2.0)
+    y = gt.forward(teacher, x, {}, gt.Physics.create(s=None), arch).y
+    return Problem(np.asarray(x), np.asarray(y), arch, gt.awgn(s))
+
+
+def train_critical(key, problem: Problem, s: float, *, K2: int = 32, steps: int = 1500, lr: float = 0.05,
+                   init=None, box: gt.Box | None = None):
+    """An approximate critical point of J_s: full-batch Adam on n x K2 fixed draws, then
+    plain gradient steps. Returns params (float64). Used to build w0 for the checks."""
+    import optax
+
+    arch = problem.arch
+    params = init if init is not None else gt.init_params(jax.random.fold_in(key, 1), arch, dtype=jnp.float64)
+    noise = draws(jax.random.fold_in(key, 2), arch, problem.physics, problem.x.shape[0], K2)
+    x = jnp.asarray(problem.x)[:, None, :]
+    y = jnp.asarray(problem.y)[:, None, :]
+    phys = problem.physics.replace(s=s)
+
+    def J(p):
+        return jnp.mean(jnp.sum((y - gt.forward(p, x, noise, phys, arch).y) ** 2, axis=-1))
+
+    opt = optax.adam(lr)
+
+    @jax.jit
+    def run(p):
+        def step(c, i):
+            p, st = c
+            g = jax.grad(J)(p)
+            u, st = opt.update(g, st, p)
+            p = optax.apply_updates(p, u)
+            if box is not None:
+                p = gt.project(p, box)
+            return (p, st), None
+        (p, _), _ = jax.lax.scan(step, (p, opt.init(p)), jnp.arange(steps))
+        return p
+
+    return run(params)

@@ -21,6 +21,8 @@ def add_arguments(parser):
     parser.add_argument("--budget", type=float, default=20, help="chip evaluations allowed (units of Eval(K1, K2))")
     parser.add_argument("--K1", type=int, default=None, help="fine-tuning inputs (default: all training inputs)")
     parser.add_argument("--K2", type=int, default=1, help="shots per input per Eval (default 1)")
+    parser.add_argument("--weights", default=None, metavar="FILE.npz",
+                        help="fine-tune these weights (W1, b1, ...) instead of training at s0")
 
 
 def run(args) -> dict:
@@ -37,7 +39,7 @@ def run(args) -> dict:
         raise GiftInputError("--K1 must be at least 2 and --K2 at least 1")
     out = run_finetune(dataset=args.dataset, arch=args.arch, s0=args.s0, st=args.st,
                        true_effects=tuple(args.true_effect), method=args.method, seed=args.seed,
-                       budget=args.budget, K1=args.K1, K2=args.K2)
+                       budget=args.budget, K1=args.K1, K2=args.K2, weights=args.weights)
     out["info"] = _plain(out.get("info", {}))
     return out
 

@@ -82,7 +82,7 @@ def identify_retrain(problem, **kw):
 
 
 # ------------------------------------------------------------------------------- SPSA
-def spsa(problem, *, batch: int = 64, c: float = 0.01, step: float = 2e-3, alpha: float = 0.602,
+def spsa(problem, *, batch: int = 64, c: float = 0.01, step: float = 5e-4, alpha: float = 0.602,
          gamma: float = 0.101):
     """Simultaneous-perturbation stochastic approximation in situ (Spall's gains).
 

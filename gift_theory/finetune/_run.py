@@ -66,16 +66,23 @@ RUNNERS = {
 }
 
 
-def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = True):
-    """``(ds, arch, w0)``: the data set and weights trained in silico at s0 (cached)."""
+def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = True, weights: str | None = None):
+    """``(ds, arch, w0)``: the data set and weights trained in silico at s0 (cached), or read
+    from the weight file ``weights`` (W1, b1, ... as written by ``gift train``)."""
+    from .._params import check_params
     from ..data import load_dataset
-    from ..training import load_or_train
+    from ..training import load_or_train, load_weights
 
     arch = Architecture.parse(arch) if isinstance(arch, str) else (
         arch if isinstance(arch, Architecture) else Architecture(tuple(arch)))
     require(s0 > 0, f"--s0 {s0}: the assumed noise level must be positive")
     ds = load_dataset(dataset)
-    w0, _ = load_or_train(dataset, arch, s0=float(s0), seed=int(seed), progress=progress)
+    require(arch.widths[0] == ds.n_inputs and arch.widths[-1] == ds.n_outputs,
+            f"--arch {arch} does not fit dataset {dataset} (inputs {ds.n_inputs}, outputs {ds.n_outputs})")
+    if weights is not None:
+        w0 = check_params(load_weights(weights)[0], arch, where=weights)
+    else:
+        w0, _ = load_or_train(dataset, arch, s0=float(s0), seed=int(seed), progress=progress)
     return ds, arch, cast(w0, jnp.float32)
 
 
@@ -109,7 +116,7 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
 
 
 def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),
-                 method: str = "gift", seed: int = 0, **options) -> dict:
+                 method: str = "gift", seed: int = 0, weights: str | None = None, **options) -> dict:
     """Fine-tune weights trained in silico at ``s0`` against a simulated chip at ``st``.
 
     Parameters
@@ -119,6 +126,7 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
     true_effects : CONTRACTS §2 effect specs the chip also has (``"shot=0.01"``, ...)
     method : one of :data:`METHODS`
     seed : names the trained weights, the chip's noise and the method's randomness
+    weights : optional weight file to fine-tune instead of training at s0
     options : budget (chip evaluations, default 20), K1 (fine-tuning inputs, default all
         training inputs), K2 (shots per input per Eval, default 1), referee_K2, and the
         method's own keywords
@@ -128,9 +136,9 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
     dict with exactly the CONTRACTS §4 finetune keys, plus ``info`` (what the method did).
     """
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
-    ds, arch_, w0 = load_setting(dataset, arch, s0, seed)
-    out = finetune_on(ds, arch_, w0, s0=s0, physics=true_physics(st, true_effects), method=method, seed=seed,
-                      **options)
+    physics = true_physics(st, true_effects)  # bad input is reported before any training
+    ds, arch_, w0 = load_setting(dataset, arch, s0, seed, weights=weights)
+    out = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=method, seed=seed, **options)
     out.pop("params")
     out.pop("direction")
     return {"dataset": dataset, "arch": list(arch_.widths), **out}
@@ -143,8 +151,8 @@ def compare_methods(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1
     Adds ``oracle_fraction``: (loss_before - loss_after) / (loss_before - loss_after of retrain).
     ``keep``: also return each method's ``params`` and line-search ``direction``.
     """
-    ds, arch_, w0 = load_setting(dataset, arch, s0, seed)
     physics = true_physics(st, true_effects)
+    ds, arch_, w0 = load_setting(dataset, arch, s0, seed)
     rows = []
     for m in methods:
         r = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=m, seed=seed, **options)

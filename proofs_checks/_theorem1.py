@@ -291,3 +291,61 @@ def render_theorem1(res: dict) -> str:
              f"- J_st(w0 - alpha v) - J_st(w0) at alpha = {fmt(res['alpha'])}: {iv(res['J_st_difference'])} -> "
              f"{'confirmed' if res['confirmed'] else 'not confirmed'}"]
     return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------
+# the conclusion: J_st(w_t) < J_st(w0) for the critical points w_t of J_st
+# --------------------------------------------------------------------------------------
+def trivial_critical_point(arch: gt.Architecture, y, dtype=jnp.float64):
+    """W_l = 0, b_l = 0 (l < L), b_L = mean of y: a critical point of J_s for every s (tanh):
+    R^(l) = 0 below the last layer, and E[R^(L)] = E[y] - b_L = 0, E[R^(L) A^(L-1)^T] = 0
+    because A^(L-1) is then noise independent of y and of N^w,(L)."""
+    layers = []
+    for l in range(1, arch.depth + 1):
+        W = jnp.zeros((arch.widths[l], arch.widths[l - 1]), dtype)
+        b = jnp.asarray(np.mean(y, axis=0), dtype) if l == arch.depth else jnp.zeros((arch.widths[l],), dtype)
+        layers.append(gt.Layer(W, b))
+    return tuple(layers)
+
+
+def theorem1_conclusion(key=None, precise: bool = False) -> dict:
+    from . import _onn
+
+    key = jax.random.PRNGKey(8) if key is None else key
+    st_ = _onn.setup(precise)
+    p = st_.problem
+    with jax.enable_x64(True):
+        wt = trivial_critical_point(p.arch, p.y)
+        K2 = 64 if precise else 32
+        noise = _mc.draws(jax.random.fold_in(key, 0), p.arch, p.physics, p.x.shape[0], K2)
+        g = _mc.estimate(_mc.per_input("grad", wt, st_.st, p.x, p.y, noise, p.physics, p.arch))
+        P = g.mean.size
+        # coordinates with zero standard error are exactly zero per sample (R^(l) = 0 below W_L = 0)
+        zs = np.where(g.se > 0, np.abs(g.mean) / np.where(g.se > 0, g.se, 1.0), np.where(g.mean == 0, 0.0, np.inf))
+        zmax = float(np.max(zs))
+        zc = z_crit(1 - 1e-5 / P)
+        d = gt.paired_difference(jax.random.fold_in(key, 1), wt, st_.w0, p.x, p.y, p.physics.replace(s=st_.st),
+                                 p.arch, K2=K2)
+    worse, z = sign_verdict(float(d.mean), float(d.se), "positive")
+    critical = zmax < zc
+    verdict = "fails" if (worse == "holds" and critical) else "inconclusive"
+    th1 = st_.theorem1
+    corrected_ok = th1["confirmed"]
+    return record(
+        "theorem1_conclusion",
+        "thm:FT-is-needed, eq. ENOt-wt-is-strictly-less-than-ENOt-w0: under ass:Nonempty-minimizer-sets and "
+        "ass:Laplacian-properties, J_st(w_t) < J_st(w0) for w_t in {w : grad J_st(w) = 0}",
+        verdict,
+        f"tanh ONN {p.arch}, teacher data, s0={st_.s0:g}, st={st_.st:g}: w_t = (W=0, hidden b=0, b_L = mean y) is "
+        f"critical for every s (analytically; numerically max |z| of grad J_st(w_t) = {zmax:.1f} < {zc:.1f}), and "
+        f"J_st(w_t) - J_st(w0) = {fmt(float(d.mean))} +- {fmt(float(d.se))} (z = {z:.1f}); the proof only shows "
+        f"a descent step from w0: here J_st(w0 - alpha v) - J_st(w0) = {fmt(th1['J_st_difference']['value'])} "
+        f"[{fmt(th1['J_st_difference']['lo'])}, {fmt(th1['J_st_difference']['hi'])}] at alpha = "
+        f"{fmt(th1['alpha'])}, C1 = {fmt(th1['C1']['value'])}",
+        correction=("there is alpha != 0 (of the sign of C1, |alpha| below the range of Table alpha-values) with "
+                    "J_st(w0 - alpha d/ds grad J_s0(w0)) < J_st(w0); hence inf_w J_st < J_st(w0) and w0 is not a "
+                    "minimiser of J_st -- not that every critical point of J_st beats w0 (confirmed here by "
+                    "theorem1_check with a paired test)") if corrected_ok else None,
+        counterexample=None if verdict != "fails" else {
+            "w_t": "W_l = 0, b_l = 0 (l<L), b_L = mean(y)", "J_st(w_t)-J_st(w0)": float(d.mean), "se": float(d.se),
+            "max_abs_z_grad_at_w_t": zmax})

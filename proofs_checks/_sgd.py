@@ -108,6 +108,6 @@ def sgd_limit_points(key=None, precise: bool = False) -> dict:
         f"(Bonferroni z_crit {zc:.1f}); no significant KKT sign violation at the bounds: {kkt_sign}",
         correction=("the limit points are KKT points of J_s on H: grad J_s = 0 in the interior coordinates, "
                     "grad <= 0 at an upper and >= 0 at a lower bound (the projected gradient vanishes: "
-                    "-grad J + pi = 0); verified here (active-coordinate signs significant, interior residual "
-                    "< 10% of the active gradients)") if kkt_ok else None,
+                    "-grad J + pi = 0); verified here (no significant sign violation at the bounds, interior "
+                    "residual < 10% of the active gradients)") if kkt_ok else None,
         counterexample=ce)

@@ -183,8 +183,8 @@ def score_identity_difference(widths=(1, 1, 1), activation="quadratic"):
     return out
 
 
-def score_function_identity(widths=(1, 1, 1)) -> dict:
-    res = score_identity_difference(widths)
+def score_function_identity(widths=(1, 1, 1), activation: str = "quadratic") -> dict:
+    res = score_identity_difference(widths, activation)
     s = res["s"]
     diffs = [sp.expand(t - p) for t, p in zip(res["true"], res["printed"])]
     fixed = [sp.expand(t - c) for t, c in zip(res["true"], res["corrected"])]

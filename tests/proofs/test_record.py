@@ -1,0 +1,27 @@
+"""The verdict machinery: each rule can return every verdict on cases with a known truth."""
+
+import pytest
+
+from proofs_checks import equality_verdict, record, sign_verdict
+
+
+def test_equality_verdict_three_outcomes():
+    assert equality_verdict(1.0, 0.01, 1.0)[0] == "fails"          # 100 se away
+    assert equality_verdict(0.001, 0.01, 1.0)[0] == "holds"        # within error, powerful test
+    assert equality_verdict(0.001, 0.5, 1.0)[0] == "inconclusive"  # within error, no power
+
+
+def test_sign_verdict_three_outcomes():
+    assert sign_verdict(-1.0, 0.01, "negative")[0] == "holds"
+    assert sign_verdict(1.0, 0.01, "negative")[0] == "fails"
+    assert sign_verdict(-0.01, 1.0, "negative")[0] == "inconclusive"
+    assert sign_verdict(1.0, 0.01, "positive")[0] == "holds"
+
+
+def test_record_requires_evidence_for_fails():
+    with pytest.raises(ValueError):
+        record("x", "c", "fails", "e")
+    with pytest.raises(ValueError):
+        record("x", "c", "maybe", "e")
+    r = record("x", "c", "fails", "e", "fix", {"diff": 1.0})
+    assert set(r) == {"id", "claim", "verdict", "evidence", "correction", "counterexample"}

@@ -11,9 +11,13 @@ has expectation exactly 0 when the model's law equals the device's (the V-statis
 beat its own floor with it). The same U-statistic of each neuron's 1-D marginal is added
 (it sees the shape of the noise law, which the vector version in many dimensions barely
 does). Each is normalised by the pooled within-data spread of its layer (neuron),
-``S_l = mean_i mean_{b!=b'} |Y_b - Y_b'|`` -- a constant of the data, so every model is
-scored on the same scale -- and ``C_il = (E_il / S_l + mean_j E1_ilj / S1_lj) / 2``; the
-discrepancy is ``D = mean_i T_i`` with ``T_i = mean_l C_il``. The floor is the same statistic between random halves of the
+``S_l = mean_i mean_{b!=b'} |Y_b - Y_b'|``, giving two channels per cell,
+``E_il / S_l`` and ``mean_j E1_ilj / S1_lj``. Each channel is weighted by one over its
+standard deviation across inputs between random halves of the measured shots -- all
+constants of the data, so every model is scored on the same scale, and a layer whose
+statistic is noisy does not drown one where the model visibly fails. The discrepancy is
+``D = mean_i T_i`` with ``T_i`` the weighted mean of the channels of input i (so D is in
+units of the per-input noise of the statistic). The floor is the same statistic between random halves of the
 measured shots. Inputs are independent, so under the model ``T_i`` are independent with
 mean 0 and the p-value is the one-sided Student-t tail of ``D / se(D)`` (the statistic's
 distribution under the fitted model, estimated from the inputs themselves; measured
@@ -154,8 +158,9 @@ def energy_cells(M, Y, paired: bool = False):
 
 
 def cell_statistic(M, Y, paired: bool = False, scales=None):
-    """Normalised cell statistic (n,): half the vector energy distance over the layer's pooled
-    spread plus half the mean per-neuron energy distance over each neuron's pooled spread.
+    """The two normalised channels of a cell, shape (n, 2): the vector energy distance over
+    the layer's pooled spread, and the mean over neurons of each neuron's energy distance
+    over its pooled spread.
 
     ``scales`` (from :func:`layer_scales`) fixes the normalisation; default: from ``Y``.
     """
@@ -164,7 +169,7 @@ def cell_statistic(M, Y, paired: bool = False, scales=None):
     if scales is None:
         scales = (wy.mean(), wy1.mean(0))
     S, S1 = scales
-    return 0.5 * E / max(S, 1e-30) + 0.5 * np.mean(E1 / np.maximum(S1, 1e-30), axis=1)
+    return np.stack([E / max(S, 1e-30), np.mean(E1 / np.maximum(S1, 1e-30), axis=1)], axis=1)
 
 
 def layer_scales(Y):
@@ -217,6 +222,12 @@ def layer_outputs(params, x, noise, physics, arch, t):
     return forward(params, x[:, None, :], noise, physics, arch, t=t, taps=True).taps
 
 
+def default_model_shots(r: int) -> int:
+    """Model shots per input when not told: 4 r (the model's own sampling noise in the
+    statistic then is a quarter of the data's, so candidates differ by physics, not luck)."""
+    return 4 * int(r)
+
+
 def _times(meas: Measurement, K: int):
     if meas.t is None:
         return None
@@ -226,9 +237,9 @@ def _times(meas: Measurement, K: int):
 
 def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     """Shots of the model for the measurement's inputs (and times): one (n, K, d_l) array per
-    measured layer (taps then output). ``K = shots`` (default r); times are the measured
+    measured layer (taps then output). ``K = shots`` (default 4 r); times are the measured
     ones, tiled when K exceeds r."""
-    K = meas.r if shots is None else int(shots)
+    K = default_model_shots(meas.r) if shots is None else int(shots)
     params = model.params if model.params is not None else meas.params
     params = tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
     noise = draws(key, model.physics, meas.arch, (meas.n, K))
@@ -247,29 +258,46 @@ def _student_p(T):
 
 @dataclasses.dataclass(frozen=True)
 class Reference:
-    """What a measurement contributes to every comparison, computed once: the per-layer
-    scales and the noise floor (random halves of the measured shots)."""
+    """What a measurement contributes to every comparison, computed once.
+
+    scales : per measured layer, the pooled within-data spreads (S_l, S1_l (d_l,))
+    weights : (L', 2) one over the standard deviation across inputs of each channel's
+        statistic between random halves of the measured shots (data only, so every model
+        is weighed the same way; a layer whose statistic is noisy counts less)
+    noise_floor, floor_se : the discrepancy between random halves and its standard error
+    floor_per_input : (n,)
+    """
 
     scales: tuple
+    weights: np.ndarray
     noise_floor: float
     floor_se: float
     floor_per_input: np.ndarray
 
 
+def _combine(C, weights):
+    """(n, L', 2) channels -> per input T (n,) and per cell (n, L'): weighted means."""
+    Cw = C * weights[None]
+    return Cw.mean(axis=(1, 2)), Cw.mean(axis=2)
+
+
 def reference(key, meas: Measurement, splits: int = 2) -> Reference:
-    """Scales and noise floor of ``meas``: the discrepancy statistic between random halves of
-    the measured shots, averaged over ``splits`` random splits (per input, then mean and se)."""
+    """Scales, channel weights and noise floor of ``meas``: the discrepancy statistic between
+    random halves of the measured shots, averaged over ``splits`` random splits."""
     layers = meas.layers()
     scales = tuple(layer_scales(Y) for Y in layers)
-    F = np.zeros(meas.n)
+    F = np.zeros((meas.n, len(layers), 2))
     for s_ in range(splits):
         for li, Y in enumerate(layers):
             A, B = _halves(jax.random.fold_in(key, s_ * 101 + li), jnp.asarray(Y, jnp.float32))
-            F += cell_statistic(A, B, scales=scales[li])
-    F /= splits * len(layers)
-    m = float(F.mean())
-    se = float(F.std(ddof=1) / np.sqrt(len(F))) if len(F) > 1 else float("nan")
-    return Reference(scales, m, se, F)
+            F[:, li] += cell_statistic(A, B, scales=scales[li])
+    F /= splits
+    sd = F.std(axis=0, ddof=1) if meas.n > 1 else np.ones(F.shape[1:])
+    weights = 1.0 / np.maximum(sd, 1e-12 * max(float(sd.max()), 1e-300))
+    Fi, _ = _combine(F, weights)
+    m = float(Fi.mean())
+    se = float(Fi.std(ddof=1) / np.sqrt(len(Fi))) if len(Fi) > 1 else float("nan")
+    return Reference(scales, weights, m, se, Fi)
 
 
 def noise_floor(key, meas: Measurement, splits: int = 2):
@@ -287,7 +315,7 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     key : PRNG key (split into ``model`` and ``floor`` subkeys)
     model : Model
     meas : Measurement (use held-out inputs for a fitted model)
-    shots : model shots per input (default: r)
+    shots : model shots per input (default: 4 r)
     ref : the measurement's :class:`Reference` if already computed (same for every model)
 
     Returns
@@ -298,9 +326,9 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     if ref is None:
         ref = reference(k_floor, meas, floor_splits)
     Ms = model_shots(k_model, model, meas, shots)
-    cells = np.stack([cell_statistic(M, jnp.asarray(Y, jnp.float32), scales=sc)
-                      for M, Y, sc in zip(Ms, meas.layers(), ref.scales)], axis=1)
-    T = cells.mean(axis=1)
+    C = np.stack([cell_statistic(M, jnp.asarray(Y, jnp.float32), scales=sc)
+                  for M, Y, sc in zip(Ms, meas.layers(), ref.scales)], axis=1)
+    T, cells = _combine(C, ref.weights)
     D, se, p = _student_p(T)
     return Comparison(discrepancy=D, se=se, noise_floor=ref.noise_floor, floor_se=ref.floor_se, p_value=p,
                       per_input=T, per_layer=cells.mean(axis=0), layer_ids=meas.layer_ids(), cells=cells)
@@ -338,17 +366,19 @@ def one_step_shots(key, model: Model, meas: Measurement, layer: int):
     return phys.readout(z, noise, layer)
 
 
-def one_step_check(key, model: Model, meas: Measurement) -> list[dict]:
+def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None = None) -> list[dict]:
     """Per measured layer: the one-step discrepancy (layer model fed the measured previous
-    layer, same shot), its se and p-value. Without taps only the end-to-end output row."""
+    layer, same shot), its se, z and p-value. Without taps only layer 1 can be fed (when the
+    network has one layer, that is the output); deeper layers need the taps."""
+    if ref is None:
+        ref = reference(jax.random.fold_in(key, 999), meas)
     rows = []
-    layers = meas.layers()
-    ids = meas.layer_ids()
-    for li, (l, Y) in enumerate(zip(ids, layers)):
+    for li, (l, Y) in enumerate(zip(meas.layer_ids(), meas.layers())):
         if meas.taps is None and l > 1:
             continue
         M = one_step_shots(jax.random.fold_in(key, l), model, meas, l)
-        E = cell_statistic(M, jnp.asarray(Y, jnp.float32), paired=True, scales=layer_scales(Y))
-        D, se, p = _student_p(E)
+        C = cell_statistic(M, jnp.asarray(Y, jnp.float32), paired=True, scales=ref.scales[li])
+        T = (C * ref.weights[li][None]).mean(axis=1)
+        D, se, p = _student_p(T)
         rows.append({"layer": l, "discrepancy": D, "se": se, "z": D / se if se > 0 else float("nan"), "p_value": p})
     return rows

@@ -3,8 +3,9 @@
 The inputs are split at random into a fitting half and a held-out half. The baseline
 (awgn, s fitted) and every candidate ``awgn + effect`` are fitted on the first half and
 scored on the second with :func:`gift_theory.lab.compare`. Candidates are ranked by
-``discrepancy_after + 2 se * (number of parameters the effect adds)``: an extra parameter
-must buy two standard errors of held-out discrepancy, so a one-parameter effect that
+``discrepancy_after + 2 se * (number of parameters the effect adds)``, se that of the
+paired difference to the baseline on the same inputs: an extra parameter must buy two
+standard errors of held-out discrepancy, so a one-parameter effect that
 explains the data beats a many-parameter one that also does (CONTRACTS §4).
 ``missing_effect_detected`` is the baseline's goodness-of-fit test, ``p_value < 0.01``.
 """
@@ -78,9 +79,14 @@ def _log(msg, verbose):
         sys.stderr.flush()
 
 
-def penalised_score(cmp: Comparison, n_params: int) -> float:
-    """Held-out discrepancy plus 2 standard errors per added parameter."""
-    return float(cmp.discrepancy + 2.0 * cmp.se * n_params)
+def penalised_score(cmp: Comparison, n_params: int, base: Comparison | None = None) -> float:
+    """Held-out discrepancy plus 2 standard errors per added parameter. The standard error
+    is that of the paired difference to the baseline over the same held-out inputs (the
+    data's own noise cancels between models), or of ``cmp`` itself without a baseline."""
+    se = cmp.se
+    if base is not None and len(base.per_input) == len(cmp.per_input) > 1:
+        se = float(np.std(cmp.per_input - base.per_input, ddof=1) / np.sqrt(len(cmp.per_input)))
+    return float(cmp.discrepancy + 2.0 * se * n_params)
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, verbose: bool = False) -> Diagnosis:
@@ -117,7 +123,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         effects = tuple(name.split("+"))
         model = fit_model(k_fit, mtr, effects, start=base, K=shots)
         cmp = compare(k_cmp, model, mte, shots=shots, ref=ref)
-        score = penalised_score(cmp, sum(N_PARAMS.get(e, 1) for e in effects))
+        score = penalised_score(cmp, sum(N_PARAMS.get(e, 1) for e in effects), base_cmp)
         ranking.append(Candidate(effects, model, cmp, score, time.time() - t1))
         _log(f"  + {name:<15s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g} "
              f"({time.time() - t1:.1f} s)", verbose)

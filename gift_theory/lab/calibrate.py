@@ -1,0 +1,187 @@
+"""Statistical calibration of the measurement loop (a script, not a test: it takes minutes).
+
+    python -m gift_theory.lab.calibrate null  [--sets 120] [--taps|--no-taps] [--fitted]
+    python -m gift_theory.lab.calibrate ident [--seeds 3] [--taps|--no-taps] [--effects a,b]
+    python -m gift_theory.lab.calibrate time  [--taps]
+
+``null``: data sets simulated from the awgn model itself; the share of p < 0.01 (and
+< 0.05) is the false-alarm rate of the goodness-of-fit test. With ``--fitted`` the model's
+s is fitted on half the inputs and the p-value taken on the other half, exactly as
+``gift diagnose`` does (the realistic case); without, the true model is scored.
+
+``ident``: for every effect of CONTRACTS §2 (and a two-effect case and the null), data
+with that hidden effect on a random network per seed; records whether ``diagnose`` flags a
+missing effect, ranks the hidden one first (top three for two), and whether the winner's
+p-value after fitting is >= 0.01. ``time``: one ``diagnose`` of a 240-input x 64-shot file
+on a 16-32-16-8 network.
+
+Every row is printed as one JSON line on stdout (progress on stderr), so a partial run is
+still a result; the summary is the last line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import jax
+import numpy as np
+
+#: hidden effects of the identification study (strong enough to be seen at this size)
+HIDDEN = {
+    "laplace": {"laplace": True},
+    "uniform": {"uniform": True},
+    "multiplicative": {"multiplicative": 0.2},
+    "common_mode": {"common_mode": 0.2},
+    "drift": {"drift": 0.4},
+    "crosstalk": {"crosstalk": 0.2},
+    "weight_error": {"weight_error": {"e": 0.15}},
+    "shot": {"shot": 0.03},
+    "saturation": {"saturation": 0.7},
+    "quantization": {"quantization": {"bits": 5, "v_range": 2.0}},
+    "shot+crosstalk": {"shot": 0.03, "crosstalk": 0.2},
+    "none": {},
+}
+
+
+def _network(seed, widths, activation="tanh"):
+    import gift_theory as gt
+
+    arch = gt.Architecture(widths, activation)
+    key = jax.random.PRNGKey(seed)
+    params = gt.init_params(jax.random.fold_in(key, 1), arch, gain=1.5)
+    # non-zero biases: the tanh works at several operating points
+    params = tuple(gt.Layer(W, 0.3 * jax.random.normal(jax.random.fold_in(key, 10 + l), b.shape))
+                   for l, (W, b) in enumerate(params))
+    return arch, params
+
+
+def _physics(spec, s, seed):
+    import gift_theory as gt
+
+    spec = {k: (dict(v, seed=seed) if k == "weight_error" else v) for k, v in spec.items()}
+    return gt.Physics.create(s=s, **spec)
+
+
+def null_study(sets, widths, n, r, s, taps, fitted, out):
+    import gift_theory as gt
+    from gift_theory.lab import Model, compare, fit_model, simulate_measurement, split_inputs
+
+    ps = []
+    t0 = time.time()
+    for i in range(sets):
+        arch, params = _network(1000 + i, widths)
+        x = np.asarray(jax.random.uniform(jax.random.PRNGKey(2000 + i), (n, widths[0])))
+        phys = gt.Physics.create(s=s)
+        meas = simulate_measurement(jax.random.PRNGKey(3000 + i), params, x, phys, shots=r, taps=taps, times=False)
+        key = jax.random.PRNGKey(4000 + i)
+        if fitted:
+            k_split, k_fit, k_cmp, _, _ = jax.random.split(key, 5)
+            train, test = split_inputs(k_split, n)
+            model = fit_model(k_fit, meas.subset(train))
+            c = compare(k_cmp, model, meas.subset(test))
+        else:
+            c = compare(key, Model(phys), meas)
+        ps.append(c.p_value)
+        row = {"study": "null", "set": i, "p_value": c.p_value, "discrepancy": c.discrepancy, "se": c.se,
+               "noise_floor": c.noise_floor, "taps": taps, "fitted": fitted}
+        out.write(json.dumps(row) + "\n")
+        out.flush()
+        if (i + 1) % 10 == 0:
+            sys.stderr.write(f"null {i + 1}/{sets}: false alarms at 0.01 so far {np.mean(np.array(ps) < 0.01):.3f} "
+                             f"({time.time() - t0:.0f} s)\n")
+    ps = np.array(ps)
+    from scipy import stats
+    return {"study": "null", "summary": True, "sets": sets, "taps": taps, "fitted": fitted,
+            "arch": list(widths), "inputs": n, "shots": r, "s": s,
+            "false_alarm_rate_0.01": float(np.mean(ps < 0.01)), "false_alarm_rate_0.05": float(np.mean(ps < 0.05)),
+            "ks_uniform_p": float(stats.kstest(ps, "uniform").pvalue), "seconds": time.time() - t0}
+
+
+def ident_study(seeds, widths, n, r, s, taps, effects, out):
+    from gift_theory.lab import diagnose, simulate_measurement
+
+    rows = []
+    for name in effects:
+        spec = HIDDEN[name]
+        hidden = [e for e in spec]
+        for seed in range(seeds):
+            arch, params = _network(seed, widths)
+            x = np.asarray(jax.random.uniform(jax.random.PRNGKey(500 + seed), (n, widths[0])))
+            phys = _physics(spec, s, 77 + seed)
+            meas = simulate_measurement(jax.random.PRNGKey(600 + seed), params, x, phys, shots=r, taps=taps, times=True)
+            t0 = time.time()
+            d = diagnose(jax.random.PRNGKey(700 + seed), meas)
+            names = [c.effects[0] for c in d.ranking]
+            k = max(len(hidden), 1) if len(hidden) < 2 else 3
+            top = names[:k]
+            row = {"study": "ident", "hidden": name, "seed": seed, "taps": taps,
+                   "detected": d.missing_effect_detected, "baseline_p": d.baseline_comparison.p_value,
+                   "ranking": names[:4], "identified": bool(hidden) and all(h in top for h in hidden),
+                   "first": names[0], "p_after": d.ranking[0].comparison.p_value,
+                   "params_first": d.ranking[0].model.params_json(), "seconds": time.time() - t0}
+            rows.append(row)
+            out.write(json.dumps(row) + "\n")
+            out.flush()
+            sys.stderr.write(f"{name:15s} seed {seed}: detected {row['detected']} first {names[0]} "
+                             f"p_after {row['p_after']:.3g} ({row['seconds']:.0f} s)\n")
+    summary = {"study": "ident", "summary": True, "taps": taps, "seeds": seeds, "arch": list(widths),
+               "inputs": n, "shots": r, "s": s, "per_effect": {}}
+    for name in effects:
+        rs = [x for x in rows if x["hidden"] == name]
+        summary["per_effect"][name] = {
+            "detected_rate": float(np.mean([x["detected"] for x in rs])),
+            "identified_rate": float(np.mean([x["identified"] for x in rs])) if name != "none" else None,
+            "identified_given_detected": (float(np.mean([x["identified"] for x in rs if x["detected"]]))
+                                          if name != "none" and any(x["detected"] for x in rs) else None),
+            "p_after_ok_rate": float(np.mean([x["p_after"] >= 0.01 for x in rs]))}
+    return summary
+
+
+def time_study(taps, out):
+    import gift_theory as gt
+    from gift_theory.lab import diagnose, simulate_measurement
+
+    widths = (16, 32, 16, 8)
+    arch, params = _network(0, widths)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(1), (240, 16)))
+    meas = simulate_measurement(jax.random.PRNGKey(2), params, x, gt.Physics.create(s=0.1, shot=0.02), shots=64,
+                                taps=taps, times=True)
+    t0 = time.time()
+    diagnose(jax.random.PRNGKey(3), meas)
+    first = time.time() - t0
+    t0 = time.time()
+    diagnose(jax.random.PRNGKey(4), meas)
+    return {"study": "time", "summary": True, "taps": taps, "arch": list(widths), "inputs": 240, "shots": 64,
+            "seconds_first_call": first, "seconds_compiled": time.time() - t0}
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m gift_theory.lab.calibrate", description=__doc__.split("\n\n")[0])
+    p.add_argument("study", choices=("null", "ident", "time"))
+    p.add_argument("--sets", type=int, default=120)
+    p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--taps", action=argparse.BooleanOptionalAction, default=True)
+    p.add_argument("--fitted", action="store_true")
+    p.add_argument("--arch", default="12-24-12-6")
+    p.add_argument("--inputs", type=int, default=160)
+    p.add_argument("--shots", type=int, default=48)
+    p.add_argument("--s", type=float, default=0.1)
+    p.add_argument("--effects", default=",".join(HIDDEN))
+    a = p.parse_args(argv)
+    widths = tuple(int(w) for w in a.arch.split("-"))
+    out = sys.stdout
+    if a.study == "null":
+        res = null_study(a.sets, widths, a.inputs, a.shots, a.s, a.taps, a.fitted, out)
+    elif a.study == "ident":
+        res = ident_study(a.seeds, widths, a.inputs, a.shots, a.s, a.taps, a.effects.split(","), out)
+    else:
+        res = time_study(a.taps, out)
+    out.write(json.dumps(res) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

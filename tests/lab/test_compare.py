@@ -1,0 +1,101 @@
+"""The discrepancy: an unbiased U-statistic, a readable floor and a calibrated p-value."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gift_theory as gt
+from gift_theory.lab import Model, compare, energy_cells, one_step_check, simulate_measurement
+
+ARCH = gt.Architecture((4, 8, 3))
+
+
+def _brute(M, Y, paired=False):
+    """Energy statistics by explicit loops over pairs (the definition)."""
+    K, r = len(M), len(Y)
+    d = lambda a, b: np.sqrt(np.sum((a - b) ** 2))
+    cross = [d(M[a], Y[b]) for a in range(K) for b in range(r) if not (paired and a == b)]
+    wm = [d(M[a], M[b]) for a in range(K) for b in range(K) if a != b]
+    wy = [d(Y[a], Y[b]) for a in range(r) for b in range(r) if a != b]
+    c1 = [np.abs(M[a] - Y[b]) for a in range(K) for b in range(r) if not (paired and a == b)]
+    m1 = [np.abs(M[a] - M[b]) for a in range(K) for b in range(K) if a != b]
+    y1 = [np.abs(Y[a] - Y[b]) for a in range(r) for b in range(r) if a != b]
+    return (2 * np.mean(cross) - np.mean(wm) - np.mean(wy), np.mean(wy),
+            2 * np.mean(c1, 0) - np.mean(m1, 0) - np.mean(y1, 0), np.mean(y1, 0))
+
+
+@pytest.mark.parametrize("paired", [False, True])
+def test_energy_matches_definition(x64, paired):
+    rng = np.random.default_rng(0)
+    M = rng.normal(size=(2, 7, 3))
+    Y = rng.normal(size=(2, 7, 3)) + 0.3
+    got = energy_cells(jnp.asarray(M), jnp.asarray(Y), paired)
+    for i in range(2):
+        want = _brute(M[i], Y[i], paired)
+        for g, w in zip(got, want):
+            np.testing.assert_allclose(np.asarray(g)[i], w, rtol=1e-9, atol=1e-12)
+
+
+def test_u_statistic_is_unbiased_v_statistic_is_not(x64):
+    """Same law: the U-statistic averages to 0 within its standard error; the biased
+    V-statistic (scipy's, diagonal kept) sits clearly above 0."""
+    key = jax.random.PRNGKey(1)
+    M = jax.random.normal(jax.random.fold_in(key, 0), (4000, 6, 3), jnp.float64)
+    Y = jax.random.normal(jax.random.fold_in(key, 1), (4000, 6, 3), jnp.float64)
+    E, wy, E1, wy1 = (np.asarray(a) for a in energy_cells(M, Y))
+    for stat in (E, E1.ravel()):
+        assert abs(stat.mean()) < 4.5 * stat.std(ddof=1) / np.sqrt(stat.size)
+    # V-statistic: within terms divide by k^2 (diagonal zeros included)
+    k = 6
+    V = E + (np.asarray(energy_cells(M, M)[1]) + wy) / k  # wm (k-1)/k and wy (k-1)/k instead of wm, wy
+    assert V.mean() > 10 * V.std(ddof=1) / np.sqrt(V.size)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    params = gt.init_params(jax.random.PRNGKey(0), ARCH, gain=1.5)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(1), (60, 4)))
+    return params, x
+
+
+def test_correct_model_sits_at_floor_wrong_model_fails(setup):
+    params, x = setup
+    phys = gt.Physics.create(s=0.1)
+    meas = simulate_measurement(jax.random.PRNGKey(5), params, x, phys, shots=24, taps=True)
+    good = compare(jax.random.PRNGKey(6), Model(phys), meas)
+    # zero-mean for the true model (4.5 se: a two-sided 1e-5 test)
+    assert abs(good.discrepancy) < 4.5 * good.se
+    assert abs(good.noise_floor) < 4.5 * good.floor_se
+    bad = compare(jax.random.PRNGKey(6), Model(gt.Physics.create(s=0.2)), meas)
+    assert bad.p_value < 1e-6 and bad.discrepancy > good.discrepancy + 4.5 * np.hypot(good.se, bad.se)
+    assert bad.noise_floor == good.noise_floor  # the floor belongs to the data, not the model
+    assert set(good.as_dict()) >= {"discrepancy", "noise_floor", "p_value", "se"}
+
+
+def test_one_step_locates_the_layer(setup):
+    """A readout effect on the output layer only shows in the last one-step row."""
+    params, x = setup
+    phys = gt.Physics.create(s=0.1)
+    meas = simulate_measurement(jax.random.PRNGKey(7), params, x, phys, shots=24, taps=True)
+    # corrupt the measured output only: a gain error of the last layer
+    import dataclasses
+    meas = dataclasses.replace(meas, y=1.5 * meas.y)
+    rows = one_step_check(jax.random.PRNGKey(8), Model(phys), meas)
+    assert [r["layer"] for r in rows] == [1, 2]
+    assert rows[1]["p_value"] < 1e-6
+    assert abs(rows[0]["discrepancy"]) < 4.5 * rows[0]["se"]
+
+
+def test_null_false_alarms_cheap(setup):
+    """Cheap calibration: on 16 data sets from the model itself (true parameters), p < 0.01
+    at most twice (P(X >= 3 | Bin(16, 0.01)) < 6e-4); the full study is
+    ``python -m gift_theory.lab.calibrate``."""
+    params, x = setup
+    phys = gt.Physics.create(s=0.1)
+    ps = []
+    for i in range(16):
+        meas = simulate_measurement(jax.random.PRNGKey(100 + i), params, x[:30], phys, shots=16, taps=False)
+        ps.append(compare(jax.random.PRNGKey(200 + i), Model(phys), meas).p_value)
+    assert sum(p < 0.01 for p in ps) <= 2
+    assert 0.05 < np.mean(ps) < 0.95

@@ -1,0 +1,107 @@
+"""The loop end to end on data with a hidden effect: diagnose names it, fit --add makes the
+model pass, the null case reports nothing missing.
+
+A small network with taps and strong hidden effects keeps this within the test budget;
+rates over many seeds and the without-taps case are measured by
+``python -m gift_theory.lab.calibrate ident`` (numbers in docs/lab.md).
+"""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+import gift_theory as gt
+from gift_theory.cli._main import main
+from gift_theory.lab import diagnose, fit_effects, save_measurement, signatures, simulate_measurement
+
+WIDTHS = (6, 12, 6, 4)
+
+HIDDEN = {
+    "laplace": {"laplace": True},
+    "uniform": {"uniform": True},
+    "multiplicative": {"multiplicative": 0.3},
+    "common_mode": {"common_mode": 0.3},
+    "drift": {"drift": 0.5},
+    "crosstalk": {"crosstalk": 0.3},
+    "weight_error": {"weight_error": {"e": 0.25, "seed": 3}},
+    "shot": {"shot": 0.05},
+    "saturation": {"saturation": 0.6},
+    "quantization": {"quantization": {"bits": 4, "v_range": 2.0}},
+}
+
+
+def _chip(spec, seed=0, n=160, r=48, s=0.1, taps=True):
+    arch = gt.Architecture(WIDTHS)
+    key = jax.random.PRNGKey(seed)
+    params = gt.init_params(jax.random.fold_in(key, 1), arch, gain=1.5)
+    params = tuple(gt.Layer(W, 0.3 * jax.random.normal(jax.random.fold_in(key, 10 + l), b.shape))
+                   for l, (W, b) in enumerate(params))
+    x = np.asarray(jax.random.uniform(jax.random.fold_in(key, 2), (n, WIDTHS[0])))
+    phys = gt.Physics.create(s=s, **spec)
+    return simulate_measurement(jax.random.fold_in(key, 3), params, x, phys, shots=r, taps=taps, times=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hidden", list(HIDDEN))
+def test_hidden_effect_is_named_first_and_fit_passes(hidden):
+    meas = _chip(HIDDEN[hidden])
+    key = jax.random.PRNGKey(11)
+    d = diagnose(key, meas)
+    names = [c.effects[0] for c in d.ranking]
+    assert d.missing_effect_detected, d.as_json()["baseline"]
+    assert names[0] == hidden, names
+    assert d.ranking[0].comparison.p_value >= 0.01
+
+
+def test_two_hidden_effects_both_in_top_three():
+    meas = _chip({"shot": 0.05, "crosstalk": 0.3})
+    d = diagnose(jax.random.PRNGKey(12), meas)
+    names = [c.effects[0] for c in d.ranking]
+    assert d.missing_effect_detected and {"shot", "crosstalk"} <= set(names[:3]), names
+    fit = fit_effects(jax.random.PRNGKey(12), meas, ["shot", "crosstalk"])
+    ladder = [c.discrepancy for _, c in fit.ladder]
+    # the error falls rung by rung, and the final model passes
+    assert ladder[0] > ladder[-1] and fit.comparison_after.p_value >= 0.01
+    assert abs(fit.after.physics.params()["k"] - 0.3) < 0.1
+
+
+def test_null_reports_nothing_missing(tmp_path, capsys):
+    meas = _chip({})
+    path = tmp_path / "null.npz"
+    save_measurement(path, meas)
+    assert main(["diagnose", str(path), "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["missing_effect_detected"] is False and out["baseline"]["p_value"] >= 0.01
+    assert out["baseline"]["effects"] == ["awgn"] and abs(out["baseline"]["params"]["s"] - 0.1) < 0.02
+    for r in out["ranking"]:
+        assert set(r) >= {"effect", "discrepancy_after", "p_value_after", "params"}
+    scores = [r["score"] for r in out["ranking"]]
+    assert scores == sorted(scores) and len(scores) == 10  # every candidate, best first (drift: times exist)
+
+
+def test_fit_command_contract(tmp_path, capsys):
+    meas = _chip(HIDDEN["shot"], seed=4)
+    path = tmp_path / "shot.npz"
+    save_measurement(path, meas)
+    assert main(["fit", str(path), "--add", "shot", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) >= {"effects", "params", "discrepancy_before", "discrepancy_after", "noise_floor", "p_value_after"}
+    assert out["effects"] == ["awgn", "shot"]
+    assert out["discrepancy_after"] < out["discrepancy_before"] and out["p_value_after"] >= 0.01
+    assert abs(out["params"]["q"] - 0.05) < 0.02
+    # without --json: a text report and a figure folder
+    assert main(["fit", str(path), "--add", "shot", "--quiet", "--figures", str(tmp_path / "figs")]) == 0
+    text = capsys.readouterr().out
+    assert "error ladder" in text and (tmp_path / "figs" / "ladder.png").stat().st_size > 1000
+
+
+def test_signatures_point_at_the_effect():
+    meas = _chip(HIDDEN["quantization"], seed=5)
+    d = diagnose(jax.random.PRNGKey(13), meas, candidates=["quantization", "shot"])
+    sig = signatures(jax.random.PRNGKey(13), d.baseline, meas)
+    assert sig["quantization"]["stands_out"] and abs(sig["quantization"]["value"] - 0.25) < 1e-6
+    meas = _chip(HIDDEN["common_mode"], seed=6)
+    d = diagnose(jax.random.PRNGKey(14), meas, candidates=["common_mode"])
+    assert signatures(jax.random.PRNGKey(14), d.baseline, meas)["common_mode"]["z"] > 3

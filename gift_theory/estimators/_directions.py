@@ -147,6 +147,9 @@ def _draws(key, physics, *, arch, shape, dtype):
 @partial(jax.jit, static_argnames=("what", "method", "theta", "arch"))
 def _kernel(xb, yb, wb, noise, params, physics, h, v, *, what, method, theta, arch):
     f = partial(_block_quantity, what, method, theta, arch, params, physics, h=h, v=v)
+    if xb.shape[1] * jax.tree_util.tree_leaves(noise)[0].shape[2] >= 256:
+        # big groups: one full-width matmul per group (XLA's batched dot is slower on CPU)
+        return jax.lax.map(lambda a: f(*a), (xb, yb, wb, noise))
     return jax.vmap(lambda x, y, w, n: f(x, y, w, n))(xb, yb, wb, noise)
 
 

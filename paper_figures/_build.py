@@ -20,7 +20,7 @@ import numpy as np
 
 from ._jobs import unavailable
 from ._scales import SCALES, get_scale, sweeps
-from ._sweep import load_points, open_client, open_dataset, run_sweep
+from ._sweep import load_points, open_client, open_dataset, publish, run_sweep
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -50,7 +50,7 @@ def _save_png(fig, path: str) -> None:
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=120)
-        os.replace(tmp, path)
+        publish(tmp, path)
     finally:
         plt.close(fig)
         if os.path.exists(tmp):

@@ -78,7 +78,7 @@ def heatmap(ax, mean: xr.DataArray, half: xr.DataArray | None, title: str, unit:
                 txt += f"\n±{h[i, j]:.2f}"
             ax.text(j, i, txt, ha="center", va="center", fontsize=7)
             if np.isclose(s0s[i], sts[j]):
-                ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, lw=1.5, ec="black"))
+                ax.add_patch(plt.Rectangle((j - 0.45, i - 0.45), 0.9, 0.9, fill=False, lw=2, ec="navy", ls="--"))
     plt.colorbar(im, ax=ax, shrink=0.8)
     return im
 
@@ -110,6 +110,6 @@ def improvement_heatmaps(ds: xr.Dataset, split: str, kind: str, title: str):
     for ax, (var, t, unit) in zip(axes, panels):
         mean, half = mean_ci(imp[var])
         heatmap(ax, mean, half, t, unit=unit)
-    fig.suptitle(f"{title}\n{grid_note(ds)}; mean over seeds, ±95 % CI; boxed: $s_0 = s_t$", fontsize=9)
+    fig.suptitle(f"{title}\n{grid_note(ds)}; mean over seeds, ±95 % CI; dashed box: $s_0 = s_t$", fontsize=9)
     fig.tight_layout()
     return fig

@@ -101,6 +101,14 @@ def point_id(sweep: Sweep, point: Mapping) -> str:
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:20]
 
 
+def publish(tmp: str, path: str) -> None:
+    """Give a finished temp file the usual permissions (mkstemp makes 0600), then rename it."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, path)
+
+
 def atomic_write_bytes(path: str, data: bytes) -> None:
     """Write ``data`` to ``path`` via a temp file in the same folder and ``os.replace``."""
     folder = os.path.dirname(os.path.abspath(path)) or "."
@@ -111,7 +119,7 @@ def atomic_write_bytes(path: str, data: bytes) -> None:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+        publish(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -215,7 +223,7 @@ def save_dataset(ds, path: str) -> None:
     os.close(fd)
     try:
         ds.to_netcdf(tmp, engine=netcdf_engine())
-        os.replace(tmp, path)
+        publish(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

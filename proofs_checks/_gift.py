@@ -104,7 +104,7 @@ def theorem2_guarantee(key=None, precise: bool = False) -> dict:
         "for w_ft = GIFT(s0; eta, K1, K2) (Algorithm 1 with the printed D^[0])",
         verdict,
         f"tanh ONN {p.arch}, teacher data n={p.x.shape[0]}, s0={s0:g}, st={st:g}, w0 trained at s0; printed D^[0] "
-        f"(K2={D.n and (64 if precise else 32)} per input), eta={fmt(eta)}, search stopped at i={info['iterations']}, "
+        f"(K2={64 if precise else 32} per input), eta={fmt(eta)}, search stopped at i={info['iterations']}, "
         f"chose c={info['chosen'][0]} sign={info['chosen'][1]:+d}; J_st(w_ft) - J_st(w0) = {fmt(diff)} +- {fmt(se)} "
         f"(paired, fresh draws; z = {z:.1f}, one-sided at 1-1e-5). The printed D^[0] estimates -(s0/2) d/ds grad J "
         f"(see d0_limit), a rescaling that the two-sided line search absorbs",

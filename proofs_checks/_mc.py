@@ -6,8 +6,7 @@ standard error (lem:Hierarchical-sampling-is-unbiased). Derivatives in s are pat
 (autodiff through ``s * xi`` with the standard draws xi held fixed), so the same draws
 at two noise levels give common random numbers. The printed estimator D^[0]
 (eqs. sample_D0_Wi / sample_D0_bi) comes from :mod:`gift_theory.estimators`
-(``method="score_paper"``) when that package is installed, else from the local
-transcription :func:`d0_printed_samples`.
+(``method="score_paper"``).
 """
 
 from __future__ import annotations
@@ -22,7 +21,7 @@ from jax.flatten_util import ravel_pytree
 
 import gift_theory as gt
 
-_WHAT = ("loss", "grad", "ds", "ds2", "hvp", "d0_printed")
+_WHAT = ("loss", "grad", "ds", "ds2", "hvp")
 
 
 @partial(jax.jit, static_argnames=("arch", "what"))
@@ -48,22 +47,13 @@ def _per_input(params, s, x, y, noise, physics, arch, what, vec=None):
         _, unravel = ravel_pytree(params)
         tangent = unravel(vec)
         fn = flat(lambda p, s_, x1, y1, n1: jax.jvp(lambda q: g(q, s_, x1, y1, n1), (p,), (tangent,))[1])
-    elif what == "d0_printed":
-        def fn(p, s_, x1, y1, n1):
-            # printed D^[0]: (sum_alpha (s0^-2 |N^alpha|^2 - d_alpha)) R A^T with R A^T = -1/2 grad of the loss
-            def one(n_one):
-                gi = ravel_pytree(jax.grad(lambda q: loss(q, s_, x1, y1, jax.tree_util.tree_map(
-                    lambda a: a[None], n_one)))(p))[0]
-                weight = sum(jnp.sum(v ** 2) - v.size for v in n_one.values())  # N = s0 xi
-                return weight * (-0.5) * gi
-            return jnp.mean(jax.vmap(one)(n1), axis=0)
     else:
         raise ValueError(what)
     return jax.vmap(fn, in_axes=(None, None, 0, 0, 0))(params, s, x, y, noise)
 
 
 def per_input(what: str, params, s, x, y, noise, physics, arch, vec=None) -> np.ndarray:
-    """Per-input samples of ``what`` in {"loss", "grad", "ds", "ds2", "hvp", "d0_printed"}.
+    """Per-input samples of ``what`` in {"loss", "grad", "ds", "ds2", "hvp"}.
 
     Parameters
     ----------
@@ -96,25 +86,14 @@ def estimate(samples) -> gt.Estimate:
 
 
 def d0_printed(key, params, x, y, physics, arch, K2) -> gt.Estimate:
-    """The printed D^[0](K1, K2) (eqs. sample_D0_Wi / sample_D0_bi) with its standard error.
+    """The printed D^[0](K1, K2) (eqs. sample_D0_Wi / sample_D0_bi) as a flat vector with its
+    standard error, from the shared ``gift_theory.estimators.d_ds_grad(method="score_paper")``."""
+    from gift_theory.estimators import d_ds_grad
 
-    Uses ``gift_theory.estimators.d_ds_grad(method="score_paper")`` when available.
-    """
-    try:
-        from gift_theory.estimators import d_ds_grad  # the shared implementation
-    except ImportError:
-        d_ds_grad = None
-    if d_ds_grad is not None:
-        est = d_ds_grad(key, params, x, y, physics, arch, method="score_paper", K2=K2)
-        mean = np.asarray(ravel_pytree(est.mean)[0], dtype=np.float64)
-        se = np.asarray(ravel_pytree(est.se)[0], dtype=np.float64)
-        samples = est.samples
-        if samples is not None:
-            samples = np.asarray(jax.vmap(lambda t: ravel_pytree(t)[0])(samples)) if not isinstance(
-                samples, np.ndarray) else samples
-        return gt.Estimate(mean, se, est.n, samples)
-    noise = draws(key, arch, physics, x.shape[0], K2, params[0].W.dtype)
-    return estimate(per_input("d0_printed", params, physics.s, x, y, noise, physics, arch))
+    est = d_ds_grad(key, params, x, y, physics, arch, method="score_paper", K2=K2)
+    mean = np.asarray(ravel_pytree(est.mean)[0], dtype=np.float64)
+    se = np.asarray(ravel_pytree(est.se)[0], dtype=np.float64)
+    return gt.Estimate(mean, se, est.n)
 
 
 class Problem(NamedTuple):

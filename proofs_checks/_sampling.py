@@ -73,7 +73,7 @@ def d0_limit(key=None, precise: bool = False) -> dict:
         "lem:unbiased-sampling-D0: lim_{K1,K2->inf} D^[0](K1,K2) (eqs. sample_D0_Wi, sample_D0_bi) = "
         "d/ds grad J_s0(w0) almost surely",
         verdict,
-        f"tanh ONN {arch}, s0={s:g}, K1={prob.x.shape[0]} inputs x K2 draws, printed D^[0] from "
+        f"tanh ONN {arch}, s0={s:g}, K1={prob.x.shape[0]} inputs x K2={32 if precise else 16} draws, printed D^[0] from "
         f"gift_theory.estimators (score_paper) vs pathwise d/ds grad J on the same draws, projected on a direction "
         f"from independent draws: difference z = {z_p:.1f}; ratio D^[0]/(d/ds grad J) = {fmt(r)} +- {fmt(r_se)} "
         f"(-s0/2 = {-s / 2:g}); (-2/s0) D^[0] vs d/ds grad J: z = {z_c:.1f} ({v_c})",

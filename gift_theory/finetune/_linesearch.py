@@ -102,7 +102,7 @@ def fit_quadratic(alphas, means, ses, C2_prior=None):
 
 
 def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int = 4, z_accept: float = 2.5,
-                       confirm_rounds: int = 4, probe_z: float = 4.0):
+                       confirm_rounds: int | None = None, probe_z: float = 4.0):
     """The repaired GIFT line search along ``direction`` (see module docstring).
 
     Parameters
@@ -114,6 +114,7 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     refine : fitted steps after the two probes
     z_accept : the confirmation must show improvement / se > z_accept
     confirm_rounds : at most this many fresh (w0, candidate) pairs, stopping once accepted
+        (default: as many as the budget pays for)
     probe_z : probes at +-a with a^2 C2 / 2 = probe_z * se_pair (a measurable rise)
 
     Returns
@@ -159,7 +160,8 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
                  "direction_norm": float(u_norm)})
     w_best = axpy(alpha_best, u, w0)
     diffs = []
-    for _ in range(confirm_rounds):
+    rounds = confirm_rounds if confirm_rounds is not None else 10 ** 6
+    for _ in range(rounds):
         if problem.evaluations_left() < 2 - 1e-9 or means[best] <= 0:
             break
         diffs.append(problem.eval_chip(w0) - problem.eval_chip(w_best))

@@ -21,4 +21,5 @@ from ._closed import product_minimiser as product_minimiser
 from ._closed import theorem1_bounds as theorem1_bounds
 from ._plots import plot_bound_regions as plot_bound_regions
 from ._plots import plot_example_curves as plot_example_curves
+from ._symbolic import all_noise_critical_points as all_noise_critical_points
 from ._symbolic import example as symbolic_example

@@ -34,3 +34,25 @@ def example(L: int):
     example_rhs = (1 + s0 ** 2 / m2) / (2 * V)
     return dict(s=s, s0=s0, st=st, V=V, m2=m2, w=w, J=J, critical_residual=crit, v=v, u=u, C1=C1,
                 printed_rhs=printed, corrected_rhs=corrected, example_rhs=example_rhs)
+
+
+def all_noise_critical_points(L: int = 2):
+    """Critical points of the ONN-model linear chain 1-1-..-1 with noise at every site
+    (mode "all"): J_s = m2 (V - W)^2 + s^2 B(w) with B = W^2 + sum_l P_l^2 (weighted sums)
+    + sum_{l<L} P_l^2 (hidden activations), P_l = w_L...w_{l+1}.
+
+    Returns (J, solutions of grad J = 0 from sympy, the rescaling derivative
+    d/dt J(t w_1, w_2/t, w_3, ...) at t = 1, which is -2 s^2 (2 P_1^2) < 0 unless P_1 = 0).
+    """
+    s, V, m2, t = sp.symbols("s V m2 t", positive=True)
+    w = sp.symbols(f"w1:{L + 1}", real=True)
+    W = sp.Mul(*w)
+    tail = lambda l: sp.Mul(*w[l:])   # P_l = w_L ... w_{l+1}
+    B = W ** 2 + sum(tail(l) ** 2 for l in range(1, L + 1)) + sum(tail(l) ** 2 for l in range(1, L))
+    J = m2 * (V - W) ** 2 + s ** 2 * B
+    sols = sp.solve([sp.diff(J, wi) for wi in w], w, dict=True)
+    if L < 2:
+        return J, sols, sp.Integer(0)
+    scaled = J.subs({w[0]: t * w[0], w[1]: w[1] / t}, simultaneous=True)
+    rescale = sp.simplify(sp.diff(scaled, t).subs(t, 1))
+    return J, sols, rescale

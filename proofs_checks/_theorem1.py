@@ -188,7 +188,8 @@ def _dot_unit(a_samples, b_samples):
 
 
 def theorem1_check(key, params, x, y, physics: gt.Physics, arch: gt.Architecture, s0: float, st: float, *,
-                   K2: int = 16, n_zeta: int = 5, confidence: float = 0.95, confirm_K2: int = 64) -> dict:
+                   K2: int = 16, n_zeta: int = 5, confidence: float = 0.95, confirm_K2: int = 64,
+                   chip_eval=None) -> dict:
     """Theorem 1 for the user's model, data and trained weights w0 = ``params``.
 
     Computes, each with a confidence interval at ``confidence`` (normal approximation,
@@ -200,7 +201,10 @@ def theorem1_check(key, params, x, y, physics: gt.Physics, arch: gt.Architecture
     alpha -> 0: it depends on alpha, see theorem1_condition), the admissible alpha range of
     Table alpha-values, and finally a paired test (common random numbers, ``confirm_K2``
     draws) that J_st(w0 - alpha v) < J_st(w0) at alpha = C1 / (2 C2) (the minimiser of the
-    quadratic model; alpha = sign(C1) |C1| / |v|^2 ... if C2 <= 0).
+    quadratic model; a small step of the sign of C1 if C2 <= 0). With ``chip_eval`` -- a
+    callable ``w -> per-input losses (K1,)`` measured on the device, e.g. Eval_w of eq.
+    def:Eval -- the confirmation is done on the chip instead: per-input paired differences
+    of one measurement at w0 - alpha v and one at w0 (independent shots).
 
     Returns
     -------
@@ -261,7 +265,10 @@ def theorem1_check(key, params, x, y, physics: gt.Physics, arch: gt.Architecture
     flat0, unravel = gt.flatten(params)
     w_new = unravel(flat0 - alpha * jnp.asarray(v, flat0.dtype))
     phys_t = physics.replace(s=st)
-    diff = gt.paired_difference(k_conf, w_new, params, x, y, phys_t, arch, K2=confirm_K2)
+    if chip_eval is None:
+        diff = gt.paired_difference(k_conf, w_new, params, x, y, phys_t, arch, K2=confirm_K2)
+    else:
+        diff = gt.estimate_from_samples(np.asarray(chip_eval(w_new)) - np.asarray(chip_eval(params)))
     d_mean, d_se = float(diff.mean), float(diff.se)
     confirmed = d_mean + z * d_se < 0
     I = lambda a, b: Interval.of(a, b, z)._asdict()
@@ -278,6 +285,7 @@ def theorem1_check(key, params, x, y, physics: gt.Physics, arch: gt.Architecture
         "C1": I(C1, C1_se), "C1_proof": I(C1p, C1p_se), "C2_at_alpha0": I(C2, C2_se),
         "alpha_range": list(alpha_range), "alpha": float(alpha),
         "J_st_difference": I(d_mean, d_se), "confirmed": bool(confirmed),
+        "confirmed_on": "model" if chip_eval is None else "chip",
     }
 
 

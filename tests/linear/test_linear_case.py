@@ -78,3 +78,12 @@ def test_plots(tmp_path):
     p2 = lc.plot_example_curves(str(tmp_path / "curves.png"))
     assert (tmp_path / "regions.png").stat().st_size > 1000 and (tmp_path / "curves.png").stat().st_size > 1000
     assert p1.endswith("regions.png") and p2.endswith("curves.png")
+
+
+def test_all_noise_chain_has_only_trivial_critical_points_for_L_ge_2():
+    J, sols, rescale = lc.all_noise_critical_points(1)
+    assert len(sols) == 1 and sp.simplify(list(sols[0].values())[0] - sp.Symbol("V", positive=True) * sp.Symbol(
+        "m2", positive=True) / (sp.Symbol("m2", positive=True) + sp.Symbol("s", positive=True) ** 2)) == 0
+    J, sols, rescale = lc.all_noise_critical_points(2)
+    assert sols and all(sp.Mul(*[sol.get(w, w) for w in sp.symbols("w1:3", real=True)]) == 0 for sol in sols)
+    assert rescale != 0          # rescaling the factors lowers J whenever w2 != 0

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
+from .._errors import GiftInputError
 from .._model import forward, sample_noise
 from .._params import Layer
 from ._measurement import Measurement
@@ -242,8 +243,14 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     K = default_model_shots(meas.r) if shots is None else int(shots)
     params = model.params if model.params is not None else meas.params
     params = tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
-    noise = draws(key, model.physics, meas.arch, (meas.n, K))
-    outs = layer_outputs(params, jnp.asarray(meas.x, jnp.float32), noise, model.physics, meas.arch, _times(meas, K))
+    # in chunks of 2 r shots: the shape the fit compiled for, so no second compilation
+    chunk = 2 * meas.r if K % (2 * meas.r) == 0 else K
+    x = jnp.asarray(meas.x, jnp.float32)
+    parts = []
+    for c in range(K // chunk):
+        noise = draws(jax.random.fold_in(key, c), model.physics, meas.arch, (meas.n, chunk))
+        parts.append(layer_outputs(params, x, noise, model.physics, meas.arch, _times(meas, chunk)))
+    outs = parts[0] if len(parts) == 1 else tuple(jnp.concatenate(p, axis=1) for p in zip(*parts))
     return tuple(outs[l - 1] for l in meas.layer_ids())
 
 
@@ -284,6 +291,10 @@ def _combine(C, weights):
 def reference(key, meas: Measurement, splits: int = 2) -> Reference:
     """Scales, channel weights and noise floor of ``meas``: the discrepancy statistic between
     random halves of the measured shots, averaged over ``splits`` random splits."""
+    if meas.r < 4:
+        raise GiftInputError(f"measurement has {meas.r} shots per input; the noise floor (random halves) needs at least 4")
+    if meas.n < 2:
+        raise GiftInputError("measurement has 1 input; the p-value (over inputs) needs at least 2")
     layers = meas.layers()
     scales = tuple(layer_scales(Y) for Y in layers)
     F = np.zeros((meas.n, len(layers), 2))

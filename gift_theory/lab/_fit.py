@@ -61,7 +61,7 @@ def split_inputs(key, n: int, frac: float = 0.5):
     if n < 4:
         raise GiftInputError(f"measurement has {n} inputs; fitting and held-out scoring need at least 4")
     perm = np.asarray(jax.random.permutation(key, n))
-    k = int(round(n * frac))
+    k = n - int(round(n * (1 - frac)))  # held-out half n // 2 (equal halves share compiled shapes)
     k = min(max(k, 2), n - 2)
     return np.sort(perm[:k]), np.sort(perm[k:])
 

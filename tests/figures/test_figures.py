@@ -119,6 +119,7 @@ def test_cli_bad_input_is_one_line_and_exit_2(capsys, tmp_path):
     assert err.count("\n") == 1 and "--mnist-folder" in err
 
 
+@pytest.mark.slow
 def test_real_jobs_on_a_tiny_net():
     """The job functions against the real library: one GIFT point and one estimator point."""
     if _jobs.unavailable("paper_figures._jobs:gift_job"):

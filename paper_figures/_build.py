@@ -155,6 +155,8 @@ def _build(sc, mods, all_sweeps, needed, data_dir, figure_dir, compute, progress
             if missing:
                 raise RuntimeError("; ".join(sweep_problem.get(s, f"no data for sweep {s}") for s in missing))
             data = {s: data_of(s) for s in mod.SWEEPS}
+            if hasattr(mod, "load"):  # figures with their own saved data (closed forms)
+                data.update(mod.load(data_dir))
             _save_png(mod.draw(data), entry["path"])
             entry["status"] = "drawn"
         except Exception as exc:  # one figure's failure must not stop the others

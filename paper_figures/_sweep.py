@@ -359,9 +359,23 @@ def run_sweep(sweep: Sweep, folder: str, *, scheduler: str | None = None, n_work
                 close()
     ds = assemble(folder, sweep)
     ds.attrs["failed"] = failed
+    ds.attrs["code_commit"] = _git_commit()
     if save:
         save_dataset(ds, os.path.join(folder, f"{sweep.name}.nc"))
     return ds
+
+
+def _git_commit() -> str:
+    """The checkout's HEAD commit when the sweep was assembled (uncommitted changes not marked), or ''."""
+    import subprocess
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True, text=True,
+                              timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return head
 
 
 def toy_job(a, b, seconds: float = 0.0, fail_on=None, fail_flag: str | None = None, **_):

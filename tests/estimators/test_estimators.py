@@ -154,7 +154,7 @@ def test_per_input_groups_give_the_usual_standard_error(x64):
     np.testing.assert_allclose(_flat(est.mean), s.mean(0), rtol=1e-10, atol=1e-14)
 
 
-def test_bad_input_is_one_line():
+def test_bad_input_is_one_line(x64):
     params, x, y = _data(ARCH)
     with pytest.raises(gt.GiftInputError, match="unknown method"):
         d_ds_grad(jax.random.PRNGKey(0), params, x, y, gt.awgn(0.1), ARCH, method="nope")

@@ -20,7 +20,7 @@ def run(args):
     import jax
 
     import gift_theory as gt
-    from ..lab import Model, compare, one_step_check, where_it_fails
+    from ..lab import Model, compare, one_step_check, reference, where_it_fails
     from ..lab._figures import heatmaps
     from ..lab._fit import fit_model, split_inputs
 
@@ -40,7 +40,7 @@ def run(args):
         train, test = split_inputs(k_split, meas.n)
         model = fit_model(k_fit, meas.subset(train), (), K=args.shots)
         scored, fitted = meas.subset(test), True
-    c = compare(k_cmp, model, scored, shots=args.shots)
+    c = compare(k_cmp, model, scored, shots=args.shots, ref=reference(k_ref, scored))  # same keys as diagnose
     out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": fitted},
            "discrepancy": c.discrepancy, "se": c.se, "noise_floor": c.noise_floor, "floor_se": c.floor_se,
            "p_value": c.p_value, "inputs_scored": scored.n,

@@ -43,7 +43,7 @@ def run(args):
         out["worst_cells"] = where["worst"][:10]
         c = res.baseline_comparison
         rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
-            (f"awgn + {cand.effects[0]}", cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
+            ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
             for cand in res.ranking[:3]]
         out["figures"] = [error_ladder(rungs, c.noise_floor, c.floor_se, f"{folder}/ladder.png",
                                        title="baseline and best candidates"),

@@ -39,10 +39,13 @@ class Candidate:
     seconds: float
 
     def as_json(self) -> dict:
-        name = self.effects[0] if len(self.effects) == 1 else "+".join(self.effects)
-        return {"effect": name, "discrepancy_after": self.comparison.discrepancy,
+        # a second-stage entry is named by the effect it adds; "with" lists the ones before
+        out = {"effect": self.effects[-1], "discrepancy_after": self.comparison.discrepancy,
                 "p_value_after": self.comparison.p_value, "params": self.model.params_json(),
                 "se": self.comparison.se, "score": self.score}
+        if len(self.effects) > 1:
+            out["with"] = list(self.effects[:-1])
+        return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,7 +92,8 @@ def penalised_score(cmp: Comparison, n_params: int, base: Comparison | None = No
     return float(cmp.discrepancy + 2.0 * se * n_params)
 
 
-def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, verbose: bool = False) -> Diagnosis:
+def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int = 4,
+             verbose: bool = False) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
     Parameters
@@ -98,7 +102,10 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     meas : Measurement
     candidates : effect names to try (default: every CONTRACTS §2 effect except awgn;
         drift only when the file has acquisition times)
-    shots : model shots per input (default r)
+    shots : model shots per input (default 4 r)
+    second : when the best single effect still fails (p < 0.01), the best ``second``
+        runners-up are each fitted on top of it and ranked next (a greedy forward step, for
+        two missing effects); their entries carry both effects' parameters
 
     Returns
     -------
@@ -128,6 +135,23 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         _log(f"  + {name:<15s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g} "
              f"({time.time() - t1:.1f} s)", verbose)
     ranking.sort(key=lambda c: c.score)
+    if second and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
+        # the best single effect still fails: add each runner-up on top of it (greedy forward step)
+        first = ranking[0]
+        rest = [c.effects[0] for c in ranking[1:1 + second] if c.effects[0] not in first.effects]
+        stage2 = []
+        for name in rest:
+            t1 = time.time()
+            effects = first.effects + (name,)
+            model = fit_model(k_fit, mtr, (name,), start=first.model, K=shots)
+            cmp = compare(k_cmp, model, mte, shots=shots, ref=ref)
+            score = penalised_score(cmp, sum(N_PARAMS.get(e, 1) for e in effects), base_cmp)
+            stage2.append(Candidate(effects, model, cmp, score, time.time() - t1))
+            _log(f"  + {'+'.join(effects):<30s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} "
+                 f"p = {cmp.p_value:.3g}", verbose)
+        stage2.sort(key=lambda c: c.score)
+        named = [c.effects[-1] for c in stage2]
+        ranking = [first] + stage2 + [c for c in ranking[1:] if c.effects[0] not in named]
     steps = tuple(one_step_check(k_step, base, meas)) if meas.has_taps else ()
     return Diagnosis(base, base_cmp, tuple(ranking), steps, test, time.time() - t0)
 

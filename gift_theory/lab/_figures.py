@@ -2,7 +2,7 @@
 
 Plotting never recomputes the science: each function draws numbers already computed
 by :func:`gift_theory.lab.fit_effects`, :func:`gift_theory.lab.diagnose` or
-:func:`gift_theory.lab.cell_statistics`.
+:func:`gift_theory.lab.where_it_fails`.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def error_ladder(rungs, noise_floor: float, floor_se: float, path: str, title: s
 def heatmaps(stats: dict, path: str, title: str = "where the model fails"):
     """Per-cell standardised statistics as heatmaps over (layer, neuron) x input bin.
 
-    ``stats`` is the output of :func:`gift_theory.lab.cell_statistics`: for each statistic
+    ``stats`` is the output of :func:`gift_theory.lab.where_it_fails`: for each statistic
     name an array (rows = "layer:neuron", columns = bins of the model's pre-activation).
     """
     plt = _plt()
@@ -70,13 +70,9 @@ def heatmaps(stats: dict, path: str, title: str = "where the model fails"):
     fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 0.5 + 0.14 * len(stats["rows"])), squeeze=False)
     for ax, name in zip(axes[0], names):
         M = np.asarray(stats["maps"][name], float)
-        lim = np.nanmax(np.abs(M)) if np.isfinite(M).any() else 1.0
-        center = 0.5 if name == "pit" else 0.0
-        if name == "pit":
-            lim = 0.5
-            im = ax.imshow(M, aspect="auto", cmap="RdBu_r", vmin=0, vmax=1, interpolation="nearest")
-        else:
-            im = ax.imshow(M - 0 * center, aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
+        lim = max(float(np.nanmax(np.abs(M))) if np.isfinite(M).any() else 1.0, 3.0)
+        # every statistic is standardised (N(0, 1) under the model): one symmetric scale
+        im = ax.imshow(M, aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
         ax.set_title(name, fontsize=9)
         ax.set_xlabel("pre-activation bin", fontsize=8)
         ax.set_yticks(range(len(stats["rows"])))

@@ -114,7 +114,7 @@ def ident_study(seeds, widths, n, r, s, taps, effects, out):
             meas = simulate_measurement(jax.random.PRNGKey(600 + seed), params, x, phys, shots=r, taps=taps, times=True)
             t0 = time.time()
             d = diagnose(jax.random.PRNGKey(700 + seed), meas)
-            names = [c.effects[0] for c in d.ranking]
+            names = [c.effects[-1] for c in d.ranking]
             k = max(len(hidden), 1) if len(hidden) < 2 else 3
             top = names[:k]
             row = {"study": "ident", "hidden": name, "seed": seed, "taps": taps,

@@ -138,7 +138,10 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     if second and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
         # the best single effect still fails: add each runner-up on top of it (greedy forward step)
         first = ranking[0]
-        rest = [c.effects[0] for c in ranking[1:1 + second] if c.effects[0] not in first.effects]
+        laws = ("laplace", "uniform")
+        has_law = any(e in laws for e in first.effects)
+        rest = [c.effects[0] for c in ranking[1:] if c.effects[0] not in first.effects
+                and not (has_law and c.effects[0] in laws)][:second]
         stage2 = []
         for name in rest:
             t1 = time.time()

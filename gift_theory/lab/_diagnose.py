@@ -92,7 +92,7 @@ def penalised_score(cmp: Comparison, n_params: int, base: Comparison | None = No
     return float(cmp.discrepancy + 2.0 * se * n_params)
 
 
-def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int = 4,
+def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = None,
              verbose: bool = False) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
@@ -104,8 +104,9 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         drift only when the file has acquisition times)
     shots : model shots per input (default 4 r)
     second : when the best single effect still fails (p < 0.01), the best ``second``
-        runners-up are each fitted on top of it and ranked next (a greedy forward step, for
-        two missing effects); their entries carry both effects' parameters
+        runners-up (default: all; a strong first effect can push the second far down the
+        single-effect list) are each fitted on top of it and ranked next (a greedy forward
+        step, for two missing effects); their entries carry both effects' parameters
 
     Returns
     -------
@@ -141,7 +142,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         laws = ("laplace", "uniform")
         has_law = any(e in laws for e in first.effects)
         rest = [c.effects[0] for c in ranking[1:] if c.effects[0] not in first.effects
-                and not (has_law and c.effects[0] in laws)][:second]
+                and not (has_law and c.effects[0] in laws)][:second]  # None: every runner-up
         stage2 = []
         for name in rest:
             t1 = time.time()

@@ -136,7 +136,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         _log(f"  + {name:<15s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g} "
              f"({time.time() - t1:.1f} s)", verbose)
     ranking.sort(key=lambda c: c.score)
-    if second and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
+    if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
         # the best single effect still fails: add each runner-up on top of it (greedy forward step)
         first = ranking[0]
         laws = ("laplace", "uniform")

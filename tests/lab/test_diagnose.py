@@ -32,7 +32,7 @@ HIDDEN = {
 }
 
 
-def _chip(spec, seed=0, n=160, r=48, s=0.1, taps=True):
+def _chip(spec, seed=0, n=120, r=40, s=0.1, taps=True):
     arch = gt.Architecture(WIDTHS)
     key = jax.random.PRNGKey(seed)
     params = gt.init_params(jax.random.fold_in(key, 1), arch, gain=1.5)

@@ -84,11 +84,13 @@ def _log(msg, verbose):
 
 def penalised_score(cmp: Comparison, n_params: int, base: Comparison | None = None) -> float:
     """Held-out discrepancy plus 2 standard errors per added parameter. The standard error
-    is that of the paired difference to the baseline over the same held-out inputs (the
-    data's own noise cancels between models), or of ``cmp`` itself without a baseline."""
+    is the smaller of ``cmp``'s own and that of the paired difference to the baseline over
+    the same held-out inputs (where the data's own noise cancels between models)."""
     se = cmp.se
     if base is not None and len(base.per_input) == len(cmp.per_input) > 1:
-        se = float(np.std(cmp.per_input - base.per_input, ddof=1) / np.sqrt(len(cmp.per_input)))
+        # paired with the baseline the data's noise cancels -- unless the baseline is far off
+        # and its own scatter dominates: then the candidate's se is the smaller, honest unit
+        se = min(se, float(np.std(cmp.per_input - base.per_input, ddof=1) / np.sqrt(len(cmp.per_input))))
     return float(cmp.discrepancy + 2.0 * se * n_params)
 
 

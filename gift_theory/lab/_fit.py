@@ -347,6 +347,13 @@ def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None,
     f = problem.loss(physics, params, free)
     theta0 = _theta_of(physics, free)
     grids = {free.index(p): _grid_theta(p, physics, meas) for p in grid_params if p in free}
+    if start is not None and new and "s" in free:
+        # an added effect usually takes over part of the variance s had absorbed: scan s
+        # down from its old value once more after the new parameter's scan
+        i = free.index("s")
+        th_s = np.log(max(float(physics.s), 1e-12)) + np.log([0.4, 0.55, 0.7, 0.85, 1.0, 1.1])
+        grids = {**grids, i: th_s} if i not in grids else grids
+        grids = {**{k: v for k, v in grids.items() if k != i}, i: th_s}
     theta, _ = _optimise(f, theta0, grids)
     vals = {p: float(v) for p, v in zip(free, [np.exp(th) if lo >= 0 else th for th, lo in
                                                   zip(theta, [_lower(physics, p) for p in free])])}

@@ -3,8 +3,8 @@
 The inputs are split at random into a fitting half and a held-out half. The baseline
 (awgn, s fitted) and every candidate ``awgn + effect`` are fitted on the first half and
 scored on the second with :func:`gift_theory.lab.compare`. Candidates are ranked by
-``discrepancy_after + 2 se * (number of parameters the effect adds)``, se that of the
-paired difference to the baseline on the same inputs: an extra parameter must buy two
+``discrepancy_after + 2 se * (number of parameters the effect adds)``, se the smaller of
+the candidate's own and that of its paired difference to the baseline on the same inputs: an extra parameter must buy two
 standard errors of held-out discrepancy, so a one-parameter effect that
 explains the data beats a many-parameter one that also does (CONTRACTS §4).
 ``missing_effect_detected`` is the baseline's goodness-of-fit test, ``p_value < 0.01``.

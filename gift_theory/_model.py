@@ -27,6 +27,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from . import _random
 from ._arch import Architecture
 from .effects import Physics
 
@@ -40,7 +41,7 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
     """Standard draws for ``batch_shape`` shots: ``{name: array of shape batch_shape + event}``.
 
     Additive sites (``a0``, ``w{l}``, ``a{l}``) follow the physics' noise law with unit
-    variance; every other draw is standard normal. Each name has its own subkey, so the
+    variance; every other draw is standard normal (all from :mod:`gift_theory._random`). Each name has its own subkey, so the
     draws of a site do not change when other effects are added (common random numbers).
     """
     batch_shape = tuple(batch_shape)
@@ -49,7 +50,7 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
     for name, event in physics.draws(arch).items():
         k = _site_key(key, name)
         shape = batch_shape + tuple(event)
-        out[name] = physics.standard(k, shape, dtype) if name in additive else jax.random.normal(k, shape, dtype)
+        out[name] = physics.standard(k, shape, dtype) if name in additive else _random.normal(k, shape, dtype)
     return out
 
 

@@ -15,7 +15,6 @@ from .._errors import require
 from .._model import forward, sample_noise
 from .._params import check_params
 from ..effects import Physics
-from ..estimators import rbg_key
 from ._base import Ledger, Measurement
 
 
@@ -64,7 +63,7 @@ class SimulatedChip:
         self.ledger.charge(x.shape[0] * shots)
         k = jax.random.fold_in(self.key, self._calls) if key is None else key
         self._calls += 1
-        y, tp, t = _measure(rbg_key(k), params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots, taps=bool(taps),
+        y, tp, t = _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots, taps=bool(taps),
                             with_t="drift" in self.physics)
         return Measurement(x, np.asarray(y), tuple(np.asarray(a) for a in tp), None if t is None else np.asarray(t))
 

@@ -12,6 +12,14 @@
   ``--eff-K1`` x 8 samples; D is a long pathwise reference run over the same inputs, and
   the observed error of each run against it is reported next to the predicted one.
 
+* ``d0_deep_paper_torch`` (only where PyTorch is installed; gift does not need it): the same
+  estimate written as a careful batched PyTorch program (one forward pass of all K1 K2
+  samples, one backward pass of the score-weighted loss), the peer the issue names, timed in
+  the same run so that the comparison is a ratio on one machine.
+* ``d0_deep_million``: K1 K2 = 10^6 samples (K1 = 125000 inputs x K2 = 8) on the same net, in
+  a fresh process whose peak resident memory is read from the OS (``peak_rss_gb``; the
+  estimators work in blocks of ``chunk`` samples, so memory must not grow with K1 K2).
+
 The deep net has Glorot-initialised weights and uniform random inputs with one-hot targets
 (an estimator's cost does not depend on the data).
 """
@@ -30,7 +38,7 @@ def add_arguments(parser):
     parser.add_argument("--repeats", type=int, default=3, help="timed repeats per benchmark (best is reported)")
     parser.add_argument("--eff-K1", type=int, default=256, help="inputs per efficiency run (x 8 draws)")
     parser.add_argument("--ref-K2", type=int, default=64, help="draws per input of the pathwise reference")
-    parser.add_argument("--quick", action="store_true", help="skip estimator_efficiency")
+    parser.add_argument("--quick", action="store_true", help="skip estimator_efficiency and d0_deep_million")
 
 
 def matmul_gflops(n: int = 2048, repeats: int = 5) -> float:
@@ -83,9 +91,99 @@ def run(args) -> dict:
                            "method": method, "K1": K1, "K2": K2, "arch": list(DEEP), "credited_flops": flops,
                            "first_call_seconds": compile_s})
         _log(f"{name}: {best:.3f} s, {gflops:.1f} GFLOP/s, {gflops / roof:.2f} of matmul")
+    peer = _torch_peer(params, x, y, s0, K2, args.repeats)
+    if peer is not None:
+        gflops = flops / peer["seconds"] / 1e9
+        peer.update({"name": "d0_deep_paper_torch", "gflops": gflops, "ratio_to_matmul": gflops / roof, "K1": K1,
+                     "K2": K2, "arch": list(DEEP), "credited_flops": flops,
+                     "gift_speedup": peer["seconds"] / benchmarks[0]["seconds"]})
+        benchmarks.append(peer)
+        _log(f"d0_deep_paper_torch: {peer['seconds']:.3f} s ({peer['gift_speedup']:.2f}x the time of gift's)")
+    else:
+        _log("d0_deep_paper_torch: PyTorch not installed, peer skipped")
     if not args.quick:
         benchmarks.append(_efficiency(args, arch, params, x, y, phys, roof))
+        benchmarks.append(_million(roof))
     return {"matmul_gflops": roof, "benchmarks": benchmarks}
+
+
+def _torch_peer(params, x, y, s0: float, K2: int, repeats: int):
+    """The paper's estimator D^[0] as a careful batched PyTorch program; None without PyTorch."""
+    try:
+        import torch
+    except ImportError:
+        return None
+    import os
+
+    torch.set_num_threads(os.cpu_count() or 1)
+    Ws = [torch.tensor(np.asarray(p.W), requires_grad=True) for p in params]
+    bs = [torch.tensor(np.asarray(p.b), requires_grad=True) for p in params]
+    X = torch.tensor(np.asarray(x)).repeat_interleave(K2, 0)
+    Y = torch.tensor(np.asarray(y)).repeat_interleave(K2, 0)
+    gen = torch.Generator().manual_seed(0)
+
+    def once():
+        n = X.shape[0]
+        xi = torch.randn(X.shape, generator=gen)
+        Q, D = (xi * xi).sum(1), X.shape[1]
+        a = X + s0 * xi
+        for l, (W, b) in enumerate(zip(Ws, bs), start=1):
+            nw = torch.randn((n, W.shape[0]), generator=gen)
+            Q, D = Q + (nw * nw).sum(1), D + W.shape[0]
+            z = torch.addmm(b, a, W.t()) + s0 * nw
+            if l < len(Ws):
+                na = torch.randn((n, W.shape[0]), generator=gen)
+                Q, D = Q + (na * na).sum(1), D + W.shape[0]
+                a = torch.tanh(z) + s0 * na
+            else:
+                a = z
+        loss = ((Q - D) / n * ((Y - a) ** 2).sum(1)).sum()
+        return [-0.5 * g for g in torch.autograd.grad(loss, Ws + bs)]
+
+    first = _timed(once)
+    best = min(_timed(once) for _ in range(repeats))
+    return {"seconds": best, "first_call_seconds": first, "method": "score_paper (PyTorch " + torch.__version__ + ")",
+            "peer": True}
+
+
+def _million(roof: float) -> dict:
+    """d0_deep_million in a fresh process, so that its peak resident memory is its own."""
+    import json
+    import subprocess
+
+    _log("d0_deep_million: K1 K2 = 10^6 on the deep net in a fresh process (about a minute) ...")
+    proc = subprocess.run([sys.executable, "-m", "gift_theory.cli._bench", "million"], capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"d0_deep_million failed: {proc.stderr.strip().splitlines()[-1:]}")
+    r = json.loads(proc.stdout)
+    r["ratio_to_matmul"] = r["gflops"] / roof
+    _log(f"d0_deep_million: {r['seconds']:.1f} s, peak memory {r['peak_rss_gb']:.2f} GB")
+    return r
+
+
+def _million_child() -> dict:
+    import resource
+
+    import jax
+    import jax.numpy as jnp
+
+    import gift_theory as gt
+    from ..estimators import d_ds_grad
+
+    arch = gt.Architecture(DEEP)
+    params = gt.init_params(jax.random.PRNGKey(0), arch)
+    K1, K2 = 125_000, 8
+    x = jax.random.uniform(jax.random.PRNGKey(1), (K1, DEEP[0]))
+    y = jax.nn.one_hot(jnp.arange(K1) % DEEP[-1], DEEP[-1])
+    t = time.perf_counter()
+    est = d_ds_grad(jax.random.PRNGKey(2), params, x, y, gt.awgn(0.1), arch, method="score_paper", K2=K2)
+    jax.block_until_ready((est.mean, est.se))
+    seconds = time.perf_counter() - t
+    flops = 6.0 * arch.n_weights * K1 * K2
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9  # Linux reports KiB
+    return {"name": "d0_deep_million", "seconds": seconds, "gflops": flops / seconds / 1e9, "method": "score_paper",
+            "K1": K1, "K2": K2, "arch": list(DEEP), "credited_flops": flops, "peak_rss_gb": peak,
+            "input_data_gb": K1 * DEEP[0] * 4 / 1e9}
 
 
 def _efficiency(args, arch, params, x, y, phys, roof) -> dict:
@@ -137,7 +235,17 @@ def render(r: dict) -> str:
                 lines.append(f"  {m:12s} {e['samples_for_5pct']:12.4g}   (observed {e['relative_error_observed']:.3f}"
                              f" vs predicted {e['relative_error_predicted']:.3f} at {e['samples']} samples)")
             lines.append(f"  pathwise needs {b['pathwise_advantage_over_score_paper']:.0f}x fewer samples than score_paper")
+        elif b["name"] == "d0_deep_million":
+            lines.append(f"{b['name']:18s} {b['seconds']:8.1f} s  {b['gflops']:7.1f} GFLOP/s  "
+                         f"{b['ratio_to_matmul']:.2f} of matmul, peak memory {b['peak_rss_gb']:.2f} GB "
+                         f"(of which input data {b['input_data_gb']:.2f} GB)")
         else:
             lines.append(f"{b['name']:18s} {b['seconds']:8.3f} s  {b['gflops']:7.1f} GFLOP/s  "
                          f"{b['ratio_to_matmul']:.2f} of matmul")
     return "\n".join(lines)
+
+
+if __name__ == "__main__" and sys.argv[1:] == ["million"]:
+    import json
+
+    sys.stdout.write(json.dumps(_million_child()) + "\n")

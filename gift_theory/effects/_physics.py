@@ -8,6 +8,7 @@ from typing import Iterable, Mapping
 import jax
 import jax.numpy as jnp
 
+from .. import _random
 from .._errors import GiftInputError
 from ._base import REGISTRY, STAGES, Effect, make_effect, parse_effect
 from .awgn import Awgn
@@ -169,7 +170,7 @@ class Physics:
         for e in self.effects:
             if e.stage == "law":
                 return e.standard(key, shape, dtype)
-        return jax.random.normal(key, shape, dtype)
+        return _random.normal(key, shape, dtype)
 
     def effective_weights(self, W: jax.Array, layer: int) -> jax.Array:
         for e in self.effects:

@@ -3,9 +3,7 @@ s / sqrt(2)) instead of Gaussian. No parameter of its own: it uses ``awgn``'s s.
 
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
-
+from .. import _random
 from ._base import Effect, register
 
 
@@ -18,4 +16,4 @@ class Laplace(Effect):
     @staticmethod
     def standard(key, shape, dtype):
         """Unit-variance Laplace draws."""
-        return jax.random.laplace(key, shape, dtype) / jnp.sqrt(2.0).astype(dtype)
+        return _random.laplace(key, shape, dtype)

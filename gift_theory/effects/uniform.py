@@ -3,9 +3,7 @@ deviation s). No parameter of its own: it uses ``awgn``'s s."""
 
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
-
+from .. import _random
 from ._base import Effect, register
 
 
@@ -19,5 +17,4 @@ class Uniform(Effect):
     @staticmethod
     def standard(key, shape, dtype):
         """Unit-variance uniform draws on (-sqrt 3, sqrt 3)."""
-        r = jnp.sqrt(3.0).astype(dtype)
-        return jax.random.uniform(key, shape, dtype, -r, r)
+        return _random.uniform_law(key, shape, dtype)

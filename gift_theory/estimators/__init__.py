@@ -14,6 +14,5 @@ from ._directions import d_dtheta_grad as d_dtheta_grad
 from ._directions import grad_objective as grad_objective
 from ._directions import hvp as hvp
 from ._directions import paper_constant as paper_constant
-from ._directions import rbg_key as rbg_key
 from ._hierarchical import hierarchical_mean as hierarchical_mean
 from ._hierarchical import summarise as summarise

@@ -54,8 +54,10 @@ def paper_constant(s: float) -> float:
 # ----------------------------------------------------------------------------- kernels
 def _weighted_loss(params, physics, arch, x, y, noise, cw):
     """sum_{i,m} cw_im (y_i - M(x_i, w, N_im))^2 for x (m, d0), noise (m, K2, .), cw (m, K2)."""
-    out = forward(params, x[:, None, :], noise, physics, arch).y
-    return jnp.sum(cw * squared_error(out, y[:, None, :]))
+    m, K2 = cw.shape
+    flat = {k: v.reshape((m * K2,) + v.shape[2:]) for k, v in noise.items()}
+    out = forward(params, jnp.repeat(x, K2, axis=0), flat, physics, arch).y
+    return jnp.sum(cw.reshape(-1) * squared_error(out, jnp.repeat(y, K2, axis=0)))
 
 
 def _score_stats(noise, arch, physics):
@@ -140,39 +142,23 @@ def _block_quantity(what, method, theta, arch, params, physics, x, y, w, noise, 
 
 @partial(jax.jit, static_argnames=("arch", "shape", "dtype"))
 def _draws(key, physics, *, arch, shape, dtype):
-    # compiled apart from the kernels, so every method shares one compiled sampler
+    # compiled apart from the kernels: every method shares one compiled sampler, and the draws
+    # are written once (fused into the kernel, XLA recomputes them in every consumer)
     return sample_noise(key, arch, physics, shape, dtype)
 
 
 @partial(jax.jit, static_argnames=("what", "method", "theta", "arch"))
 def _kernel(xb, yb, wb, noise, params, physics, h, v, *, what, method, theta, arch):
+    # one vmapped pass over the block's groups: the forward products of all groups are one
+    # matmul, the per-group weight gradients one batched matmul (measured on 2 cores: as fast
+    # as the ungrouped gradient for groups of >= 512 samples)
     f = partial(_block_quantity, what, method, theta, arch, params, physics, h=h, v=v)
-    if xb.shape[1] * jax.tree_util.tree_leaves(noise)[0].shape[2] >= 256:
-        # big groups: one full-width matmul per group (XLA's batched dot is slower on CPU)
-        return jax.lax.map(lambda a: f(*a), (xb, yb, wb, noise))
-    return jax.vmap(lambda x, y, w, n: f(x, y, w, n))(xb, yb, wb, noise)
-
-
-def rbg_key(key):
-    """The same randomness source re-expressed as an ``rbg`` key.
-
-    XLA compiles threefry normal draws for a whole network in 15-20 s on a loaded 2-core
-    machine, the RngBitGenerator ones in ~2 s; same key, same draws.
-    """
-    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        impl = jax.random.key_impl(key)
-        if str(getattr(impl, "name", impl)) == "rbg":
-            return key
-        data = jax.random.key_data(key)
-    else:
-        data = key
-    data = jnp.asarray(data, jnp.uint32).reshape(-1)
-    return jax.random.wrap_key_data(jnp.tile(data, 4 // data.shape[0])[:4], impl="rbg")
+    return jax.vmap(f)(xb, yb, wb, noise)
 
 
 def _block(key, xb, yb, wb, params, physics, h, v, *, what, method, theta, arch, K2):
     dtype = jnp.dtype(params[0].W.dtype)
-    noise = _draws(rbg_key(key), physics, arch=arch, shape=tuple(xb.shape[:2]) + (K2,), dtype=dtype)
+    noise = _draws(key, physics, arch=arch, shape=tuple(xb.shape[:2]) + (K2,), dtype=dtype)
     return _kernel(xb, yb, wb, noise, params, physics, h, v, what=what, method=method, theta=theta, arch=arch)
 
 
@@ -206,7 +192,7 @@ def _step(physics, theta, h):
 
 
 # ----------------------------------------------------------------------------- public
-def grad_objective(key, params, x, y, physics: Physics, arch: Architecture, *, K2: int = 8, groups: int = 32,
+def grad_objective(key, params, x, y, physics: Physics, arch: Architecture, *, K2: int = 8, groups: int = 16,
                    chunk: int = 16384, keep_samples: bool = False):
     """grad_w J_s(w) on the inputs ``x`` (eq. objective-function-as-a-function-of-s).
 
@@ -217,7 +203,9 @@ def grad_objective(key, params, x, y, physics: Physics, arch: Architecture, *, K
     x : (K1, d_0) inputs; y : (K1, d_L) targets
     physics, arch : the model
     K2 : noise draws per input
-    groups : number of independent units for the standard error (batch means over inputs)
+    groups : number of independent units for the standard error (batch means over inputs; 16
+        groups give the standard error 15 degrees of freedom and keep each group's weight-gradient
+        product large enough to run at full matmul speed)
     chunk : maximum number of samples (inputs x draws) per compiled block
 
     Returns
@@ -227,7 +215,7 @@ def grad_objective(key, params, x, y, physics: Physics, arch: Architecture, *, K
     return _run("grad", "pathwise", "s", key, params, x, y, physics, arch, K2, 0.0, None, groups, chunk, keep_samples)
 
 
-def hvp(key, params, x, y, physics: Physics, arch: Architecture, v, *, K2: int = 8, groups: int = 32,
+def hvp(key, params, x, y, physics: Physics, arch: Architecture, v, *, K2: int = 8, groups: int = 16,
         chunk: int = 16384, keep_samples: bool = False):
     """Hess_w J_s(w) @ v by forward-over-reverse autodiff at fixed draws.
 
@@ -239,7 +227,7 @@ def hvp(key, params, x, y, physics: Physics, arch: Architecture, v, *, K2: int =
 
 
 def d_ds_grad(key, params, x, y, physics: Physics, arch: Architecture, *, method: str = "pathwise", K2: int = 8,
-              h: float | None = None, groups: int = 32, chunk: int = 16384, keep_samples: bool = False):
+              h: float | None = None, groups: int = 16, chunk: int = 16384, keep_samples: bool = False):
     """An estimate of d/ds grad_w J_s(w) (paper Section "Calculation of (d/ds) grad J").
 
     Parameters
@@ -264,7 +252,7 @@ def d_ds_grad(key, params, x, y, physics: Physics, arch: Architecture, *, method
 
 
 def d2_ds2_grad(key, params, x, y, physics: Physics, arch: Architecture, *, method: str = "pathwise", K2: int = 8,
-                h: float | None = None, groups: int = 32, chunk: int = 16384, keep_samples: bool = False):
+                h: float | None = None, groups: int = 16, chunk: int = 16384, keep_samples: bool = False):
     """An estimate of d^2/ds^2 grad_w J_s(w): "pathwise" (forward-over-forward-over-reverse),
     "fd" (second central difference at fixed draws) or "score" (phi''/phi weights, centred)."""
     require(method in D2_DS2_METHODS, f"d2_ds2_grad: unknown method {method!r}; known: {', '.join(D2_DS2_METHODS)}")
@@ -274,7 +262,7 @@ def d2_ds2_grad(key, params, x, y, physics: Physics, arch: Architecture, *, meth
 
 
 def d_dtheta_grad(key, params, x, y, physics: Physics, arch: Architecture, *, theta: str = "s",
-                  method: str = "pathwise", K2: int = 8, h: float | None = None, groups: int = 32,
+                  method: str = "pathwise", K2: int = 8, h: float | None = None, groups: int = 16,
                   chunk: int = 16384, keep_samples: bool = False):
     """An estimate of d/dtheta grad_w J for any physical parameter ``theta`` of ``physics``
     (``"s"``, ``"q"``, ``"m"``, ``"k"``, ...): "pathwise" (autodiff through the effect at

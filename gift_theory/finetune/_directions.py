@@ -1,5 +1,5 @@
 """In-silico search directions (free: no chip use). All computed on the training data at
-the model's physics (awgn at s0), with the rbg randomness of :mod:`gift_theory.estimators`."""
+the model's physics (awgn at s0), with the draws of :mod:`gift_theory._random`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from .._errors import require
-from ..estimators import d_ds_grad, grad_objective, hvp, rbg_key
+from ..estimators import d_ds_grad, grad_objective, hvp
 from ._tree import axpy, norm, scale, vdot
 
 DIRECTIONS = ("score_paper", "score", "pathwise", "gradient", "random", "ift")
@@ -15,7 +15,7 @@ DIRECTIONS = ("score_paper", "score", "pathwise", "gradient", "random", "ift")
 
 def hvp_operator(problem, *, K2: int = 4, key=None):
     """v -> Hess_w J_s0(w0) v at fixed draws (a linear map), and its draws' key."""
-    key = rbg_key(jax.random.fold_in(problem.key, 301) if key is None else key)
+    key = jax.random.fold_in(problem.key, 301) if key is None else key
 
     def op(v):
         return hvp(key, problem.w0, problem.x, problem.y, problem.model, problem.arch, v, K2=K2).mean
@@ -60,7 +60,7 @@ def direction(problem, kind: str, *, K2: int = 16):
         minimiser-path tangent H^-1 d/ds grad J_s0 by conjugate gradients)
     """
     require(kind in DIRECTIONS, f"direction: unknown kind {kind!r}; known: {', '.join(DIRECTIONS)}")
-    key = rbg_key(jax.random.fold_in(problem.key, 100 + DIRECTIONS.index(kind)))
+    key = jax.random.fold_in(problem.key, 100 + DIRECTIONS.index(kind))
     args = (problem.w0, problem.x, problem.y, problem.model, problem.arch)
     if kind in ("score_paper", "score", "pathwise"):
         est = d_ds_grad(key, *args, method=kind, K2=K2 if kind == "pathwise" else 4 * K2)

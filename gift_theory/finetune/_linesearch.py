@@ -27,7 +27,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._objective import per_input_loss
-from ..estimators import rbg_key
 from ._tree import axpy, norm, unit, vdot
 
 
@@ -69,7 +68,7 @@ def gift_printed(problem, D0, eta: float, *, max_iter: int = 1000):
 
 def pair_se_model(problem, *, seed: int = 0) -> float:
     """In-silico standard error of a paired Eval difference at w0 (two fresh shot sets, same inputs)."""
-    k = rbg_key(jax.random.fold_in(problem.key, 500 + seed))
+    k = jax.random.fold_in(problem.key, 500 + seed)
     la = per_input_loss(jax.random.fold_in(k, 0), problem.w0, problem.x_ft, problem.y_ft, problem.model,
                         problem.arch, problem.K2)
     lb = per_input_loss(jax.random.fold_in(k, 1), problem.w0, problem.x_ft, problem.y_ft, problem.model,

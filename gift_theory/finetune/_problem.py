@@ -18,7 +18,6 @@ from .._objective import accuracy, objective, per_input_loss
 from .._params import cast
 from ..chips import SimulatedChip, chip_eval
 from ..effects import Physics, awgn
-from ..estimators import rbg_key
 
 
 class Problem(NamedTuple):
@@ -87,7 +86,7 @@ def make_problem(arch: Architecture, w0, x, y, *, s0: float, true_physics: Physi
 
 def referee(params, x, y, labels, physics: Physics, arch: Architecture, *, K2: int = 32, seed: int = 12345) -> dict:
     """True loss and accuracy under ``physics`` (many draws, fixed key: common random numbers)."""
-    key = rbg_key(jax.random.PRNGKey(seed))
+    key = jax.random.PRNGKey(seed)
     params = cast(params, jnp.float32)
     j = objective(key, params, x, y, physics, arch, K2)
     a = accuracy(jax.random.fold_in(key, 1), params, x, labels, physics, arch, K2)
@@ -96,4 +95,4 @@ def referee(params, x, y, labels, physics: Physics, arch: Architecture, *, K2: i
 
 def referee_losses(params, x, y, physics: Physics, arch: Architecture, *, K2: int = 32, seed: int = 12345):
     """Per-input true losses (K1,), same draws as :func:`referee` (for paired comparisons)."""
-    return per_input_loss(rbg_key(jax.random.PRNGKey(seed)), cast(params, jnp.float32), x, y, physics, arch, K2)
+    return per_input_loss(jax.random.PRNGKey(seed), cast(params, jnp.float32), x, y, physics, arch, K2)

@@ -14,7 +14,6 @@ import optax
 from .._model import forward, sample_noise, squared_error
 from .._params import flatten
 from ..effects import Physics, awgn
-from ..estimators import rbg_key
 from ..training import TrainConfig, train
 
 #: warm-start retraining from w0 (oracle and identify-retrain use the same recipe)
@@ -23,7 +22,7 @@ RETRAIN = TrainConfig(method="minibatch", epochs=20, lr=0.01, momentum=0.9, batc
 
 def retrain(problem, physics: Physics, *, config: TrainConfig = RETRAIN, seed: int = 0):
     """Noise-aware mini-batch SGD in silico under ``physics``, starting from w0 (no chip use)."""
-    key = rbg_key(jax.random.fold_in(problem.key, 700 + seed))
+    key = jax.random.fold_in(problem.key, 700 + seed)
     return train(key, problem.arch, problem.x, problem.y, physics, config, params=problem.w0)
 
 
@@ -52,7 +51,7 @@ def identify_noise_level(problem, *, shots: int = 8, evaluations: float = 1.0, d
     v_i = np.sum(np.var(np.asarray(m.y, np.float64), axis=1, ddof=1), axis=-1)
     V, V_se = float(v_i.mean()), float(v_i.std(ddof=1) / math.sqrt(n))
     x = jnp.asarray(problem.x_ft[:n])
-    key = rbg_key(jax.random.fold_in(problem.key, 801))
+    key = jax.random.fold_in(problem.key, 801)
     like = jnp.zeros((shots,))
 
     def model_V(s):
@@ -142,7 +141,7 @@ def pat(problem, *, batch: int = 32, lr: float = 0.01, momentum: float = 0.9):
     remaining = problem.chip.ledger.remaining()
     n_steps = int(remaining // per_step) if math.isfinite(remaining) else 100
     rng = np.random.default_rng(int(jax.random.randint(jax.random.fold_in(problem.key, 3), (), 0, 2**31 - 1)))
-    key = rbg_key(jax.random.fold_in(problem.key, 901))
+    key = jax.random.fold_in(problem.key, 901)
     for k in range(n_steps):
         idx = rng.choice(problem.K1, size=min(batch, problem.K1), replace=False)
         y_chip = jnp.asarray(problem.chip.measure(params, problem.x_ft[idx], problem.K2).y, jnp.float32)

@@ -30,9 +30,11 @@ class Physics:
 
     effects: tuple[Effect, ...] = ()
 
-    # pytree protocol: the tuple of effects is itself a pytree of their leaves
+    # pytree protocol: the tuple of effects is itself a pytree of their leaves. The names are
+    # the static aux data: JAX's treedefs of two parameterless effects (laplace, uniform)
+    # compare equal, so without them a jitted function compiled for one law served the other
     def tree_flatten(self):
-        return (self.effects,), None
+        return (self.effects,), self.names
 
     @classmethod
     def tree_unflatten(cls, aux, children):

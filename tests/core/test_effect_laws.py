@@ -177,3 +177,19 @@ def test_gains_multiply(x64):
     y_mult = shots_of(gt.Physics.create(s=None, multiplicative=0.1, drift=0.2), v, 3, key=5, t=t)
     y_one = shots_of(gt.Physics.create(s=None, multiplicative=0.1), v, 3, key=5, t=t)
     np.testing.assert_allclose(y_mult, y_one * (1 + 0.2 * 0.5), rtol=1e-12)
+
+
+def test_one_compiled_pass_never_serves_another_law(x64):
+    """Regression: JAX's treedefs of the parameterless laplace and uniform effects compare
+    equal, so a jitted pass compiled for one law was (in some processes) reused for the other."""
+    trees = {law: jax.tree_util.tree_structure(gt.Physics.parse([law], s=1.0)) for law in ("laplace", "uniform")}
+    assert trees["laplace"] != trees["uniform"]
+    arch = gt.Architecture((1, 1), "identity", noise_sites="input")
+    params = (gt.Layer(jnp.ones((1, 1)), jnp.zeros(1)),)
+    got = {}
+    for law in ("laplace", "uniform", "laplace"):
+        out = gt.simulate(jax.random.PRNGKey(3), params, jnp.zeros((1, 1)), gt.Physics.parse([law], s=1.0), arch,
+                          shots=40_000)
+        got.setdefault(law, []).append(stats.kurtosis(np.asarray(out.y).ravel()))
+    # excess kurtosis 3 (laplace) against -1.2 (uniform): se ~ sqrt(24 / n) * ... << 1
+    assert min(got["laplace"]) > 2.0 and got["uniform"][0] < -1.0

@@ -90,29 +90,41 @@ def forward(params, x, noise: dict, physics: Physics, arch: Architecture, *, t=N
     -------
     Forward
     """
-    s = physics.s
-    sigma = arch.sigma
-    L = arch.depth
-    a = x + s * noise["a0"] if "a0" in noise else x
+    a = x + physics.s * noise["a0"] if "a0" in noise else x
     outs, pres = [], []
     for l, (W, b) in enumerate(params, start=1):
-        W = physics.effective_weights(W, l)
-        u = a @ W.T
-        g = physics.gain(noise, l, t, u.shape)
-        z = (u if g is None else g * u) + b
-        if f"w{l}" in noise:
-            z = z + s * noise[f"w{l}"]
-        if l < L:
-            a = sigma(z)
-            if f"a{l}" in noise:
-                a = a + s * noise[f"a{l}"]
-        else:
-            a = z
-        a = physics.readout(a, noise, l)
+        a, z = layer_step(W, b, a, noise, physics, arch, l, t=t)
         if taps:
             outs.append(a)
             pres.append(z)
     return Forward(a, tuple(outs), tuple(pres))
+
+
+def layer_step(W, b, a, noise: dict, physics: Physics, arch: Architecture, layer: int, *, t=None):
+    """Layer ``layer`` of the generative process fed with ``a`` (its input a_{l-1}).
+
+    ``u = W_eff a``, ``z = g u + b + s n_w``, output ``D(sigma(z) + s n_a)`` (hidden) or
+    ``D(z)`` (last layer), through the physics' hooks. Used by :func:`forward` and by the
+    measurement lab's one-step checks (``a`` the *measured* previous layer).
+
+    Returns
+    -------
+    (output a_l, pre-activation z_l)
+    """
+    s = physics.s
+    W = physics.effective_weights(W, layer)
+    u = a @ W.T
+    g = physics.gain(noise, layer, t, u.shape)
+    z = (u if g is None else g * u) + b
+    if f"w{layer}" in noise:
+        z = z + s * noise[f"w{layer}"]
+    if layer < arch.depth:
+        out = arch.sigma(z)
+        if f"a{layer}" in noise:
+            out = out + s * noise[f"a{layer}"]
+    else:
+        out = z
+    return physics.readout(out, noise, layer), z
 
 
 def simulate(key: jax.Array, params, x, physics: Physics, arch: Architecture, shots: int = 1, *, t=None,

@@ -45,6 +45,7 @@ def run(args):
            "discrepancy": c.discrepancy, "se": c.se, "noise_floor": c.noise_floor, "floor_se": c.floor_se,
            "p_value": c.p_value, "inputs_scored": scored.n,
            "per_layer": {f"layer{l}": float(v) for l, v in zip(c.layer_ids, c.per_layer)},
+           "channel_z": c.as_dict()["channel_z"],
            "where": one_step_check(k_step, model, meas) if meas.has_taps else []}
     folder = figure_dir(args)
     where = where_it_fails(k, model, scored)
@@ -61,7 +62,11 @@ def render(out) -> str:
              f"discrepancy {out['discrepancy']:.4g} +- {out['se']:.2g} on {out['inputs_scored']} inputs; "
              f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}; p = {out['p_value']:.3g}"
              + ("  -> the model FAILS (p < 0.01)" if out["p_value"] < 0.01 else "  -> consistent with the data"),
-             "per layer: " + ", ".join(f"{k} {v:.3g}" for k, v in out["per_layer"].items())]
+             "per layer (its part of the discrepancy): " + ", ".join(f"{k} {v:.3g}" for k, v in out["per_layer"].items())]
+    if out.get("channel_z"):
+        lines.append("channel z per layer (> 3: this aspect of the layer's shots is off):")
+        for layer, row in out["channel_z"].items():
+            lines.append(f"  {layer}: " + "  ".join(f"{c} {z:5.1f}" for c, z in row.items()))
     for w in out.get("where", []):
         lines.append(f"  one-step layer {w['layer']}: {w['discrepancy']:.4g} (z = {w['z']:.1f}, p = {w['p_value']:.3g})")
     if out.get("worst_cells"):

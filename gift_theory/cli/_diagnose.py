@@ -60,7 +60,8 @@ def render(out) -> str:
     lines.append("ranking (held-out discrepancy after fitting, parsimony-penalised):")
     for i, r in enumerate(out["ranking"], 1):
         ps = ", ".join(f"{k}={v:.4g}" for k, v in r["params"].items())
-        lines.append(f"  {i:2d}. {r['effect']:<15s} {r['discrepancy_after']:10.4g}  p = {r['p_value_after']:<9.3g} {ps}")
+        name = " + ".join(r.get("with", []) + [r["effect"]])
+        lines.append(f"  {i:2d}. {name:<28s} {r['discrepancy_after']:10.4g}  p = {r['p_value_after']:<9.3g} {ps}")
     if out.get("where"):
         lines.append("one-step check per layer (layer fed the measured layer before):")
         for w in out["where"]:

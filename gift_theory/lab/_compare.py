@@ -1,27 +1,46 @@
-"""Compare a model with measurements: the unbiased energy discrepancy, its floor and p-value.
+"""Compare a model with measurements: a discrepancy, its noise floor and a calibrated p-value.
 
-Per cell (one input i x one measured layer l, a vector over the layer's neurons so that
-correlations count) the U-statistic energy distance between model shots M and measured
-shots Y::
+A *cell* is one input i x one measured layer l (taps, then the output), seen as the vector
+of the layer's neurons over the r repeated shots. Each cell gives five *channels*, each an
+unbiased estimate of a population quantity that is >= 0 and is 0 when the model's law of
+the cell equals the device's:
 
-    E_il = 2 mean_{a,b} |M_a - Y_b| - mean_{a!=a'} |M_a - M_a'| - mean_{b!=b'} |Y_b - Y_b'|
+``energy``
+    the U-statistic energy distance between model shots M and measured shots Y of the
+    vector over neurons (correlations count)::
 
-has expectation exactly 0 when the model's law equals the device's (the V-statistic of
-``scipy.stats.energy_distance`` keeps the diagonal and is biased, so a correct model can
-beat its own floor with it). The same U-statistic of each neuron's 1-D marginal is added
-(it sees the shape of the noise law, which the vector version in many dimensions barely
-does). Each is normalised by the pooled within-data spread of its layer (neuron),
-``S_l = mean_i mean_{b!=b'} |Y_b - Y_b'|``, giving two channels per cell,
-``E_il / S_l`` and ``mean_j E1_ilj / S1_lj``. Each channel is weighted by one over its
-standard deviation across inputs between random halves of the measured shots -- all
-constants of the data, so every model is scored on the same scale, and a layer whose
-statistic is noisy does not drown one where the model visibly fails. The discrepancy is
-``D = mean_i T_i`` with ``T_i`` the weighted mean of the channels of input i (so D is in
-units of the per-input noise of the statistic). The floor is the same statistic between random halves of the
-measured shots. Inputs are independent, so under the model ``T_i`` are independent with
-mean 0 and the p-value is the one-sided Student-t tail of ``D / se(D)`` (the statistic's
-distribution under the fitted model, estimated from the inputs themselves; measured
-calibration in :mod:`gift_theory.lab.calibrate`).
+        E_il = 2 mean_{a,b} |M_a - Y_b| - mean_{a!=a'} |M_a - M_a'| - mean_{b!=b'} |Y_b - Y_b'|
+
+    (the V-statistic of ``scipy.stats.energy_distance`` keeps the zero diagonal and is
+    biased: a correct model could beat its own floor with it), over the layer's pooled
+    within-data spread;
+``energy_marginal``
+    the same of each neuron's 1-D marginal, averaged over neurons;
+``variance``, ``correlation``, ``shape``
+    *split-half products* of a cell feature f -- per-neuron log variance, log of the top
+    eigenvalue of the shot covariance (a common gain: rank-one correlation), pooled
+    standardised fourth moment (the noise law at equal variance): the measured shots are
+    split into halves A and B of h = r/2 shots, the model's into disjoint sets of h, and
+    ``(f(Y_A) - f(M_A)) (f(Y_B) - f(M_B))`` (f(M) averaged over the model's sets) has
+    expectation ``(E f(Y_h) - E f(M_h))^2`` for samples of the same size h: zero for a
+    correct model whatever f is, positive otherwise. The energy distance alone barely sees
+    a variance pattern or a law change at equal variance; these moments do.
+
+Inputs are independent, so per channel c the cell values over inputs give a Student t
+statistic t_c (mean over its standard error); transformed to the normal scale, z_c. The
+**discrepancy** is the one-sided chi-square-like sum::
+
+    Q = sum_c max(z_c, 0)^2            (over every channel of every measured layer)
+
+lower is better; a channel that a model gets wrong adds about n times its squared effect,
+one it gets right adds noise only. Its distribution under the model follows from the
+correlation of the channels across inputs (estimated from the same inputs): Q of
+z ~ N(0, R), by Monte Carlo (2e4 draws, fixed seed; beyond the simulated range the
+Satterthwaite tail of sum z^2 bounds it). That gives the **p-value** (the probability,
+under the model, of a discrepancy at least as large) and **se** (the standard deviation
+of Q under the model). The **noise floor** is the same statistic between random halves
+of the measured shots (the moment channels then use quarters). Measured calibration in
+:mod:`gift_theory.lab.calibrate` (false alarms at p < 0.01 over null data sets).
 """
 
 from __future__ import annotations
@@ -36,7 +55,7 @@ import numpy as np
 from scipy import stats
 
 from .._errors import GiftInputError
-from .._model import forward, sample_noise
+from .._model import forward, layer_step, sample_noise
 from .._params import Layer
 from ._measurement import Measurement
 
@@ -76,15 +95,17 @@ class Model:
 class Comparison:
     """Result of :func:`compare`.
 
-    discrepancy : D = mean_i T_i (0 in expectation for a correct model)
-    se : standard error of D over inputs
+    discrepancy : Q = sum_c max(z_c, 0)^2 over the channels of every measured layer
+    se : standard deviation of Q under the model (its scale of pure noise)
     noise_floor : the same statistic between random halves of the measured shots
-    floor_se : its standard error
-    p_value : one-sided P(D' >= D) under the model (Student t over inputs)
-    per_input : (n,) T_i
-    per_layer : (L',) mean_i E_il / S_l per measured layer
+    floor_se : its standard deviation under the model
+    p_value : P(Q' >= Q) under the model
+    per_input : (n,) mean over channels of each input's channel values in floor units
+    per_layer : (L',) the part of Q each measured layer contributes
     layer_ids : the 1-based layer of each entry of per_layer
-    cells : (n, L') E_il / S_l
+    cells : (n, L') per input and layer, the mean of the channel values in floor units
+    channel_z : (L', C) z of every channel (rows: layers, columns: :data:`CHANNELS` used)
+    channels : the names of the columns of channel_z
     """
 
     discrepancy: float
@@ -96,11 +117,15 @@ class Comparison:
     per_layer: np.ndarray
     layer_ids: tuple
     cells: np.ndarray
+    channel_z: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
+    channels: tuple = ()
 
     def as_dict(self) -> dict:
         return {"discrepancy": self.discrepancy, "se": self.se, "noise_floor": self.noise_floor,
                 "floor_se": self.floor_se, "p_value": self.p_value,
-                "per_layer": {f"layer{l}": float(v) for l, v in zip(self.layer_ids, self.per_layer)}}
+                "per_layer": {f"layer{l}": float(v) for l, v in zip(self.layer_ids, self.per_layer)},
+                "channel_z": {f"layer{l}": {c: float(z) for c, z in zip(self.channels, row)}
+                              for l, row in zip(self.layer_ids, self.channel_z)}}
 
 
 def _pair_dist(A, B):
@@ -263,19 +288,142 @@ def _student_p(T):
     return mean, se, float(stats.t.sf(mean / se, df=n - 1))
 
 
+# ---- the moment channels ------------------------------------------------------------------
+
+#: every channel of a cell, in order (the moment channels need r >= 8 shots)
+CHANNELS = ("energy", "energy_marginal", "variance", "correlation", "shape")
+MOMENT_CHANNELS = CHANNELS[2:]
+#: fewest shots per input for the moment channels (their noise floor splits shots in quarters)
+MIN_SHOTS_MOMENTS = 8
+
+
+def _features(S, eps):
+    """Cell features of samples S (n, h, d): per-neuron log variance (n, d), log top
+    eigenvalue of the shot covariance (n, 1), pooled standardised fourth moment (n, 1).
+    ``eps`` (a variance floor of the layer, a data constant) keeps quantised cells finite."""
+    c = S - S.mean(axis=1, keepdims=True)
+    h = S.shape[1]
+    v = np.sum(c * c, axis=1) / (h - 1)
+    cov = np.einsum("nkd,nke->nde", c, c) / (h - 1)
+    lmax = np.linalg.eigvalsh(cov)[:, -1] if S.shape[2] > 1 else v[:, 0]
+    z = c / np.sqrt(v + eps)[:, None, :]
+    return (np.log(v + eps), np.log(np.maximum(lmax, 0.0) + eps)[:, None], np.mean(z ** 4, axis=(1, 2))[:, None])
+
+
+def _product_channels(YA, YB, MA, MB, eps):
+    """(n, 3) split-half products of the features: mean over each feature's columns of
+    (f(YA) - f(MA)) (f(YB) - f(MB)); ``MA``/``MB`` are lists of model samples (averaged)."""
+    def avg(samples):
+        fs = [_features(m, eps) for m in samples]
+        return [sum(f[j] for f in fs) / len(fs) for j in range(3)]
+
+    fya, fyb = _features(YA, eps), _features(YB, eps)
+    fma, fmb = avg(MA), avg(MB)
+    return np.stack([np.mean((fya[j] - fma[j]) * (fyb[j] - fmb[j]), axis=1) for j in range(3)], axis=1)
+
+
+def _take(Y, idx):
+    return np.take_along_axis(Y, idx[:, :, None], axis=1)
+
+
+def moment_channels(M, Y, split, rng):
+    """The moment channels of one measured layer, (n, 3).
+
+    Parameters
+    ----------
+    M : (n, K, d) model shots, K >= r
+    Y : (n, r, d) measured shots
+    split : (n, r) a permutation of each input's shots: the first h = r // 2 are half A,
+        the next h half B (fixed per measurement, the same for every model)
+    rng : numpy Generator for the model's disjoint sets of h shots
+    """
+    M = np.asarray(M, np.float64)
+    Y = np.asarray(Y, np.float64)
+    n, r, _ = Y.shape
+    h = r // 2
+    K = M.shape[1]
+    if K < 2 * h:
+        raise GiftInputError(f"compare: {K} model shots per input; the moment channels need at least {2 * h}")
+    eps = 1e-3 * float(np.mean(np.var(Y, axis=1)) + 1e-30)
+    reps = K // (2 * h)
+    perm = rng.permuted(np.tile(np.arange(K), (n, 1)), axis=1)
+    MA = [_take(M, perm[:, 2 * q * h:(2 * q + 1) * h]) for q in range(reps)]
+    MB = [_take(M, perm[:, (2 * q + 1) * h:(2 * q + 2) * h]) for q in range(reps)]
+    return _product_channels(_take(Y, split[:, :h]), _take(Y, split[:, h:2 * h]), MA, MB, eps)
+
+
+def floor_moment_channels(Y, split):
+    """The moment channels between the halves of the measured shots (quarters of r/4 shots)."""
+    Y = np.asarray(Y, np.float64)
+    q = Y.shape[1] // 4
+    eps = 1e-3 * float(np.mean(np.var(Y, axis=1)) + 1e-30)
+    A1, A2, B1, B2 = (_take(Y, split[:, i * q:(i + 1) * q]) for i in range(4))
+    return _product_channels(B1, B2, [A1], [A2], eps)
+
+
+# ---- the test ----------------------------------------------------------------------------
+
+#: Monte Carlo draws of the null distribution of Q (fixed seed: same data, same p-value)
+NULL_DRAWS = 20_000
+
+
+def _z_scores(T):
+    """Per column of T (n, C): the one-sided Student t, on the normal scale. Columns with
+    no spread carry no information (z = 0)."""
+    n = T.shape[0]
+    mean = T.mean(axis=0)
+    sd = T.std(axis=0, ddof=1)
+    ok = sd > 1e-12 * (np.abs(mean) + 1e-300)
+    t = np.where(ok, mean / np.where(ok, sd, 1.0) * np.sqrt(n), 0.0)
+    with np.errstate(over="ignore", under="ignore", divide="ignore"):
+        z = stats.norm.isf(stats.t.sf(t, df=n - 1))
+    z = np.where(np.isfinite(z), z, t)  # far in the tails the t and normal scales agree to the reported digits
+    return z, ok
+
+
+def q_test(T):
+    """The discrepancy test on per-input channel values T (n, C).
+
+    Returns
+    -------
+    Q, p_value, null_mean, null_sd, z (C,)
+    """
+    z, ok = _z_scores(T)
+    Q = float(np.sum(np.maximum(z, 0.0) ** 2))
+    Tk = T[:, ok]
+    if Tk.shape[1] == 0 or T.shape[0] < 3:
+        return Q, 1.0, 0.0, 0.0, z
+    R = np.atleast_2d(np.corrcoef(Tk, rowvar=False))
+    lam, V = np.linalg.eigh(R)
+    lam = np.clip(lam, 0.0, None)
+    G = np.random.default_rng(0).standard_normal((NULL_DRAWS, len(lam))) @ (V * np.sqrt(lam)).T
+    Qs = np.sum(np.maximum(G, 0.0) ** 2, axis=1)
+    exceed = int(np.sum(Qs >= Q))
+    if exceed > 0:
+        p = (1 + exceed) / (NULL_DRAWS + 1)
+    else:  # beyond the simulation: Q <= sum z^2, whose tail is Satterthwaite's a chi2_b
+        tr1, tr2 = float(np.sum(lam)), float(np.sum(lam ** 2))
+        p = min(max(float(stats.chi2.sf(Q * tr1 / tr2, df=tr1 * tr1 / tr2)), 1e-300), 1.0 / (NULL_DRAWS + 1))
+    return Q, float(p), float(Qs.mean()), float(Qs.std(ddof=1)), z
+
+
 @dataclasses.dataclass(frozen=True)
 class Reference:
     """What a measurement contributes to every comparison, computed once.
 
     scales : per measured layer, the pooled within-data spreads (S_l, S1_l (d_l,))
-    weights : (L', 2) one over the standard deviation across inputs of each channel's
-        statistic between random halves of the measured shots (data only, so every model
-        is weighed the same way; a layer whose statistic is noisy counts less)
-    noise_floor, floor_se : the discrepancy between random halves and its standard error
+    split : (n, r) per input, the permutation of its shots that defines the halves A, B
+    channels : the channels in use (:data:`CHANNELS`, or the energy ones when r < 8)
+    weights : (L', C) one over each channel's standard deviation across inputs between
+        halves of the measured shots (for the per-input summaries only)
+    noise_floor, floor_se : Q between random halves of the measured shots, and Q's
+        standard deviation under the model
     floor_per_input : (n,)
     """
 
     scales: tuple
+    split: np.ndarray
+    channels: tuple
     weights: np.ndarray
     noise_floor: float
     floor_se: float
@@ -283,32 +431,37 @@ class Reference:
 
 
 def _combine(C, weights):
-    """(n, L', 2) channels -> per input T (n,) and per cell (n, L'): weighted means."""
+    """(n, L', C) channels -> per input (n,) and per cell (n, L'): means in floor units."""
     Cw = C * weights[None]
     return Cw.mean(axis=(1, 2)), Cw.mean(axis=2)
 
 
 def reference(key, meas: Measurement, splits: int = 2) -> Reference:
-    """Scales, channel weights and noise floor of ``meas``: the discrepancy statistic between
-    random halves of the measured shots, averaged over ``splits`` random splits."""
+    """Scales, the shot split, channel weights and the noise floor of ``meas``: the
+    discrepancy statistic between random halves of the measured shots (energy channels
+    averaged over ``splits`` random splits)."""
     if meas.r < 4:
         raise GiftInputError(f"measurement has {meas.r} shots per input; the noise floor (random halves) needs at least 4")
-    if meas.n < 2:
-        raise GiftInputError("measurement has 1 input; the p-value (over inputs) needs at least 2")
+    if meas.n < 3:
+        raise GiftInputError(f"measurement has {meas.n} inputs; the p-value (over inputs) needs at least 3")
     layers = meas.layers()
     scales = tuple(layer_scales(Y) for Y in layers)
-    F = np.zeros((meas.n, len(layers), 2))
-    for s_ in range(splits):
-        for li, Y in enumerate(layers):
-            A, B = _halves(jax.random.fold_in(key, s_ * 101 + li), jnp.asarray(Y, jnp.float32))
-            F[:, li] += cell_statistic(A, B, scales=scales[li])
-    F /= splits
-    sd = F.std(axis=0, ddof=1) if meas.n > 1 else np.ones(F.shape[1:])
+    k_split, k_floor = jax.random.split(key)
+    split = np.asarray(jax.vmap(lambda k: jax.random.permutation(k, meas.r))(jax.random.split(k_split, meas.n)))
+    moments = meas.r >= MIN_SHOTS_MOMENTS
+    channels = CHANNELS if moments else CHANNELS[:2]
+    F = np.zeros((meas.n, len(layers), len(channels)))
+    for li, Y in enumerate(layers):
+        for s_ in range(splits):
+            A, B = _halves(jax.random.fold_in(k_floor, s_ * 101 + li), jnp.asarray(Y, jnp.float32))
+            F[:, li, :2] += cell_statistic(A, B, scales=scales[li]) / splits
+        if moments:
+            F[:, li, 2:] = floor_moment_channels(Y, split)
+    sd = F.std(axis=0, ddof=1)
     weights = 1.0 / np.maximum(sd, 1e-12 * max(float(sd.max()), 1e-300))
+    Q, _, _, null_sd, _ = q_test(F.reshape(meas.n, -1))
     Fi, _ = _combine(F, weights)
-    m = float(Fi.mean())
-    se = float(Fi.std(ddof=1) / np.sqrt(len(Fi))) if len(Fi) > 1 else float("nan")
-    return Reference(scales, weights, m, se, Fi)
+    return Reference(scales, split, channels, weights, Q, null_sd, Fi)
 
 
 def noise_floor(key, meas: Measurement, splits: int = 2):
@@ -326,7 +479,7 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     key : PRNG key (split into ``model`` and ``floor`` subkeys)
     model : Model
     meas : Measurement (use held-out inputs for a fitted model)
-    shots : model shots per input (default: 4 r)
+    shots : model shots per input (default: 4 r; at least r)
     ref : the measurement's :class:`Reference` if already computed (same for every model)
 
     Returns
@@ -336,45 +489,40 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     k_model, k_floor = jax.random.split(key)
     if ref is None:
         ref = reference(k_floor, meas, floor_splits)
+    if shots is not None and int(shots) < meas.r:
+        raise GiftInputError(f"compare: --shots {shots} model shots per input; at least the measured {meas.r} needed")
     Ms = model_shots(k_model, model, meas, shots)
-    C = np.stack([cell_statistic(M, jnp.asarray(Y, jnp.float32), scales=sc)
-                  for M, Y, sc in zip(Ms, meas.layers(), ref.scales)], axis=1)
+    rng = np.random.default_rng(np.asarray(jax.random.key_data(jax.random.fold_in(k_model, 7))).ravel())
+    C = np.zeros((meas.n, len(Ms), len(ref.channels)))
+    for li, (M, Y, sc) in enumerate(zip(Ms, meas.layers(), ref.scales)):
+        C[:, li, :2] = cell_statistic(M, jnp.asarray(Y, jnp.float32), scales=sc)
+        if len(ref.channels) > 2:
+            C[:, li, 2:] = moment_channels(M, Y, ref.split, rng)
+    Q, p, _, null_sd, z = q_test(C.reshape(meas.n, -1))
+    zl = z.reshape(len(Ms), len(ref.channels))
     T, cells = _combine(C, ref.weights)
-    D, se, p = _student_p(T)
-    return Comparison(discrepancy=D, se=se, noise_floor=ref.noise_floor, floor_se=ref.floor_se, p_value=p,
-                      per_input=T, per_layer=cells.mean(axis=0), layer_ids=meas.layer_ids(), cells=cells)
+    return Comparison(discrepancy=Q, se=null_sd, noise_floor=ref.noise_floor, floor_se=ref.floor_se, p_value=p,
+                      per_input=T, per_layer=np.sum(np.maximum(zl, 0.0) ** 2, axis=1), layer_ids=meas.layer_ids(),
+                      cells=cells, channel_z=zl, channels=ref.channels)
 
 
 def one_step_shots(key, model: Model, meas: Measurement, layer: int):
     """The model's layer ``layer`` fed with the *measured* output of the layer before, same
     shot (needs taps for layer >= 2; layer 1 is fed x). Returns (n, r, d_l)."""
     arch = meas.arch
-    L = arch.depth
     params = model.params if model.params is not None else meas.params
     W, b = (jnp.asarray(p, jnp.float32) for p in params[layer - 1])
     phys = model.physics
     n, r = meas.n, meas.r
     noise = sample_noise(key, arch, phys, (n, r), jnp.float32)
     t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
-    s = phys.s
     if layer == 1:
         a = jnp.asarray(meas.x, jnp.float32)[:, None, :]
         if "a0" in noise:
-            a = a + s * noise["a0"]
+            a = a + phys.s * noise["a0"]
     else:
         a = jnp.asarray(meas.taps[layer - 2], jnp.float32)
-    # the core's forward pass for one layer, through the physics' own hooks
-    W = phys.effective_weights(W, layer)
-    u = a @ W.T
-    g = phys.gain(noise, layer, t, u.shape)
-    z = (u if g is None else g * u) + b
-    if f"w{layer}" in noise:
-        z = z + s * noise[f"w{layer}"]
-    if layer < L:
-        z = arch.sigma(z)
-        if f"a{layer}" in noise:
-            z = z + s * noise[f"a{layer}"]
-    return phys.readout(z, noise, layer)
+    return layer_step(W, b, a, noise, phys, arch, layer, t=t)[0]
 
 
 def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None = None) -> list[dict]:
@@ -389,7 +537,7 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
             continue
         M = one_step_shots(jax.random.fold_in(key, l), model, meas, l)
         C = cell_statistic(M, jnp.asarray(Y, jnp.float32), paired=True, scales=ref.scales[li])
-        T = (C * ref.weights[li][None]).mean(axis=1)
+        T = (C * ref.weights[li][None, :2]).mean(axis=1)
         D, se, p = _student_p(T)
         rows.append({"layer": l, "discrepancy": D, "se": se, "z": D / se if se > 0 else float("nan"), "p_value": p})
     return rows

@@ -3,10 +3,10 @@
 The inputs are split at random into a fitting half and a held-out half. The baseline
 (awgn, s fitted) and every candidate ``awgn + effect`` are fitted on the first half and
 scored on the second with :func:`gift_theory.lab.compare`. Candidates are ranked by
-``discrepancy_after + 2 se * (number of parameters the effect adds)``, se the smaller of
-the candidate's own and that of its paired difference to the baseline on the same inputs: an extra parameter must buy two
-standard errors of held-out discrepancy, so a one-parameter effect that
-explains the data beats a many-parameter one that also does (CONTRACTS §4).
+``discrepancy_after + 2 sd * (number of parameters the effect adds)``, sd the baseline's
+standard deviation of the discrepancy under the model: an extra parameter must buy two
+standard deviations of held-out discrepancy, so a one-parameter effect that explains the
+data beats a many-parameter one that also does (CONTRACTS §4).
 ``missing_effect_detected`` is the baseline's goodness-of-fit test, ``p_value < 0.01``.
 """
 
@@ -68,7 +68,7 @@ class Diagnosis:
         c = self.baseline_comparison
         return {"baseline": {"effects": self.baseline.effects, "params": self.baseline.params_json(),
                              "discrepancy": c.discrepancy, "noise_floor": c.noise_floor, "p_value": c.p_value,
-                             "se": c.se, "floor_se": c.floor_se},
+                             "se": c.se, "floor_se": c.floor_se, "channel_z": c.as_dict()["channel_z"]},
                 "missing_effect_detected": self.missing_effect_detected,
                 "ranking": [cand.as_json() for cand in self.ranking],
                 "where": list(self.one_step),
@@ -83,15 +83,33 @@ def _log(msg, verbose):
 
 
 def penalised_score(cmp: Comparison, n_params: int, base: Comparison | None = None) -> float:
-    """Held-out discrepancy plus 2 standard errors per added parameter. The standard error
-    is the smaller of ``cmp``'s own and that of the paired difference to the baseline over
-    the same held-out inputs (where the data's own noise cancels between models)."""
-    se = cmp.se
-    if base is not None and len(base.per_input) == len(cmp.per_input) > 1:
-        # paired with the baseline the data's noise cancels -- unless the baseline is far off
-        # and its own scatter dominates: then the candidate's se is the smaller, honest unit
-        se = min(se, float(np.std(cmp.per_input - base.per_input, ddof=1) / np.sqrt(len(cmp.per_input))))
-    return float(cmp.discrepancy + 2.0 * se * n_params)
+    """Held-out discrepancy plus 2 standard deviations per added parameter. The unit is the
+    baseline's standard deviation of Q under the model (one scale for every candidate; a
+    candidate's own would reward a model whose channels happen to be more correlated)."""
+    unit = base.se if base is not None and base.se > 0 else cmp.se
+    return float(cmp.discrepancy + 2.0 * unit * n_params)
+
+
+def _improves(pair: Candidate, first: Candidate) -> bool:
+    """A pair replaces its first effect at the top only if it clearly explains more: it
+    passes the test, or it at least halves the first effect's discrepancy and beats its
+    penalised score (between two failing models Q's own noise, ~ sqrt(4 Q), dwarfs the
+    parsimony penalty, so a lower score alone is not enough)."""
+    if pair.score >= first.score:
+        return False
+    return pair.comparison.p_value >= ALPHA or pair.comparison.discrepancy <= 0.5 * first.comparison.discrepancy
+
+
+def _merge_second_stage(first: Candidate, stage2: list, singles: list) -> list:
+    """The ranking after the greedy second step: pairs that improve on the first effect (best
+    first), the first effect itself right after the best of them (the path that led there),
+    then everything else by penalised score. A runner-up tried on top of the first is listed
+    as the pair only."""
+    better = sorted((c for c in stage2 if _improves(c, first)), key=lambda c: c.score)
+    named = {c.effects[-1] for c in stage2}
+    rest = sorted([c for c in stage2 if not any(c is b for b in better)] + [c for c in singles if c.effects[0] not in named],
+                  key=lambda c: c.score)
+    return better[:1] + [first] + better[1:] + rest
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = None,
@@ -107,8 +125,9 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     shots : model shots per input (default 4 r)
     second : when the best single effect still fails (p < 0.01), the best ``second``
         runners-up (default: all; a strong first effect can push the second far down the
-        single-effect list) are each fitted on top of it and ranked next (a greedy forward
-        step, for two missing effects); their entries carry both effects' parameters
+        single-effect list) are each fitted on top of it (a greedy forward step, for two
+        missing effects) and ranked with the rest by penalised score; their entries carry
+        both effects' parameters
 
     Returns
     -------
@@ -155,9 +174,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
             stage2.append(Candidate(effects, model, cmp, score, time.time() - t1))
             _log(f"  + {'+'.join(effects):<30s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} "
                  f"p = {cmp.p_value:.3g}", verbose)
-        stage2.sort(key=lambda c: c.score)
-        named = [c.effects[-1] for c in stage2]
-        ranking = [first] + stage2 + [c for c in ranking[1:] if c.effects[0] not in named]
+        ranking = _merge_second_stage(first, stage2, ranking[1:])
     steps = tuple(one_step_check(k_step, base, meas)) if meas.has_taps else ()
     return Diagnosis(base, base_cmp, tuple(ranking), steps, test, time.time() - t0)
 

@@ -30,7 +30,7 @@ import numpy as np
 from scipy import optimize
 
 from .._errors import GiftInputError
-from .._model import forward, sample_noise
+from .._model import forward, layer_step, sample_noise
 from .._params import Layer
 from ..effects import REGISTRY, Physics, make_effect
 from ._compare import Model, draws, layer_outputs
@@ -250,52 +250,103 @@ def _grid_theta(name, physics, meas):
     return np.log(values) if kind == "log" else values
 
 
-def _fit_weight_offsets(problem: _Problem, physics: Physics, params, steps: int = 150):
-    """Ridge-regularised offsets E_hat per layer matching the measured means (taps and y)."""
-    import optax
+def _lbfgs(loss, shapes, x0=None, iters: int = 300):
+    """Minimise ``loss(list of arrays)`` (jitted, float32) over arrays of ``shapes`` by L-BFGS."""
+    sizes = [int(np.prod(sh)) for sh in shapes]
+    vg = jax.jit(jax.value_and_grad(loss))
 
-    meas = problem.meas
-    K = max(meas.r // 2, 8)  # means need few shots; the offsets fit is the costly one
-    noise = draws(jax.random.fold_in(problem.key, 17), physics, problem.arch, (meas.n, K))
-    p32 = problem.params32(params)
-    dat = problem.dat_full
-    arch, x = problem.arch, problem.x
+    def unflat(v):
+        out, i = [], 0
+        for sh, k in zip(shapes, sizes):
+            out.append(jnp.asarray(v[i:i + k].reshape(sh), jnp.float32))
+            i += k
+        return out
+
+    def f(v):
+        val, g = vg(unflat(v))
+        return float(val), np.concatenate([np.asarray(gi, np.float64).ravel() for gi in g])
+
+    v0 = np.zeros(sum(sizes)) if x0 is None else x0
+    res = optimize.minimize(f, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters})
+    return [np.asarray(a, np.float64) for a in unflat(res.x)], res.x
+
+
+def _layer_offsets(problem: _Problem, physics: Physics, p32, layer: int, e: float, draws_per_shot: int = 8):
+    """E_hat of one layer from the measured layer before (taps): the layer's output shot by
+    shot against the model's mean response to the *measured* input of that shot (layer 1:
+    mean over shots against the mean response to x)."""
+    meas, arch = problem.meas, problem.arch
+    n, r = meas.n, meas.r
+    W, b = p32[layer - 1]
+    key = jax.random.fold_in(problem.key, 31 + layer)
+    if layer == 1:
+        K = 256  # the model's mean response must be much sharper than the measured mean (r shots)
+        noise = sample_noise(key, arch, physics, (n, K), jnp.float32)
+        a = problem.x[:, None, :] + (physics.s * noise["a0"] if "a0" in noise else 0.0)
+        t = None if problem.t is None else problem.t[:, :K]
+        target = jnp.asarray(np.mean(meas.layers()[0], axis=1), jnp.float32)  # (n, d1)
+        resid_var = float(np.mean(np.var(meas.layers()[0], axis=1))) / r
+
+        def pred(dW):
+            return jnp.mean(layer_step(W + dW, b, a, noise, physics, arch, 1, t=t)[0], axis=1)
+    else:
+        noise = sample_noise(key, arch, physics, (n, r, draws_per_shot), jnp.float32)
+        a = jnp.asarray(meas.taps[layer - 2], jnp.float32)[:, :, None, :]
+        t = None if problem.t is None else problem.t[:, :r, None] * jnp.ones((1, 1, draws_per_shot))
+        target = jnp.asarray(meas.layers()[layer - 1], jnp.float32)  # (n, r, d_l)
+        resid_var = float(np.mean(np.var(meas.layers()[layer - 1], axis=1)))
+
+        def pred(dW):
+            return jnp.mean(layer_step(W + dW, b, a, noise, physics, arch, layer, t=t)[0], axis=2)
+
+    inv_e2 = 1.0 / max(e, 1e-6) ** 2
+    inv_v = 1.0 / max(resid_var, 1e-12)
+
+    def loss(ds):
+        (dW,) = ds
+        return 0.5 * jnp.sum((target - pred(dW)) ** 2) * inv_v + 0.5 * inv_e2 * jnp.sum(dW ** 2)
+
+    (dW,), _ = _lbfgs(loss, [W.shape])
+    return dW
+
+
+def _joint_offsets(problem: _Problem, physics: Physics, p32, e: float):
+    """E_hat of every layer at once from the measured means (no taps: the outputs only)."""
+    meas, arch = problem.meas, problem.arch
+    K = max(meas.r, 32)
+    noise = sample_noise(jax.random.fold_in(problem.key, 17), arch, physics, (meas.n, K), jnp.float32)
     t = None if problem.t is None else problem.t[:, :K]
-    r = meas.r
-    n_obs = sum(meas.n * a.shape[2] for a in meas.layers())
+    targets = [jnp.asarray(np.mean(Y, axis=1), jnp.float32) for Y in meas.layers()]
+    inv_v = [1.0 / max(float(np.mean(np.var(Y, axis=1))) / meas.r, 1e-12) for Y in meas.layers()]
+    ids = meas.layer_ids()
+    inv_e2 = 1.0 / max(e, 1e-6) ** 2
 
-    def loss(delta, inv_e2):
-        ps = tuple(Layer(W + dW, b) for (W, b), dW in zip(p32, delta))
-        out = forward(ps, x[:, None, :], noise, physics, arch, t=t, taps=True)
-        chi2 = 0.0
-        for A, d in zip(out.taps, dat):
-            if d is not None:
-                m = jnp.mean(A, 1)
-                v = jnp.var(A, 1)
-                chi2 = chi2 + jnp.sum((m - d["m"]) ** 2 / (d["v"] / r + v / K + 1e-12))
-        ridge = sum(jnp.sum(dW ** 2) for dW in delta)
-        return (0.5 * chi2 + 0.5 * inv_e2 * ridge) / n_obs
+    def loss(ds):
+        ps = tuple(Layer(W + dW, b) for (W, b), dW in zip(p32, ds))
+        out = forward(ps, problem.x[:, None, :], noise, physics, arch, t=t, taps=True)
+        chi2 = sum(jnp.sum((tg - jnp.mean(out.taps[l - 1], axis=1)) ** 2) * iv for tg, iv, l in zip(targets, inv_v, ids))
+        return 0.5 * chi2 + 0.5 * inv_e2 * sum(jnp.sum(dW ** 2) for dW in ds)
 
-    opt = optax.adam(5e-3)
+    ds, _ = _lbfgs(loss, [W.shape for W, _ in p32])
+    return ds
 
-    @jax.jit
-    def run(delta, inv_e2):
-        def step(carry, _):
-            dl, st = carry
-            g = jax.grad(loss)(dl, inv_e2)
-            upd, st = opt.update(g, st, dl)
-            return (optax.apply_updates(dl, upd), st), None
-        (dl, _), _ = jax.lax.scan(step, (delta, opt.init(delta)), None, length=steps)
-        return dl
 
-    delta = tuple(jnp.zeros_like(W) for W, _ in p32)
+def _fit_weight_offsets(problem: _Problem, physics: Physics, params):
+    """Offsets E_hat (a fixed per-device error cannot be a random effect of a model): per layer
+    from the taps when the file has them (each layer's output regressed, shot by shot, on the
+    measured output of the layer before), else jointly from the output means; ridge prior
+    N(0, e^2) with e re-estimated once from the first pass."""
+    meas = problem.meas
+    p32 = problem.params32(params)
     rms_w = float(np.sqrt(np.mean(np.concatenate([np.ravel(W) ** 2 for W, _ in params]))))
-    e = 0.05 * rms_w
+    e = 0.2 * rms_w
     for _ in range(2):
-        delta = run(delta, jnp.float32(1.0 / e ** 2))
-        e = max(float(np.sqrt(np.mean(np.concatenate([np.ravel(np.asarray(d)) ** 2 for d in delta])))), 1e-4 * rms_w)
-    new = tuple(Layer(np.asarray(W, np.float64) + np.asarray(d, np.float64), np.asarray(b, np.float64))
-                for (W, b), d in zip(params, delta))
+        if meas.has_taps:
+            deltas = [_layer_offsets(problem, physics, p32, l, e) for l in range(1, problem.arch.depth + 1)]
+        else:
+            deltas = _joint_offsets(problem, physics, p32, e)
+        e = max(float(np.sqrt(np.mean(np.concatenate([np.ravel(d) ** 2 for d in deltas])))), 1e-4 * rms_w)
+    new = tuple(Layer(np.asarray(W, np.float64) + d, np.asarray(b, np.float64)) for (W, b), d in zip(params, deltas))
     return new, e
 
 

@@ -7,6 +7,7 @@ import pytest
 
 import gift_theory as gt
 from gift_theory.lab import Model, compare, energy_cells, one_step_check, simulate_measurement
+from gift_theory.lab._compare import CHANNELS, floor_moment_channels, moment_channels, q_test
 
 ARCH = gt.Architecture((4, 8, 3))
 
@@ -64,13 +65,67 @@ def test_correct_model_sits_at_floor_wrong_model_fails(setup):
     phys = gt.Physics.create(s=0.1)
     meas = simulate_measurement(jax.random.PRNGKey(5), params, x, phys, shots=24, taps=True)
     good = compare(jax.random.PRNGKey(6), Model(phys), meas)
-    # zero-mean for the true model (4.5 se: a two-sided 1e-5 test)
-    assert abs(good.discrepancy) < 4.5 * good.se
-    assert abs(good.noise_floor) < 4.5 * good.floor_se
+    # the true model's Q and the data-halves floor are both draws of the null law of Q
+    assert good.p_value > 1e-4
+    assert abs(good.discrepancy - good.noise_floor) < 4.5 * np.hypot(good.se, good.floor_se)
     bad = compare(jax.random.PRNGKey(6), Model(gt.Physics.create(s=0.2)), meas)
-    assert bad.p_value < 1e-6 and bad.discrepancy > good.discrepancy + 4.5 * np.hypot(good.se, bad.se)
+    assert bad.p_value < 1e-6 and bad.discrepancy > good.noise_floor + 4.5 * good.floor_se
     assert bad.noise_floor == good.noise_floor  # the floor belongs to the data, not the model
     assert set(good.as_dict()) >= {"discrepancy", "noise_floor", "p_value", "se"}
+    assert good.channels == CHANNELS and good.channel_z.shape == (2, len(CHANNELS))
+
+
+def test_moment_channels_are_unbiased_and_see_variance_and_law(x64):
+    """Same law: each split-half product averages to 0 within its standard error; a 20 %
+    larger spread shows in the variance channel, a Laplace law of equal variance in the
+    shape channel."""
+    rng = np.random.default_rng(3)
+    n, r, K, d = 3000, 16, 64, 4
+    split = np.tile(np.arange(r), (n, 1))
+    Y = rng.normal(size=(n, r, d))
+
+    def chans(M, Y_):
+        return moment_channels(M, Y_, split, np.random.default_rng(4))
+
+    same = chans(rng.normal(size=(n, K, d)), Y)
+    z = same.mean(0) / (same.std(0, ddof=1) / np.sqrt(n))
+    assert np.all(np.abs(z) < 4.5)
+    wider = chans(rng.normal(size=(n, K, d)), 1.2 * Y)
+    assert wider[:, 0].mean() / (wider[:, 0].std(ddof=1) / np.sqrt(n)) > 10  # variance channel
+    lap = rng.laplace(scale=np.sqrt(0.5), size=(n, r, d))
+    law = chans(rng.normal(size=(n, K, d)), lap)
+    assert law[:, 2].mean() / (law[:, 2].std(ddof=1) / np.sqrt(n)) > 10  # shape channel
+    floor = floor_moment_channels(Y, split)
+    assert np.all(np.abs(floor.mean(0) / (floor.std(0, ddof=1) / np.sqrt(n))) < 4.5)
+
+
+def test_q_test_is_calibrated_on_correlated_channels():
+    """Per-input channel values with mean 0 and correlated columns: over 400 data sets the
+    p-values are uniform (KS at 1e-3) -- the Monte Carlo null uses the estimated correlation."""
+    from scipy import stats
+
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(6, 6))
+    ps = [q_test(rng.normal(size=(80, 6)) @ A + rng.normal(size=(80, 6)))[1] for _ in range(400)]
+    assert stats.kstest(ps, "uniform").pvalue > 1e-3
+    # a shifted channel is found
+    T = rng.normal(size=(80, 6)) @ A
+    T[:, 2] += 0.8 * T[:, 2].std()
+    assert q_test(T)[1] < 1e-4
+
+
+def test_a_law_change_at_equal_variance_is_detected():
+    """Laplace noise of the same s: the energy channels barely move, the shape channel does."""
+    arch = gt.Architecture((3, 6, 2))
+    params = gt.init_params(jax.random.PRNGKey(2), arch, gain=1.5)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(3), (200, 3)))
+    truth = gt.Physics.parse(["laplace"], s=0.2)
+    meas = simulate_measurement(jax.random.PRNGKey(4), params, x, truth, shots=64, taps=True)
+    gauss = compare(jax.random.PRNGKey(5), Model(gt.Physics.create(s=0.2)), meas)
+    right = compare(jax.random.PRNGKey(5), Model(truth), meas)
+    assert gauss.p_value < 1e-3 and right.p_value > 1e-3
+    i = gauss.channels.index("shape")
+    assert gauss.channel_z[:, i].max() > 4
 
 
 def test_one_step_locates_the_layer(setup):

@@ -1,8 +1,16 @@
-"""``gift demo``: the main job. Train (or load from the cache) on digits, fine-tune one
-misspecified pair against a simulated chip with GIFT and its rivals under one chip budget,
-print one table and draw a figure (the predicted vs observed loss change along GIFT's
-line, and every method's loss). ``--grid`` runs the report's (s0, st) grid instead and
-prints each method's share of the retrain oracle's loss gain.
+"""``gift demo``: the main job, in three parts.
+
+1. Fine-tuning: train (or load from the cache) on digits, fine-tune one misspecified pair
+   against a simulated chip with GIFT and its rivals under one chip budget, print one table
+   and draw a figure (the predicted vs observed loss change along GIFT's line, and every
+   method's loss).
+2. Theory: two of the paper's claims as computed verdicts (``gift check`` runs all twelve).
+3. The measurement loop: a simulated chip with a hidden physical effect, measured with
+   taps; ``diagnose`` says whether the awgn model fails, which effect is missing, and the
+   fitted model's error against the noise floor (``gift diagnose`` / ``gift fit``).
+
+``--grid`` runs the report's (s0, st) grid of part 1 instead and prints each method's share
+of the retrain oracle's loss gain; ``--parts`` picks parts.
 
 A thin shell: the work is :func:`gift_theory.finetune.compare_methods` and
 :func:`gift_theory.finetune.oracle_grid`.
@@ -31,6 +39,10 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="gift-out", help="folder for the figure and its data (default gift-out)")
     parser.add_argument("--no-figure", action="store_true")
+    parser.add_argument("--parts", default="finetune,theory,lab",
+                        help="comma-separated parts to run: finetune, theory, lab (default all)")
+    parser.add_argument("--hidden", default="shot=0.03", metavar="NAME=VALUE",
+                        help="the hidden effect of the lab part's chip (default shot=0.03)")
     parser.add_argument("--grid", action="store_true",
                         help="run the (s0, st) grid (0.05,0.2) (0.2,0.05) (0.1,0.3) (0.3,0.1) (0.1,0.1) instead")
 
@@ -54,7 +66,7 @@ def _progress(r):
 
 
 def run(args):
-    from ..finetune import compare_methods, oracle_grid
+    from ..finetune import oracle_grid
 
     t0 = time.perf_counter()
     methods = _methods(args.methods)
@@ -67,24 +79,94 @@ def run(args):
             r.pop("info", None)
         return {"mode": "grid", "dataset": args.dataset, "arch": args.arch, "budget": args.budget, "rows": rows,
                 "seconds": time.perf_counter() - t0}
+    parts = [p.strip() for p in args.parts.split(",") if p.strip()]
+    bad = [p for p in parts if p not in PARTS]
+    if bad or not parts:
+        raise GiftInputError(f"--parts: unknown part {bad[0] if bad else args.parts!r}; parts: {', '.join(PARTS)}")
+    hidden = _hidden(args.hidden) if "lab" in parts else None  # bad input before any work
+    result = {"mode": "pair", "dataset": args.dataset, "arch": args.arch, "s0": args.s0, "st": args.st,
+              "true_effects": list(args.true_effect), "budget": args.budget, "parts": parts}
+    if "finetune" in parts:
+        result.update(_finetune(args, methods))
+    if "theory" in parts:
+        result["theory"] = _theory(args)
+    if "lab" in parts:
+        result["lab"] = _lab(args, hidden)
+    result["seconds"] = time.perf_counter() - t0
+    return result
+
+
+PARTS = ("finetune", "theory", "lab")
+#: the claims part 2 shows: a symbolic one and a closed-form one (seconds each)
+THEORY_CHECKS = ("score_function_identity", "linear_example_bound")
+
+
+def _finetune(args, methods) -> dict:
+    from ..finetune import compare_methods
+
     if "retrain" not in methods:
         methods = tuple(methods) + ("retrain",)
     rows = compare_methods(args.dataset, args.arch, args.s0, args.st, tuple(args.true_effect), methods=methods,
                            seed=args.seed, progress=_progress, keep=True, budget=args.budget)
-    result = {"mode": "pair", "dataset": args.dataset, "arch": args.arch, "s0": args.s0, "st": args.st,
-              "true_effects": list(args.true_effect), "budget": args.budget}
+    out = {}
     curve = _curve(args, rows)
     for r in rows:
         r.pop("params")
         r.pop("direction")
         r["info"] = {k: v for k, v in r["info"].items() if isinstance(v, (int, float, bool, str, list))}
-    result["rows"] = rows
+    out["rows"] = rows
     if curve is not None:
-        result["curve"] = {k: np.asarray(v).tolist() for k, v in curve.items()}
+        out["curve"] = {k: np.asarray(v).tolist() for k, v in curve.items()}
         if not args.no_figure:
-            result["figure"] = _figure(args, rows, curve)
-    result["seconds"] = time.perf_counter() - t0
-    return result
+            out["figure"] = _figure(args, rows, curve)
+    return out
+
+
+def _theory(args) -> list:
+    from proofs_checks import run_checks
+
+    sys.stderr.write("gift demo: theory: " + ", ".join(THEORY_CHECKS) + "\n")
+    return run_checks(THEORY_CHECKS, seed=args.seed)
+
+
+def _hidden(spec: str):
+    from ..effects import parse_effect
+
+    e = parse_effect(spec, where="--hidden")
+    if e.name == "awgn":
+        raise GiftInputError("--hidden: awgn is the baseline, not a hidden effect; e.g. shot=0.03 or laplace")
+    return e
+
+
+def _lab(args, hidden) -> dict:
+    """A chip with a hidden effect, measured with taps, diagnosed and fitted."""
+    import jax
+
+    import gift_theory as gt
+    from ..lab import diagnose, save_measurement, simulate_measurement
+
+    t0 = time.perf_counter()
+    arch = gt.Architecture((8, 16, 8, 4))
+    key = jax.random.PRNGKey(args.seed)
+    params = gt.init_params(jax.random.fold_in(key, 1), arch, gain=1.5)
+    params = tuple(gt.Layer(W, 0.3 * jax.random.normal(jax.random.fold_in(key, 10 + l), b.shape))
+                   for l, (W, b) in enumerate(params))
+    x = np.asarray(jax.random.uniform(jax.random.fold_in(key, 2), (160, 8)))
+    if hidden.name == "weight_error":
+        hidden = type(hidden)(**{**hidden.param_dict(), "seed": args.seed})
+    physics = gt.Physics.of([gt.make_effect("awgn", s=0.1), hidden])
+    meas = simulate_measurement(jax.random.fold_in(key, 3), params, x, physics, shots=48, taps=True, times=True)
+    path = None
+    if not args.no_figure:
+        os.makedirs(args.out, exist_ok=True)
+        path = os.path.join(args.out, "demo_chip.npz")
+        save_measurement(path, meas)
+    sys.stderr.write(f"gift demo: lab: chip {arch} with a hidden effect, 160 inputs x 48 shots, taps; diagnosing ...\n")
+    d = diagnose(jax.random.fold_in(key, 4), meas)
+    out = d.as_json()
+    return {"chip": physics.describe(), "file": path, "baseline": out["baseline"],
+            "missing_effect_detected": out["missing_effect_detected"], "ranking": out["ranking"][:3],
+            "seconds": time.perf_counter() - t0}
 
 
 def _curve(args, rows):
@@ -169,8 +251,36 @@ def _figure(args, rows, curve) -> str:
 def render(result) -> str:
     if result["mode"] == "grid":
         return render_grid(result)
+    lines = []
+    if "rows" in result:
+        lines += _render_finetune(result)
+    if "theory" in result:
+        lines += ["", "2. theory: the paper's claims as computed verdicts (all twelve: gift check)"]
+        for c in result["theory"]:
+            lines.append(f"  {c['id']:<28s} {c['verdict']:<13s} {c['evidence'][:110]}")
+            if c.get("correction"):
+                lines.append(f"  {'':<28s} correction: {c['correction'][:100]}")
+    if "lab" in result:
+        lab = result["lab"]
+        b = lab["baseline"]
+        lines += ["", f"3. measurement loop: a chip with a hidden effect ({lab['chip']}; the model is not told)",
+                  f"  awgn model (s fitted = {b['params']['s']:.4g}): discrepancy {b['discrepancy']:.4g} against a "
+                  f"noise floor {b['noise_floor']:.4g} +- {b['floor_se']:.2g}, p = {b['p_value']:.3g} -> "
+                  + ("a physical effect is MISSING" if lab["missing_effect_detected"] else "nothing missing"),
+                  "  most likely missing (fitted, scored on held-out inputs):"]
+        for i, r in enumerate(lab["ranking"], 1):
+            name = " + ".join(r.get("with", []) + [r["effect"]])
+            ps = ", ".join(f"{k}={v:.3g}" for k, v in r["params"].items())
+            lines.append(f"   {i}. {name:<24s} discrepancy {r['discrepancy_after']:8.4g}  p = {r['p_value_after']:.3g}  ({ps})")
+        if lab.get("file"):
+            lines.append(f"  the measurement: {lab['file']} (gift diagnose / gift fit --add NAME on it)")
+    lines.append(f"total {result['seconds']:.0f} s")
+    return "\n".join(lines)
+
+
+def _render_finetune(result) -> list:
     rows = result["rows"]
-    lines = [f"gift demo: {result['dataset']} {result['arch']}, trained at s0={result['s0']:g}, chip at "
+    lines = [f"1. fine-tuning: {result['dataset']} {result['arch']}, trained at s0={result['s0']:g}, chip at "
              f"st={result['st']:g}{' + ' + ', '.join(result['true_effects']) if result['true_effects'] else ''}, "
              f"budget {result['budget']:g} chip evaluations", "",
              f"{'method':<17}{'loss before':>12}{'loss after':>11}{'acc before':>11}{'acc after':>10}"
@@ -184,8 +294,7 @@ def render(result) -> str:
     lines.append("'of oracle' = loss gain as a share of retraining at the true physics (which needs st known).")
     if "figure" in result:
         lines.append(f"figure: {result['figure']}")
-    lines.append(f"total {result['seconds']:.0f} s")
-    return "\n".join(lines)
+    return lines
 
 
 def render_grid(result) -> str:

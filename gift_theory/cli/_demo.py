@@ -74,11 +74,11 @@ def run(args):
         raise GiftInputError("gift demo: --s0 must be positive, --st and --budget non-negative")
     if args.grid:
         rows = oracle_grid(methods=methods, dataset=args.dataset, arch=args.arch, seed=args.seed,
-                           budget=args.budget, progress=_progress)
+                           true_effects=tuple(args.true_effect), budget=args.budget, progress=_progress)
         for r in rows:
             r.pop("info", None)
         return {"mode": "grid", "dataset": args.dataset, "arch": args.arch, "budget": args.budget, "rows": rows,
-                "seconds": time.perf_counter() - t0}
+                "true_effects": list(args.true_effect), "seconds": time.perf_counter() - t0}
     parts = [p.strip() for p in args.parts.split(",") if p.strip()]
     bad = [p for p in parts if p not in PARTS]
     if bad or not parts:
@@ -308,7 +308,9 @@ def render_grid(result) -> str:
         if r["method"] not in methods:
             methods.append(r["method"])
     head = f"{'method':<17}" + "".join(f"{f'{a:g}->{b:g}':>13}" for a, b in pairs)
-    lines = [f"share of the retrain-oracle loss gain, {result['dataset']} {result['arch']}, "
+    extra = result.get("true_effects") or []
+    lines = [f"share of the retrain-oracle loss gain, {result['dataset']} {result['arch']}"
+             f"{', chip also ' + ', '.join(extra) if extra else ''}, "
              f"<= {result['budget']:g} chip evaluations (chip evals used in brackets)", "", head]
     for m in methods:
         cells = []

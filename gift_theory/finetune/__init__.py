@@ -16,6 +16,7 @@ from ._problem import referee as referee
 from ._problem import referee_losses as referee_losses
 from ._rivals import RETRAIN as RETRAIN
 from ._rivals import identify_noise_level as identify_noise_level
+from ._rivals import identify_physics as identify_physics
 from ._rivals import identify_retrain as identify_retrain
 from ._rivals import pat as pat
 from ._rivals import retrain as retrain

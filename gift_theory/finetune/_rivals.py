@@ -12,7 +12,7 @@ import numpy as np
 import optax
 
 from .._model import forward, sample_noise, squared_error
-from .._params import flatten
+from .._params import Layer, flatten
 from ..effects import Physics, awgn
 from ..training import TrainConfig, train
 
@@ -74,44 +74,87 @@ def identify_noise_level(problem, *, shots: int = 8, evaluations: float = 1.0, d
                    "variance_se": V_se, "inputs": n, "shots": shots}
 
 
+def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps: bool = True, seed: int = 0):
+    """Measure the chip at w0 and find its physics with the measurement lab.
+
+    ``evaluations`` units of chip budget buy ``shots`` repeated shots of as many fine-tuning
+    inputs as they pay for (with the hidden layers where the chip has taps); the lab's
+    :func:`~gift_theory.lab.diagnose` fits awgn and every effect of CONTRACTS §2 (but
+    weight_error, whose fixed offsets retraining cannot use) on half the inputs and tests
+    them on the other half. The physics is the top-ranked model when the awgn model fails
+    its test (p < 0.01), else the awgn model with its fitted s.
+
+    Returns
+    -------
+    physics, info (the inputs and shots used, the baseline p-value, the ranking's top three)
+    """
+    from ..lab import Measurement as LabMeasurement
+    from ..lab import diagnose
+    from ..lab._fit import CANDIDATES
+
+    n = int(min(problem.K1, max(8, math.floor(evaluations * problem.unit_shots / shots))))
+    m = problem.chip.measure(problem.w0, problem.x_ft[:n], shots, taps=taps)
+    meas = LabMeasurement(np.asarray(m.x, np.float64), np.asarray(m.y, np.float64),
+                          tuple(Layer(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in problem.w0),
+                          taps=tuple(np.asarray(a, np.float64) for a in m.taps) if m.taps else None,
+                          t=None if m.t is None else np.asarray(m.t, np.float64), activation=problem.arch.activation)
+    d = diagnose(jax.random.fold_in(problem.key, 810 + seed), meas,
+                 candidates=[c for c in CANDIDATES if c != "weight_error" and (c != "drift" or m.t is not None)])
+    physics = d.ranking[0].model.physics if d.missing_effect_detected else d.baseline.physics
+    return physics, {"physics": physics.describe(), "inputs": n, "shots": shots, "taps": bool(m.taps),
+                     "baseline_p": d.baseline_comparison.p_value,
+                     "missing_effect_detected": d.missing_effect_detected,
+                     "ranking": [c.as_json()["effect"] for c in d.ranking[:3]]}
+
+
 def identify_retrain(problem, **kw):
-    """Spend the budget measuring the chip, estimate s, retrain in silico at the estimate from w0."""
-    s_hat, info = identify_noise_level(problem, **kw)
-    return retrain(problem, awgn(s_hat)), info
+    """Spend the budget measuring the chip, identify its physics (s and any missing effect of
+    CONTRACTS §2, :func:`identify_physics`), retrain in silico at the estimate from w0."""
+    physics, info = identify_physics(problem, **kw)
+    return retrain(problem, physics), info
 
 
 # ------------------------------------------------------------------------------- SPSA
 def spsa(problem, *, batch: int = 64, c: float = 0.01, step: float = 5e-4, alpha: float = 0.602,
-         gamma: float = 0.101):
+         gamma: float = 0.101, calibration: int = 4):
     """Simultaneous-perturbation stochastic approximation in situ (Spall's gains).
 
     Each iteration sends one mini-batch of the fine-tuning set through the chip at
     w + c_k Delta and w - c_k Delta (Delta Rademacher; the same inputs for both sides), and
-    steps w <- w - a_k (L+ - L-) / (2 c_k) Delta. ``a`` is calibrated on the first
-    iteration so that the first step moves each weight by about ``step``.
+    steps w <- w - a_k (L+ - L-) / (2 c_k) Delta. ``a`` is calibrated (Spall's practice) on
+    the mean |g| of ``calibration`` gradient estimates at w0 -- charged to the budget like
+    every other query -- so that the first step moves each weight by about ``step``; no step
+    moves a weight by more than 10 ``step`` (one lucky tiny |g| must not blow the weights up).
     """
     vec0, unravel = flatten(problem.w0)
     vec = np.asarray(vec0, np.float64)
     per_iter = 2 * batch * problem.K2
-    n_iter = int(problem.chip.ledger.remaining() // per_iter) if math.isfinite(problem.chip.ledger.remaining()) \
-        else 100
+    remaining = problem.chip.ledger.remaining()
+    n_iter = int(remaining // per_iter) if math.isfinite(remaining) else 100
     rng = np.random.default_rng(int(jax.random.randint(problem.key, (), 0, 2**31 - 1)))
     A = 0.1 * max(n_iter, 1)
-    a = None
 
     def loss(v, idx):
         out = problem.chip.measure(unravel(jnp.asarray(v, jnp.float32)), problem.x_ft[idx], problem.K2).y
         return float(np.mean(np.sum((np.asarray(out, np.float64) - problem.y_ft[idx][:, None, :]) ** 2, axis=-1)))
 
-    for k in range(n_iter):
+    def estimate(v, ck):
         idx = rng.choice(problem.K1, size=min(batch, problem.K1), replace=False)
-        delta = rng.choice([-1.0, 1.0], size=vec.shape)
+        delta = rng.choice([-1.0, 1.0], size=v.shape)
+        return (loss(v + ck * delta, idx) - loss(v - ck * delta, idx)) / (2 * ck), delta
+
+    n_cal = min(calibration, n_iter)
+    g_cal = [abs(estimate(vec, c)[0]) for _ in range(n_cal)]
+    n_iter -= n_cal
+    scale = float(np.mean(g_cal)) if g_cal else 0.0
+    a = step * (A + 1) ** alpha / max(scale, 1e-8)
+    for k in range(n_iter):
         ck = c / (k + 1) ** gamma
-        g = (loss(vec + ck * delta, idx) - loss(vec - ck * delta, idx)) / (2 * ck)
-        if a is None:
-            a = step * (A + 1) ** alpha / max(abs(g), 1e-8)
-        vec = vec - a / (k + 1 + A) ** alpha * g * delta
-    return unravel(jnp.asarray(vec, jnp.float32)), {"iterations": n_iter, "batch": batch}
+        g, delta = estimate(vec, ck)
+        move = float(np.clip(a / (k + 1 + A) ** alpha * g, -10 * step, 10 * step))
+        vec = vec - move * delta
+    return unravel(jnp.asarray(vec, jnp.float32)), {"iterations": n_iter, "batch": batch, "calibration": n_cal,
+                                                    "gain_a": a}
 
 
 # ------------------------------------------------------------------------------- PAT

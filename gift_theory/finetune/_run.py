@@ -186,10 +186,11 @@ GRID = ((0.05, 0.2), (0.2, 0.05), (0.1, 0.3), (0.3, 0.1), (0.1, 0.1))
 
 
 def oracle_grid(pairs=GRID, methods=METHODS, *, dataset: str = "digits", arch="64-32-32-10", seed: int = 0,
-                progress=None, **options) -> list[dict]:
+                true_effects=(), progress=None, **options) -> list[dict]:
     """:func:`compare_methods` over (s0, st) pairs; every row carries ``oracle_fraction``."""
     methods = ("retrain",) + tuple(m for m in methods if m != "retrain")
     rows = []
     for s0, st in pairs:
-        rows += compare_methods(dataset, arch, s0, st, methods=methods, seed=seed, progress=progress, **options)
+        rows += compare_methods(dataset, arch, s0, st, tuple(true_effects), methods=methods, seed=seed,
+                                progress=progress, **options)
     return rows

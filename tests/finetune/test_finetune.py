@@ -10,7 +10,7 @@ import pytest
 import gift_theory as gt
 from gift_theory.chips import Ledger, Measurement
 from gift_theory.finetune import (conjugate_gradients, fit_quadratic, gift_printed, identify_noise_level,
-                                  make_problem, paired_line_search)
+                                  identify_physics, make_problem, paired_line_search, spsa)
 from gift_theory.finetune._tree import axpy, norm, unit
 
 ARCH = gt.Architecture((4, 3, 2))
@@ -111,6 +111,30 @@ def test_identify_noise_level_recovers_st():
     s_hat, info = identify_noise_level(problem, shots=8, evaluations=1.0)
     assert abs(s_hat - st) < 5 * info["s_hat_se"] + 0.02 * st, (s_hat, info)
     assert problem.evaluations_used() == 1
+
+
+def test_identify_physics_finds_a_hidden_effect_from_chip_measurements():
+    """identify-retrain measures the chip at w0 (4 evaluations), and the measurement lab names
+    the hidden shot noise and fits its q: the physics that retraining then uses."""
+    arch = gt.Architecture((4, 8, 3))
+    w0 = gt.init_params(jax.random.PRNGKey(5), arch, gain=1.5)
+    x = np.random.default_rng(6).random((480, 4)).astype(np.float32)
+    y = np.zeros((480, 3), np.float32)
+    truth = gt.Physics.create(s=0.1, shot=0.05)
+    problem = make_problem(arch, w0, x, y, s0=0.05, true_physics=truth, budget=4, K2=1, seed=1)
+    physics, info = identify_physics(problem, shots=16, evaluations=4.0)
+    assert info["missing_effect_detected"] and "shot" in physics.names, info
+    assert abs(physics.params()["q"] - 0.05) < 0.02 and abs(physics.s - 0.1) < 0.03
+    assert problem.evaluations_used() == 4
+
+
+def test_spsa_never_blows_up_on_a_flat_start():
+    """A chip whose loss is flat at w0 gives |g| ~ 0 on the first estimates: the gain is
+    calibrated on their mean and every move is capped, so the weights stay finite and near w0."""
+    problem, _ = _setup(0.0, sigma=0.0, budget=4)
+    w, info = spsa(problem, batch=16)
+    assert all(np.all(np.isfinite(np.asarray(leaf))) for leaf in jax.tree_util.tree_leaves(w))
+    assert float(norm(axpy(-1.0, problem.w0, w))) <= 10 * 5e-4 * np.sqrt(sum(a.size for a in jax.tree_util.tree_leaves(w))) * info["iterations"]
 
 
 def _cli(capsys, *argv):

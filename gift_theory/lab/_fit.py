@@ -15,9 +15,12 @@ no obstacle). Two effects need more than moments:
   multiples of ``step``); ``bits`` is the smallest integer with ``step 2^(bits-1)`` at least
   the largest measured magnitude, ``v_range = step 2^(bits-1)``.
 * weight_error: a model cannot know the device's E, so it is fitted as fixed offsets
-  ``E_hat`` (ridge regression of the measured means through the differentiable forward
-  pass, prior N(0, e^2), e re-estimated once); the fitted model uses ``W + E_hat`` and
-  reports ``e``. Held-out inputs judge whether the offsets generalise.
+  ``E_hat`` (prior N(0, e^2), e re-estimated once, L-BFGS through the differentiable layer
+  map): with taps layer by layer, each layer's measured output shot by shot against the
+  model's mean response to the measured output of the layer before (layer 1: means over
+  shots against the mean response to x); without taps all layers at once from the output
+  means. The fitted model uses ``W + E_hat`` and reports ``e``. Held-out inputs judge
+  whether the offsets generalise.
 """
 
 from __future__ import annotations
@@ -250,8 +253,9 @@ def _grid_theta(name, physics, meas):
     return np.log(values) if kind == "log" else values
 
 
-def _lbfgs(loss, shapes, x0=None, iters: int = 300):
-    """Minimise ``loss(list of arrays)`` (jitted, float32) over arrays of ``shapes`` by L-BFGS."""
+def _lbfgs(loss, shapes, iters: int = 300):
+    """Minimise ``loss(list of arrays)`` (jitted, float32) over arrays of ``shapes`` by L-BFGS,
+    from zero; returns the minimising arrays (float64)."""
     sizes = [int(np.prod(sh)) for sh in shapes]
     vg = jax.jit(jax.value_and_grad(loss))
 
@@ -266,9 +270,8 @@ def _lbfgs(loss, shapes, x0=None, iters: int = 300):
         val, g = vg(unflat(v))
         return float(val), np.concatenate([np.asarray(gi, np.float64).ravel() for gi in g])
 
-    v0 = np.zeros(sum(sizes)) if x0 is None else x0
-    res = optimize.minimize(f, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters})
-    return [np.asarray(a, np.float64) for a in unflat(res.x)], res.x
+    res = optimize.minimize(f, np.zeros(sum(sizes)), jac=True, method="L-BFGS-B", options={"maxiter": iters})
+    return [np.asarray(a, np.float64) for a in unflat(res.x)]
 
 
 def _layer_offsets(problem: _Problem, physics: Physics, p32, layer: int, e: float, draws_per_shot: int = 8):
@@ -306,7 +309,7 @@ def _layer_offsets(problem: _Problem, physics: Physics, p32, layer: int, e: floa
         (dW,) = ds
         return 0.5 * jnp.sum((target - pred(dW)) ** 2) * inv_v + 0.5 * inv_e2 * jnp.sum(dW ** 2)
 
-    (dW,), _ = _lbfgs(loss, [W.shape])
+    (dW,) = _lbfgs(loss, [W.shape])
     return dW
 
 
@@ -327,8 +330,7 @@ def _joint_offsets(problem: _Problem, physics: Physics, p32, e: float):
         chi2 = sum(jnp.sum((tg - jnp.mean(out.taps[l - 1], axis=1)) ** 2) * iv for tg, iv, l in zip(targets, inv_v, ids))
         return 0.5 * chi2 + 0.5 * inv_e2 * sum(jnp.sum(dW ** 2) for dW in ds)
 
-    ds, _ = _lbfgs(loss, [W.shape for W, _ in p32])
-    return ds
+    return _lbfgs(loss, [W.shape for W, _ in p32])
 
 
 def _fit_weight_offsets(problem: _Problem, physics: Physics, params):

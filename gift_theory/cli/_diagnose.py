@@ -62,6 +62,8 @@ def render(out) -> str:
         ps = ", ".join(f"{k}={v:.4g}" for k, v in r["params"].items())
         name = " + ".join(r.get("with", []) + [r["effect"]])
         lines.append(f"  {i:2d}. {name:<28s} {r['discrepancy_after']:10.4g}  p = {r['p_value_after']:<9.3g} {ps}")
+    if any("net_discrepancy_after" in r for r in out["ranking"]):
+        lines.append("  (fitted weight offsets: p against the refit null, i.e. net of the offsets' estimation error)")
     if out.get("where"):
         lines.append("one-step check per layer (layer fed the measured layer before):")
         for w in out["where"]:

@@ -41,6 +41,9 @@ def render(out) -> str:
              f"held-out discrepancy: before {out['discrepancy_before']:.4g} (p = {out['p_value_before']:.3g}) -> "
              f"after {out['discrepancy_after']:.4g} +- {out['se_after']:.2g} (p = {out['p_value_after']:.3g}); "
              f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}"]
+    if "net_discrepancy_after" in out:
+        lines.append(f"fitted weight offsets: p against the refit null ({out['refit_null_replicates']} replicates); "
+                     f"discrepancy net of their estimation error {out['net_discrepancy_after']:.4g}")
     lines.append("error ladder:")
     for r in out["ladder"]:
         lines.append(f"  {r['model']:<40s} {r['discrepancy']:10.4g} +- {r['se']:.2g}  p = {r['p_value']:.3g}")

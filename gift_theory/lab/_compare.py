@@ -106,6 +106,11 @@ class Comparison:
     cells : (n, L') per input and layer, the mean of the channel values in floor units
     channel_z : (L', C) z of every channel (rows: layers, columns: :data:`CHANNELS` used)
     channels : the names of the columns of channel_z
+    net_discrepancy : for a model with fitted offsets scored against a refit null
+        (``compare(..., null_replicates=...)``): Q net of what the offsets' estimation error
+        alone adds, the statistic of ``p_value``; ``discrepancy`` stays the raw held-out Q
+        (what ranking by held-out error needs: estimation error is part of a model's cost)
+    replicates : number of refit-null replicates behind ``p_value`` (0: none needed)
     """
 
     discrepancy: float
@@ -119,9 +124,13 @@ class Comparison:
     cells: np.ndarray
     channel_z: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
     channels: tuple = ()
+    net_discrepancy: float | None = None
+    replicates: int = 0
 
     def as_dict(self) -> dict:
-        return {"discrepancy": self.discrepancy, "se": self.se, "noise_floor": self.noise_floor,
+        extra = {} if not self.replicates else {"net_discrepancy": self.net_discrepancy,
+                                                 "refit_null_replicates": self.replicates}
+        return {**extra, "discrepancy": self.discrepancy, "se": self.se, "noise_floor": self.noise_floor,
                 "floor_se": self.floor_se, "p_value": self.p_value,
                 "per_layer": {f"layer{l}": float(v) for l, v in zip(self.layer_ids, self.per_layer)},
                 "channel_z": {f"layer{l}": {c: float(z) for c, z in zip(self.channels, row)}
@@ -367,28 +376,53 @@ def floor_moment_channels(Y, split):
 NULL_DRAWS = 20_000
 
 
-def _z_scores(T):
+def _z_scores(T, shift=None, extra_var=None):
     """Per column of T (n, C): the one-sided Student t, on the normal scale. Columns with
-    no spread carry no information (z = 0)."""
+    no spread carry no information (z = 0). ``shift`` (C,) is subtracted from the column
+    means and ``extra_var`` (C,) added to their squared standard errors (a null whose mean
+    is not zero: see :func:`q_test`)."""
     n = T.shape[0]
-    mean = T.mean(axis=0)
+    mean = T.mean(axis=0) - (0.0 if shift is None else shift)
     sd = T.std(axis=0, ddof=1)
     ok = sd > 1e-12 * (np.abs(mean) + 1e-300)
-    t = np.where(ok, mean / np.where(ok, sd, 1.0) * np.sqrt(n), 0.0)
+    se = np.sqrt(np.where(ok, sd, 1.0) ** 2 / n + (0.0 if extra_var is None else extra_var))
+    t = np.where(ok, mean / se, 0.0)
     with np.errstate(over="ignore", under="ignore", divide="ignore"):
         z = stats.norm.isf(stats.t.sf(t, df=n - 1))
     z = np.where(np.isfinite(z), z, t)  # far in the tails the t and normal scales agree to the reported digits
     return z, ok
 
 
-def q_test(T):
+def replicate_null(T_reps):
+    """``(shift, extra_var)`` of :func:`q_test` from B replicate channel matrices (B, n, C)
+    simulated under the null *with* the model's estimation: data from the fitted model as
+    truth, parameters refitted on simulated fitting data, channels on simulated held-out
+    data. ``shift`` is the replicates' mean channel value (what estimation error alone
+    adds); ``extra_var`` is the part of the variance of a channel's mean that inputs do not
+    average away (an estimation error is shared by every held-out input), over and above
+    the within-inputs standard error, inflated by 1 + 1/B for the estimated shift."""
+    T_reps = np.asarray(T_reps, np.float64)
+    B, n = T_reps.shape[:2]
+    means = T_reps.mean(axis=1)  # (B, C)
+    shift = means.mean(axis=0)
+    within = np.mean(T_reps.var(axis=1, ddof=1), axis=0) / n
+    between = means.var(axis=0, ddof=1) if B > 1 else np.zeros_like(shift)
+    extra = np.maximum(between - within, 0.0) * (1.0 + 1.0 / B) + within / B
+    return shift, extra
+
+
+def q_test(T, shift=None, extra_var=None):
     """The discrepancy test on per-input channel values T (n, C).
+
+    ``shift`` and ``extra_var`` (C,) describe a null under which the channel means are not
+    zero (a model with many fitted parameters scored on held-out inputs: its estimation
+    error raises the mean-sensitive channels; :func:`replicate_null`).
 
     Returns
     -------
     Q, p_value, null_mean, null_sd, z (C,)
     """
-    z, ok = _z_scores(T)
+    z, ok = _z_scores(T, shift, extra_var)
     Q = float(np.sum(np.maximum(z, 0.0) ** 2))
     Tk = T[:, ok]
     if Tk.shape[1] == 0 or T.shape[0] < 3:
@@ -470,8 +504,22 @@ def noise_floor(key, meas: Measurement, splits: int = 2):
     return ref.noise_floor, ref.floor_se
 
 
+def channel_values(key, model: Model, meas: Measurement, ref: Reference, shots: int | None = None) -> np.ndarray:
+    """The channels of every cell, (n, L', C): input x measured layer x channel of ``ref``."""
+    if shots is not None and int(shots) < meas.r:
+        raise GiftInputError(f"compare: --shots {shots} model shots per input; at least the measured {meas.r} needed")
+    Ms = model_shots(key, model, meas, shots)
+    rng = np.random.default_rng(np.asarray(jax.random.key_data(jax.random.fold_in(key, 7))).ravel())
+    C = np.zeros((meas.n, len(Ms), len(ref.channels)))
+    for li, (M, Y, sc) in enumerate(zip(Ms, meas.layers(), ref.scales)):
+        C[:, li, :2] = cell_statistic(M, jnp.asarray(Y, jnp.float32), scales=sc)
+        if len(ref.channels) > 2:
+            C[:, li, 2:] = moment_channels(M, Y, ref.split, rng)
+    return C
+
+
 def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, ref: Reference | None = None,
-            floor_splits: int = 2) -> Comparison:
+            floor_splits: int = 2, null_replicates=None) -> Comparison:
     """Score ``model`` against ``meas`` (see the module docstring for the statistic).
 
     Parameters
@@ -481,6 +529,9 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     meas : Measurement (use held-out inputs for a fitted model)
     shots : model shots per input (default: 4 r; at least r)
     ref : the measurement's :class:`Reference` if already computed (same for every model)
+    null_replicates : (B, n, L', C) channel values simulated under the null with the model's
+        estimation error (:func:`gift_theory.lab.offset_replicates`); the test then allows
+        for it (:func:`replicate_null`). Default: a model with no estimation error to speak of.
 
     Returns
     -------
@@ -489,21 +540,20 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     k_model, k_floor = jax.random.split(key)
     if ref is None:
         ref = reference(k_floor, meas, floor_splits)
-    if shots is not None and int(shots) < meas.r:
-        raise GiftInputError(f"compare: --shots {shots} model shots per input; at least the measured {meas.r} needed")
-    Ms = model_shots(k_model, model, meas, shots)
-    rng = np.random.default_rng(np.asarray(jax.random.key_data(jax.random.fold_in(k_model, 7))).ravel())
-    C = np.zeros((meas.n, len(Ms), len(ref.channels)))
-    for li, (M, Y, sc) in enumerate(zip(Ms, meas.layers(), ref.scales)):
-        C[:, li, :2] = cell_statistic(M, jnp.asarray(Y, jnp.float32), scales=sc)
-        if len(ref.channels) > 2:
-            C[:, li, 2:] = moment_channels(M, Y, ref.split, rng)
+    C = channel_values(k_model, model, meas, ref, shots)
+    L = C.shape[1]
     Q, p, _, null_sd, z = q_test(C.reshape(meas.n, -1))
-    zl = z.reshape(len(Ms), len(ref.channels))
+    net, B = None, 0
+    if null_replicates is not None:
+        reps = np.asarray(null_replicates)
+        B = reps.shape[0]
+        shift, extra = replicate_null(reps.reshape(B, meas.n, -1))
+        net, p, _, _, _ = q_test(C.reshape(meas.n, -1), shift, extra)
+    zl = z.reshape(L, len(ref.channels))
     T, cells = _combine(C, ref.weights)
     return Comparison(discrepancy=Q, se=null_sd, noise_floor=ref.noise_floor, floor_se=ref.floor_se, p_value=p,
                       per_input=T, per_layer=np.sum(np.maximum(zl, 0.0) ** 2, axis=1), layer_ids=meas.layer_ids(),
-                      cells=cells, channel_z=zl, channels=ref.channels)
+                      cells=cells, channel_z=zl, channels=ref.channels, net_discrepancy=net, replicates=B)
 
 
 def one_step_shots(key, model: Model, meas: Measurement, layer: int):

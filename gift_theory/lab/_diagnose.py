@@ -8,6 +8,12 @@ standard deviation of the discrepancy under the model: an extra parameter must b
 standard deviations of held-out discrepancy, so a one-parameter effect that explains the
 data beats a many-parameter one that also does (CONTRACTS §4).
 ``missing_effect_detected`` is the baseline's goodness-of-fit test, ``p_value < 0.01``.
+
+A model with fitted weight offsets has hundreds of parameters; their estimation error is
+part of its held-out discrepancy (so ranking charges it for them), but its p-value is taken
+against a refit null (:func:`gift_theory.lab._fit.offset_replicates`: B = 8 replicates of
+simulate-refit-score), so that a correct offset model passes. The replicates are made once
+per call, for the first candidate with offsets, and reused by the others that have them.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import numpy as np
 
 from .._errors import GiftInputError
 from ._compare import Comparison, Model, compare, one_step_check, reference
-from ._fit import CANDIDATES, N_PARAMS, fit_model, split_inputs
+from ._fit import CANDIDATES, N_PARAMS, fit_model, offset_replicates, split_inputs
 from ._measurement import Measurement
 
 #: the significance level of the goodness-of-fit test (CONTRACTS §4)
@@ -45,6 +51,9 @@ class Candidate:
                 "se": self.comparison.se, "score": self.score}
         if len(self.effects) > 1:
             out["with"] = list(self.effects[:-1])
+        if self.comparison.replicates:
+            out["net_discrepancy_after"] = self.comparison.net_discrepancy
+            out["refit_null_replicates"] = self.comparison.replicates
         return out
 
 
@@ -98,6 +107,23 @@ def _improves(pair: Candidate, first: Candidate) -> bool:
     return pair.score < first.score and pair.comparison.p_value >= ALPHA
 
 
+class _Scorer:
+    """Held-out scoring shared by every candidate of one call (refit null made once)."""
+
+    def __init__(self, key, fit_meas, test_meas, ref, shots):
+        self.key, self.fit_meas, self.test_meas, self.ref, self.shots = key, fit_meas, test_meas, ref, shots
+        self.replicates = None
+
+    def __call__(self, model: Model) -> Comparison:
+        reps = None
+        if model.params is not None and "weight_error" in model.extra:
+            if self.replicates is None:
+                self.replicates = offset_replicates(jax.random.fold_in(self.key, 4321), model, self.fit_meas,
+                                                    self.test_meas, self.ref, shots=self.shots)
+            reps = self.replicates
+        return compare(self.key, model, self.test_meas, shots=self.shots, ref=self.ref, null_replicates=reps)
+
+
 def _merge_second_stage(first: Candidate, stage2: list, singles: list) -> list:
     """The ranking after the greedy second step: the best pair that improves on the first
     effect (:func:`_improves`), the first effect itself right after it (the path that led
@@ -136,8 +162,9 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     train, test = split_inputs(k_split, meas.n)
     mtr, mte = meas.subset(train), meas.subset(test)
     ref = reference(k_ref, mte)
+    score_of = _Scorer(k_cmp, mtr, mte, ref, shots)
     base = fit_model(k_fit, mtr, (), K=shots)
-    base_cmp = compare(k_cmp, base, mte, shots=shots, ref=ref)
+    base_cmp = score_of(base)
     _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
          f"(floor {ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
     if candidates is None:
@@ -149,7 +176,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         t1 = time.time()
         effects = tuple(name.split("+"))
         model = fit_model(k_fit, mtr, effects, start=base, K=shots)
-        cmp = compare(k_cmp, model, mte, shots=shots, ref=ref)
+        cmp = score_of(model)
         score = penalised_score(cmp, sum(N_PARAMS.get(e, 1) for e in effects), base_cmp)
         ranking.append(Candidate(effects, model, cmp, score, time.time() - t1))
         _log(f"  + {name:<15s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g} "
@@ -167,7 +194,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
             t1 = time.time()
             effects = first.effects + (name,)
             model = fit_model(k_fit, mtr, (name,), start=first.model, K=shots)
-            cmp = compare(k_cmp, model, mte, shots=shots, ref=ref)
+            cmp = score_of(model)
             score = penalised_score(cmp, sum(N_PARAMS.get(e, 1) for e in effects), base_cmp)
             stage2.append(Candidate(effects, model, cmp, score, time.time() - t1))
             _log(f"  + {'+'.join(effects):<30s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} "
@@ -194,8 +221,11 @@ class FitResult:
                 "discrepancy_before": b.discrepancy, "discrepancy_after": a.discrepancy,
                 "noise_floor": a.noise_floor, "p_value_after": a.p_value,
                 "p_value_before": b.p_value, "se_before": b.se, "se_after": a.se, "floor_se": a.floor_se,
-                "ladder": [{"model": lab, "discrepancy": c.discrepancy, "se": c.se, "p_value": c.p_value}
-                           for lab, c in self.ladder]}
+                "ladder": [{"model": lab, "discrepancy": c.discrepancy, "se": c.se, "p_value": c.p_value,
+                            **({"net_discrepancy": c.net_discrepancy} if c.replicates else {})}
+                           for lab, c in self.ladder],
+                **({"net_discrepancy_after": a.net_discrepancy, "refit_null_replicates": a.replicates}
+                   if a.replicates else {})}
 
 
 def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, verbose: bool = False) -> FitResult:
@@ -216,15 +246,16 @@ def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, ve
     train, test = split_inputs(k_split, meas.n)
     mtr, mte = meas.subset(train), meas.subset(test)
     ref = reference(k_ref, mte)
+    score_of = _Scorer(k_cmp, mtr, mte, ref, shots)
     base = fit_model(k_fit, mtr, (), K=shots)
-    base_cmp = compare(k_cmp, base, mte, shots=shots, ref=ref)
+    base_cmp = score_of(base)
     ladder = [("awgn", base_cmp)]
     _log(f"awgn: {base.describe()} discrepancy {base_cmp.discrepancy:.3g} (floor {ref.noise_floor:.3g})", verbose)
     model, cmp, added = base, base_cmp, []
     for e in effects:
         added.append(e)
         model = fit_model(k_fit, mtr, (e,), start=model, K=shots)
-        cmp = compare(k_cmp, model, mte, shots=shots, ref=ref)
+        cmp = score_of(model)
         ladder.append(("awgn + " + " + ".join(added), cmp))
         _log(f"+{e}: {model.describe()} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g}", verbose)
     return FitResult(base, model, base_cmp, cmp, tuple(ladder))

@@ -25,6 +25,7 @@ no obstacle). Two effects need more than moments:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import jax
@@ -253,11 +254,11 @@ def _grid_theta(name, physics, meas):
     return np.log(values) if kind == "log" else values
 
 
-def _lbfgs(loss, shapes, iters: int = 300):
-    """Minimise ``loss(list of arrays)`` (jitted, float32) over arrays of ``shapes`` by L-BFGS,
-    from zero; returns the minimising arrays (float64)."""
+def _lbfgs(value_and_grad, shapes, iters: int = 300, start=None):
+    """Minimise a function of a list of arrays of ``shapes`` by L-BFGS, given
+    ``value_and_grad(list of float32 arrays) -> (value, list of gradients)``, from ``start``
+    (default zero); returns the minimising arrays (float64)."""
     sizes = [int(np.prod(sh)) for sh in shapes]
-    vg = jax.jit(jax.value_and_grad(loss))
 
     def unflat(v):
         out, i = [], 0
@@ -267,14 +268,36 @@ def _lbfgs(loss, shapes, iters: int = 300):
         return out
 
     def f(v):
-        val, g = vg(unflat(v))
+        val, g = value_and_grad(unflat(v))
         return float(val), np.concatenate([np.asarray(gi, np.float64).ravel() for gi in g])
 
-    res = optimize.minimize(f, np.zeros(sum(sizes)), jac=True, method="L-BFGS-B", options={"maxiter": iters})
+    v0 = np.zeros(sum(sizes)) if start is None else np.concatenate([np.ravel(a) for a in start]).astype(np.float64)
+    res = optimize.minimize(f, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters})
     return [np.asarray(a, np.float64) for a in unflat(res.x)]
 
 
-def _layer_offsets(problem: _Problem, physics: Physics, p32, layer: int, e: float, draws_per_shot: int = 8):
+# module-level jitted losses: compiled once per shape and physics structure, not per call
+@functools.partial(jax.jit, static_argnames=("arch", "layer", "axis"))
+def _layer_vg(ds, W, b, a, noise, physics, t, target, inv_v, inv_e2, arch, layer, axis):
+    def loss(ds):
+        (dW,) = ds
+        pred = jnp.mean(layer_step(W + dW, b, a, noise, physics, arch, layer, t=t)[0], axis=axis)
+        return 0.5 * jnp.sum((target - pred) ** 2) * inv_v + 0.5 * inv_e2 * jnp.sum(dW ** 2)
+    return jax.value_and_grad(loss)(ds)
+
+
+@functools.partial(jax.jit, static_argnames=("arch", "ids"))
+def _joint_vg(ds, p32, x, noise, physics, t, targets, inv_v, inv_e2, arch, ids):
+    def loss(ds):
+        ps = tuple(Layer(W + dW, b) for (W, b), dW in zip(p32, ds))
+        out = forward(ps, x[:, None, :], noise, physics, arch, t=t, taps=True)
+        chi2 = sum(jnp.sum((tg - jnp.mean(out.taps[l - 1], axis=1)) ** 2) * iv for tg, iv, l in zip(targets, inv_v, ids))
+        return 0.5 * chi2 + 0.5 * inv_e2 * sum(jnp.sum(dW ** 2) for dW in ds)
+    return jax.value_and_grad(loss)(ds)
+
+
+def _layer_offsets(problem: _Problem, physics: Physics, p32, layer: int, e: float, draws_per_shot: int = 8,
+                   start=None):
     """E_hat of one layer from the measured layer before (taps): the layer's output shot by
     shot against the model's mean response to the *measured* input of that shot (layer 1:
     mean over shots against the mean response to x)."""
@@ -289,48 +312,38 @@ def _layer_offsets(problem: _Problem, physics: Physics, p32, layer: int, e: floa
         t = None if problem.t is None else problem.t[:, :K]
         target = jnp.asarray(np.mean(meas.layers()[0], axis=1), jnp.float32)  # (n, d1)
         resid_var = float(np.mean(np.var(meas.layers()[0], axis=1))) / r
-
-        def pred(dW):
-            return jnp.mean(layer_step(W + dW, b, a, noise, physics, arch, 1, t=t)[0], axis=1)
+        axis = 1
     else:
         noise = sample_noise(key, arch, physics, (n, r, draws_per_shot), jnp.float32)
         a = jnp.asarray(meas.taps[layer - 2], jnp.float32)[:, :, None, :]
         t = None if problem.t is None else problem.t[:, :r, None] * jnp.ones((1, 1, draws_per_shot))
         target = jnp.asarray(meas.layers()[layer - 1], jnp.float32)  # (n, r, d_l)
         resid_var = float(np.mean(np.var(meas.layers()[layer - 1], axis=1)))
+        axis = 2
+    inv_e2 = jnp.float32(1.0 / max(e, 1e-6) ** 2)
+    inv_v = jnp.float32(1.0 / max(resid_var, 1e-12))
 
-        def pred(dW):
-            return jnp.mean(layer_step(W + dW, b, a, noise, physics, arch, layer, t=t)[0], axis=2)
+    def vg(ds):
+        return _layer_vg(ds, W, b, a, noise, physics, t, target, inv_v, inv_e2, arch, layer, axis)
 
-    inv_e2 = 1.0 / max(e, 1e-6) ** 2
-    inv_v = 1.0 / max(resid_var, 1e-12)
-
-    def loss(ds):
-        (dW,) = ds
-        return 0.5 * jnp.sum((target - pred(dW)) ** 2) * inv_v + 0.5 * inv_e2 * jnp.sum(dW ** 2)
-
-    (dW,) = _lbfgs(loss, [W.shape])
+    (dW,) = _lbfgs(vg, [W.shape], start=None if start is None else [start])
     return dW
 
 
-def _joint_offsets(problem: _Problem, physics: Physics, p32, e: float):
+def _joint_offsets(problem: _Problem, physics: Physics, p32, e: float, start=None):
     """E_hat of every layer at once from the measured means (no taps: the outputs only)."""
     meas, arch = problem.meas, problem.arch
     K = max(meas.r, 32)
     noise = sample_noise(jax.random.fold_in(problem.key, 17), arch, physics, (meas.n, K), jnp.float32)
     t = None if problem.t is None else problem.t[:, :K]
-    targets = [jnp.asarray(np.mean(Y, axis=1), jnp.float32) for Y in meas.layers()]
-    inv_v = [1.0 / max(float(np.mean(np.var(Y, axis=1))) / meas.r, 1e-12) for Y in meas.layers()]
-    ids = meas.layer_ids()
-    inv_e2 = 1.0 / max(e, 1e-6) ** 2
+    targets = tuple(jnp.asarray(np.mean(Y, axis=1), jnp.float32) for Y in meas.layers())
+    inv_v = tuple(jnp.float32(1.0 / max(float(np.mean(np.var(Y, axis=1))) / meas.r, 1e-12)) for Y in meas.layers())
+    inv_e2 = jnp.float32(1.0 / max(e, 1e-6) ** 2)
 
-    def loss(ds):
-        ps = tuple(Layer(W + dW, b) for (W, b), dW in zip(p32, ds))
-        out = forward(ps, problem.x[:, None, :], noise, physics, arch, t=t, taps=True)
-        chi2 = sum(jnp.sum((tg - jnp.mean(out.taps[l - 1], axis=1)) ** 2) * iv for tg, iv, l in zip(targets, inv_v, ids))
-        return 0.5 * chi2 + 0.5 * inv_e2 * sum(jnp.sum(dW ** 2) for dW in ds)
+    def vg(ds):
+        return _joint_vg(ds, p32, problem.x, noise, physics, t, targets, inv_v, inv_e2, arch, tuple(meas.layer_ids()))
 
-    return _lbfgs(loss, [W.shape for W, _ in p32])
+    return _lbfgs(vg, [W.shape for W, _ in p32], start=start)
 
 
 def _fit_weight_offsets(problem: _Problem, physics: Physics, params):
@@ -350,6 +363,67 @@ def _fit_weight_offsets(problem: _Problem, physics: Physics, params):
         e = max(float(np.sqrt(np.mean(np.concatenate([np.ravel(d) ** 2 for d in deltas])))), 1e-4 * rms_w)
     new = tuple(Layer(np.asarray(W, np.float64) + d, np.asarray(b, np.float64)) for (W, b), d in zip(params, deltas))
     return new, e
+
+
+def _resimulate(key, model: Model, meas: Measurement) -> Measurement:
+    """``meas`` with its shots (and taps) replaced by shots of ``model`` taken as the truth:
+    same inputs, shots per input, times and programmed weights."""
+    from .._model import simulate
+
+    params = model.params if model.params is not None else meas.params
+    p32 = tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+    t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
+    out = simulate(key, p32, jnp.asarray(meas.x, jnp.float32), model.physics, meas.arch, shots=meas.r, t=t,
+                   taps=True)
+    taps = tuple(np.asarray(a, np.float64) for a in out.taps[:-1]) if meas.has_taps else None
+    return dataclasses.replace(meas, y=np.asarray(out.y, np.float64), taps=taps)
+
+
+#: replicates of the refit null of a model with fitted offsets (see :func:`offset_replicates`)
+OFFSET_REPLICATES = 8
+
+
+def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measurement, ref, *,
+                      shots: int | None = None, B: int = OFFSET_REPLICATES, K: int | None = None) -> np.ndarray:
+    """Channel values of a model with fitted weight offsets under the null *with* its
+    estimation error, for :func:`compare`'s ``null_replicates``: B times, data are simulated
+    from the fitted model as the truth on the fitting inputs, the offsets refitted (the same
+    estimator, with the model's prior scale e, from the fitted values), and the refitted
+    model scored on data simulated on the held-out inputs.
+
+    A few hundred offsets fitted on a few thousand noisy means leave an estimation error
+    that held-out data see (about one squared standard error per offset); without this a
+    correct weight_error model fails its own held-out test whenever weights are many for
+    the inputs (docs/lab.md).
+
+    Returns
+    -------
+    (B, n_test, L', C) array
+    """
+    from ._compare import channel_values
+
+    if model.params is None or "weight_error" not in model.extra:
+        raise ValueError("offset_replicates: the model has no fitted offsets")
+    e = float(model.extra["weight_error"])
+    truth_params = model.params
+    E_hat = [np.asarray(W1, np.float64) - np.asarray(W0, np.float64)
+             for (W1, _), (W0, _) in zip(truth_params, fit_meas.params)]
+    out = []
+    for b in range(B):
+        kb = jax.random.fold_in(key, b)
+        k_tr, k_te, k_fit, k_cmp = jax.random.split(kb, 4)
+        sim_tr = _resimulate(k_tr, model, fit_meas)
+        problem = _Problem(k_fit, sim_tr, K)
+        p32 = problem.params32(fit_meas.params)
+        if sim_tr.has_taps:
+            deltas = [_layer_offsets(problem, model.physics, p32, l, e, start=E_hat[l - 1])
+                      for l in range(1, problem.arch.depth + 1)]
+        else:
+            deltas = _joint_offsets(problem, model.physics, p32, e, start=E_hat)
+        refit = Model(model.physics, tuple(Layer(np.asarray(W, np.float64) + d, np.asarray(bb, np.float64))
+                                           for (W, bb), d in zip(fit_meas.params, deltas)), model.extra)
+        out.append(channel_values(k_cmp, refit, _resimulate(k_te, model, test_meas), ref, shots))
+    return np.stack(out)
 
 
 def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None, K: int | None = None) -> Model:

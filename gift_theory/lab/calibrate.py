@@ -1,13 +1,16 @@
 """Statistical calibration of the measurement loop (a script, not a test: it takes minutes).
 
-    python -m gift_theory.lab.calibrate null  [--sets 120] [--taps|--no-taps] [--fitted]
+    python -m gift_theory.lab.calibrate null  [--sets 120] [--taps|--no-taps] [--fitted [--effect NAME]]
     python -m gift_theory.lab.calibrate ident [--seeds 3] [--taps|--no-taps] [--effects a,b]
     python -m gift_theory.lab.calibrate time  [--taps]
 
 ``null``: data sets simulated from the awgn model itself; the share of p < 0.01 (and
 < 0.05) is the false-alarm rate of the goodness-of-fit test. With ``--fitted`` the model's
 s is fitted on half the inputs and the p-value taken on the other half, exactly as
-``gift diagnose`` does (the realistic case); without, the true model is scored.
+``gift diagnose`` does (the realistic case); without, the true model is scored. With
+``--fitted --effect NAME`` the data have the hidden effect NAME and the model fits it too
+(the p-value after ``fit --add NAME`` when NAME is the right answer; weight_error: with its
+refit null).
 
 ``ident``: for every effect of CONTRACTS §2 (and a two-effect case and the null), data
 with that hidden effect on a random network per seed; records whether ``diagnose`` flags a
@@ -65,28 +68,33 @@ def _physics(spec, s, seed):
     return gt.Physics.create(s=s, **spec)
 
 
-def null_study(sets, widths, n, r, s, taps, fitted, out):
+def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
     import gift_theory as gt
-    from gift_theory.lab import Model, compare, fit_model, simulate_measurement, split_inputs
+    from gift_theory.lab import Model, compare, fit_model, reference, simulate_measurement, split_inputs
+    from gift_theory.lab._diagnose import _Scorer
 
     ps = []
     t0 = time.time()
     for i in range(sets):
         arch, params = _network(1000 + i, widths)
         x = np.asarray(jax.random.uniform(jax.random.PRNGKey(2000 + i), (n, widths[0])))
-        phys = gt.Physics.create(s=s)
-        meas = simulate_measurement(jax.random.PRNGKey(3000 + i), params, x, phys, shots=r, taps=taps, times=False)
+        phys = gt.Physics.create(s=s) if effect is None else _physics(HIDDEN[effect], s, 5000 + i)
+        meas = simulate_measurement(jax.random.PRNGKey(3000 + i), params, x, phys, shots=r, taps=taps,
+                                    times=effect == "drift")
         key = jax.random.PRNGKey(4000 + i)
-        if fitted:
-            k_split, k_fit, k_cmp, _, _ = jax.random.split(key, 5)
+        if fitted:  # exactly as diagnose scores a candidate
+            k_split, k_fit, k_cmp, k_ref, _ = jax.random.split(key, 5)
             train, test = split_inputs(k_split, n)
-            model = fit_model(k_fit, meas.subset(train))
-            c = compare(k_cmp, model, meas.subset(test))
+            mtr, mte = meas.subset(train), meas.subset(test)
+            model = fit_model(k_fit, mtr)
+            if effect is not None:
+                model = fit_model(k_fit, mtr, tuple(HIDDEN[effect]), start=model)
+            c = _Scorer(k_cmp, mtr, mte, reference(k_ref, mte), None)(model)
         else:
             c = compare(key, Model(phys), meas)
         ps.append(c.p_value)
         row = {"study": "null", "set": i, "p_value": c.p_value, "discrepancy": c.discrepancy, "se": c.se,
-               "noise_floor": c.noise_floor, "taps": taps, "fitted": fitted}
+               "noise_floor": c.noise_floor, "taps": taps, "fitted": fitted, "effect": effect}
         out.write(json.dumps(row) + "\n")
         out.flush()
         if (i + 1) % 10 == 0:
@@ -94,7 +102,7 @@ def null_study(sets, widths, n, r, s, taps, fitted, out):
                              f"({time.time() - t0:.0f} s)\n")
     ps = np.array(ps)
     from scipy import stats
-    return {"study": "null", "summary": True, "sets": sets, "taps": taps, "fitted": fitted,
+    return {"study": "null", "summary": True, "sets": sets, "taps": taps, "fitted": fitted, "effect": effect,
             "arch": list(widths), "inputs": n, "shots": r, "s": s,
             "false_alarm_rate_0.01": float(np.mean(ps < 0.01)), "false_alarm_rate_0.05": float(np.mean(ps < 0.05)),
             "ks_uniform_p": float(stats.kstest(ps, "uniform").pvalue), "seconds": time.time() - t0}
@@ -170,11 +178,15 @@ def main(argv=None):
     p.add_argument("--shots", type=int, default=48)
     p.add_argument("--s", type=float, default=0.1)
     p.add_argument("--effects", default=",".join(HIDDEN))
+    p.add_argument("--effect", default=None, choices=[k for k in HIDDEN if "+" not in k and k != "none"],
+                   help="null: the data have this hidden effect and the model fits it (with --fitted)")
     a = p.parse_args(argv)
     widths = tuple(int(w) for w in a.arch.split("-"))
     out = sys.stdout
     if a.study == "null":
-        res = null_study(a.sets, widths, a.inputs, a.shots, a.s, a.taps, a.fitted, out)
+        if a.effect is not None and not a.fitted:
+            p.error("--effect needs --fitted (the model fits the effect's parameters)")
+        res = null_study(a.sets, widths, a.inputs, a.shots, a.s, a.taps, a.fitted, out, a.effect)
     elif a.study == "ident":
         res = ident_study(a.seeds, widths, a.inputs, a.shots, a.s, a.taps, a.effects.split(","), out)
     else:

@@ -6,6 +6,7 @@
 """
 
 import os
+import shutil
 import tempfile
 
 import jax
@@ -17,9 +18,22 @@ settings.register_profile("gift", deadline=None, max_examples=25,
 settings.load_profile("gift")
 
 
+_MADE = []
+
+
 def pytest_configure(config):
-    os.environ.setdefault("GIFT_CACHE_DIR", tempfile.mkdtemp(prefix="gift-test-cache-"))
+    if "GIFT_CACHE_DIR" not in os.environ:
+        _MADE.append(tempfile.mkdtemp(prefix="gift-test-cache-"))
+        os.environ["GIFT_CACHE_DIR"] = _MADE[-1]
     os.environ.setdefault("MPLBACKEND", "agg")
+
+
+def pytest_unconfigure(config):
+    """Remove the temporary weight cache this process made (each xdist worker makes its own)."""
+    for folder in _MADE:
+        shutil.rmtree(folder, ignore_errors=True)
+        if os.environ.get("GIFT_CACHE_DIR") == folder:
+            del os.environ["GIFT_CACHE_DIR"]
 
 
 @pytest.fixture

@@ -20,7 +20,8 @@ no obstacle). Two effects need more than moments:
   model's mean response to the measured output of the layer before (layer 1: means over
   shots against the mean response to x); without taps all layers at once from the output
   means. The fitted model uses ``W + E_hat`` and reports ``e``. Held-out inputs judge
-  whether the offsets generalise.
+  whether the offsets generalise; its p-value is taken against a refit null that allows
+  for their estimation error (:func:`offset_replicates`).
 """
 
 from __future__ import annotations

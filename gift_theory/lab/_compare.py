@@ -214,10 +214,15 @@ def layer_scales(Y):
     return float(np.mean(np.asarray(wy, np.float64))), np.asarray(wy1, np.float64).mean(0)
 
 
+def _shot_permutations(key, n: int, r: int):
+    """(n, r): a random permutation of the r shots of each of n inputs."""
+    return jax.vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n))
+
+
 def _halves(key, Y):
     """Random halves (per cell) of the measured shots: two (n, r//2, d) arrays."""
     n, r, _ = Y.shape
-    perm = jax.vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n))
+    perm = _shot_permutations(key, n, r)
     Yp = jnp.take_along_axis(Y, perm[:, :, None], axis=1)
     h = r // 2
     return Yp[:, :h], Yp[:, h:2 * h]
@@ -257,6 +262,11 @@ def layer_outputs(params, x, noise, physics, arch, t):
     return forward(params, x[:, None, :], noise, physics, arch, t=t, taps=True).taps
 
 
+def params32(params):
+    """Weights as float32 :class:`Layer` s (what every jitted pass of the lab takes)."""
+    return tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+
+
 def default_model_shots(r: int) -> int:
     """Model shots per input when not told: 4 r (the model's own sampling noise in the
     statistic then is a quarter of the data's, so candidates differ by physics, not luck)."""
@@ -275,8 +285,7 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     measured layer (taps then output). ``K = shots`` (default 4 r); times are the measured
     ones, tiled when K exceeds r."""
     K = default_model_shots(meas.r) if shots is None else int(shots)
-    params = model.params if model.params is not None else meas.params
-    params = tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+    params = params32(model.params if model.params is not None else meas.params)
     # in chunks of 2 r shots: the shape the fit compiled for, so no second compilation
     chunk = 2 * meas.r if K % (2 * meas.r) == 0 else K
     x = jnp.asarray(meas.x, jnp.float32)
@@ -301,9 +310,13 @@ def _student_p(T):
 
 #: every channel of a cell, in order (the moment channels need r >= 8 shots)
 CHANNELS = ("energy", "energy_marginal", "variance", "correlation", "shape")
-MOMENT_CHANNELS = CHANNELS[2:]
 #: fewest shots per input for the moment channels (their noise floor splits shots in quarters)
 MIN_SHOTS_MOMENTS = 8
+
+
+def _variance_floor(Y):
+    """A variance floor of a measured layer Y (n, r, d) for the features (a data constant)."""
+    return 1e-3 * float(np.mean(np.var(Y, axis=1)) + 1e-30)
 
 
 def _features(S, eps):
@@ -353,7 +366,7 @@ def moment_channels(M, Y, split, rng):
     K = M.shape[1]
     if K < 2 * h:
         raise GiftInputError(f"compare: {K} model shots per input; the moment channels need at least {2 * h}")
-    eps = 1e-3 * float(np.mean(np.var(Y, axis=1)) + 1e-30)
+    eps = _variance_floor(Y)
     reps = K // (2 * h)
     perm = rng.permuted(np.tile(np.arange(K), (n, 1)), axis=1)
     MA = [_take(M, perm[:, 2 * q * h:(2 * q + 1) * h]) for q in range(reps)]
@@ -365,7 +378,7 @@ def floor_moment_channels(Y, split):
     """The moment channels between the halves of the measured shots (quarters of r/4 shots)."""
     Y = np.asarray(Y, np.float64)
     q = Y.shape[1] // 4
-    eps = 1e-3 * float(np.mean(np.var(Y, axis=1)) + 1e-30)
+    eps = _variance_floor(Y)
     A1, A2, B1, B2 = (_take(Y, split[:, i * q:(i + 1) * q]) for i in range(4))
     return _product_channels(B1, B2, [A1], [A2], eps)
 
@@ -481,7 +494,7 @@ def reference(key, meas: Measurement, splits: int = 2) -> Reference:
     layers = meas.layers()
     scales = tuple(layer_scales(Y) for Y in layers)
     k_split, k_floor = jax.random.split(key)
-    split = np.asarray(jax.vmap(lambda k: jax.random.permutation(k, meas.r))(jax.random.split(k_split, meas.n)))
+    split = np.asarray(_shot_permutations(k_split, meas.n, meas.r))
     moments = meas.r >= MIN_SHOTS_MOMENTS
     channels = CHANNELS if moments else CHANNELS[:2]
     F = np.zeros((meas.n, len(layers), len(channels)))

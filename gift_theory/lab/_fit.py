@@ -38,7 +38,7 @@ from .._errors import GiftInputError
 from .._model import forward, layer_step, sample_noise
 from .._params import Layer
 from ..effects import REGISTRY, Physics, make_effect
-from ._compare import Model, draws, layer_outputs
+from ._compare import Model, draws, layer_outputs, params32
 from ._measurement import Measurement
 
 #: candidate effects a diagnosis can add (awgn is the baseline)
@@ -180,14 +180,11 @@ class _Problem:
         # forward returns every layer; only measured ones enter the loss
         self.dat_full = tuple(self.dat[ids.index(l)] if l in ids else None for l in range(1, self.arch.depth + 1))
 
-    def params32(self, params):
-        return tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
-
     def loss(self, physics, params, free):
         """``theta -> moment loss`` for the free parameters (common random numbers)."""
         noise = draws(self.key, physics, self.arch, (self.meas.n, self.K))
         dat = self.dat_full
-        p32 = self.params32(params)
+        p32 = params32(params)
         r, K, t = self.meas.r, self.K, self.t
 
         def f(theta):
@@ -352,18 +349,27 @@ def _fit_weight_offsets(problem: _Problem, physics: Physics, params):
     from the taps when the file has them (each layer's output regressed, shot by shot, on the
     measured output of the layer before), else jointly from the output means; ridge prior
     N(0, e^2) with e re-estimated once from the first pass."""
-    meas = problem.meas
-    p32 = problem.params32(params)
+    p32 = params32(params)
     rms_w = float(np.sqrt(np.mean(np.concatenate([np.ravel(W) ** 2 for W, _ in params]))))
     e = 0.2 * rms_w
     for _ in range(2):
-        if meas.has_taps:
-            deltas = [_layer_offsets(problem, physics, p32, l, e) for l in range(1, problem.arch.depth + 1)]
-        else:
-            deltas = _joint_offsets(problem, physics, p32, e)
+        deltas = _offsets(problem, physics, p32, e)
         e = max(float(np.sqrt(np.mean(np.concatenate([np.ravel(d) ** 2 for d in deltas])))), 1e-4 * rms_w)
-    new = tuple(Layer(np.asarray(W, np.float64) + d, np.asarray(b, np.float64)) for (W, b), d in zip(params, deltas))
-    return new, e
+    return _with_offsets(params, deltas), e
+
+
+def _offsets(problem: _Problem, physics: Physics, p32, e: float, start=None):
+    """Offsets of every layer: per layer from the taps when the file has them, else jointly
+    from the output means (``start``: one array per layer to start L-BFGS from)."""
+    if problem.meas.has_taps:
+        return [_layer_offsets(problem, physics, p32, l, e, start=None if start is None else start[l - 1])
+                for l in range(1, problem.arch.depth + 1)]
+    return _joint_offsets(problem, physics, p32, e, start=start)
+
+
+def _with_offsets(params, deltas):
+    """``W + delta`` per layer, float64."""
+    return tuple(Layer(np.asarray(W, np.float64) + d, np.asarray(b, np.float64)) for (W, b), d in zip(params, deltas))
 
 
 def _resimulate(key, model: Model, meas: Measurement) -> Measurement:
@@ -371,8 +377,7 @@ def _resimulate(key, model: Model, meas: Measurement) -> Measurement:
     same inputs, shots per input, times and programmed weights."""
     from .._model import simulate
 
-    params = model.params if model.params is not None else meas.params
-    p32 = tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+    p32 = params32(model.params if model.params is not None else meas.params)
     t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
     out = simulate(key, p32, jnp.asarray(meas.x, jnp.float32), model.physics, meas.arch, shots=meas.r, t=t,
                    taps=True)
@@ -406,23 +411,15 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
     if model.params is None or "weight_error" not in model.extra:
         raise ValueError("offset_replicates: the model has no fitted offsets")
     e = float(model.extra["weight_error"])
-    truth_params = model.params
     E_hat = [np.asarray(W1, np.float64) - np.asarray(W0, np.float64)
-             for (W1, _), (W0, _) in zip(truth_params, fit_meas.params)]
+             for (W1, _), (W0, _) in zip(model.params, fit_meas.params)]
     out = []
     for b in range(B):
         kb = jax.random.fold_in(key, b)
         k_tr, k_te, k_fit, k_cmp = jax.random.split(kb, 4)
         sim_tr = _resimulate(k_tr, model, fit_meas)
-        problem = _Problem(k_fit, sim_tr, K)
-        p32 = problem.params32(fit_meas.params)
-        if sim_tr.has_taps:
-            deltas = [_layer_offsets(problem, model.physics, p32, l, e, start=E_hat[l - 1])
-                      for l in range(1, problem.arch.depth + 1)]
-        else:
-            deltas = _joint_offsets(problem, model.physics, p32, e, start=E_hat)
-        refit = Model(model.physics, tuple(Layer(np.asarray(W, np.float64) + d, np.asarray(bb, np.float64))
-                                           for (W, bb), d in zip(fit_meas.params, deltas)), model.extra)
+        deltas = _offsets(_Problem(k_fit, sim_tr, K), model.physics, params32(fit_meas.params), e, start=E_hat)
+        refit = Model(model.physics, _with_offsets(fit_meas.params, deltas), model.extra)
         out.append(channel_values(k_cmp, refit, _resimulate(k_te, model, test_meas), ref, shots))
     return np.stack(out)
 

@@ -151,7 +151,9 @@ def gift_never_worse(key=None, precise: bool = False) -> dict:
     lo, hi = _clopper_pearson(worse, R, 0.95)
     lo_strict, _ = _clopper_pearson(worse, R, 1 - 1e-5)
     corrected_v = "holds" if hi <= 2 * delta else ("fails" if lo_strict > delta else "inconclusive")
-    verdict = "fails" if worse_v == "holds" else ("holds" if worse_v == "fails" else "inconclusive")
+    # "never worse" is universal: one significantly worse run refutes it; a run that is not
+    # worse (even a significantly better one) cannot confirm it
+    verdict = "fails" if worse_v == "holds" else "inconclusive"
     correction = None
     if corrected_v == "holds":
         correction = (f"keep w0 among the candidates and let a candidate replace w0 only if a one-sided paired test "

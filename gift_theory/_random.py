@@ -17,7 +17,8 @@ ones. Laws (all exactly symmetric about 0, never infinite):
 
 * ``uniform``: ``(m + 1/2) 2^-22 - 1`` on (-1, 1), m the top 23 bits (float32) or
   ``(m + 1/2) 2^-51 - 1`` with m the top 52 bits of one cipher call (float64);
-* ``normal``: ``sqrt(2) erfinv(uniform)`` (the transform ``jax.random.normal`` uses);
+* ``normal``: ``sqrt(2) erfinv(uniform)`` (the transform ``jax.random.normal`` uses; in
+  float32 Giles' erfinv written out in fused array operations);
 * ``laplace``: unit variance, ``-sign(v) log(1 - |v|) / sqrt(2)`` for v uniform on (-1, 1);
 * ``uniform_law``: unit variance, ``sqrt(3) v``.
 
@@ -99,10 +100,53 @@ def uniform(key, shape, dtype=jnp.float32) -> jax.Array:
     return u.astype(dtype)
 
 
+# Giles (2010), "Approximating the erfinv function", single precision: erfinv(u) = u p(w) with
+# w = -log(1 - u^2) and p a degree-8 polynomial in w - 2.5 (w < 5) or sqrt(w) - 3 (w >= 5);
+# the coefficients XLA's own float32 erfinv uses, highest degree first.
+_ERFINV_CENTRAL = (2.81022636e-08, 3.43273939e-07, -3.5233877e-06, -4.39150654e-06, 0.00021858087,
+                   -0.00125372503, -0.00417768164, 0.246640727, 1.50140941)
+_ERFINV_TAIL = (-0.000200214257, 0.000100950558, 0.00134934322, -0.00367342844, 0.00573950773,
+                -0.0076224613, 0.00943887047, 1.00167406, 2.83297682)
+
+
+def _estrin8(c, t):
+    """c[0] t^8 + ... + c[8] by Estrin's scheme: depth 4 instead of Horner's 8 dependent steps
+    (XLA's CPU loops run one vector at a time, so a polynomial's latency, not its operation
+    count, sets the pace)."""
+    t2 = t * t
+    t4 = t2 * t2
+    lo = (c[8] + c[7] * t) + (c[6] + c[5] * t) * t2
+    hi = (c[4] + c[3] * t) + (c[2] + c[1] * t) * t2
+    return lo + hi * t4 + c[0] * (t4 * t4)
+
+
+def _normal32(words):
+    """uint32 words -> float32 standard normals sqrt(2) erfinv(u), u = (m + 1/2) 2^-22 - 1.
+
+    With a = 1 + u = (2m + 1) 2^-23 (exact in float32), 1 - u^2 = a (2 - a) is a product of
+    two exact factors, so w needs one rounding and one log instead of log1p(-u^2)."""
+    a = ((words >> jnp.uint32(9)).astype(jnp.float32) + 0.5) * np.float32(2.0 ** -22)
+    w = -jnp.log(a * (2.0 - a))
+    central = w < 5.0
+    t = jnp.where(central, w - 2.5, jnp.sqrt(w) - 3.0)
+    c = [jnp.where(central, np.float32(p), np.float32(q)) for p, q in zip(_ERFINV_CENTRAL, _ERFINV_TAIL)]
+    return (np.float32(np.sqrt(2.0)) * (a - 1.0)) * _estrin8(c, t)
+
+
 def normal(key, shape, dtype=jnp.float32) -> jax.Array:
-    """Standard normal draws (inverse-CDF of :func:`uniform`)."""
-    u = uniform(key, shape, dtype)
-    return (np.sqrt(2.0) * jax.scipy.special.erfinv(u)).astype(dtype)
+    """Standard normal draws: the inverse CDF sqrt(2) erfinv(u) of :func:`uniform`'s u.
+
+    float32 (and narrower): Giles' single-precision erfinv written out in fused array operations
+    (faster than ``jax.scipy.special.erfinv`` on CPU, and more accurate: at most 6 float32 ulps
+    from the exact inverse CDF at every one of the 2^23 points of the uniform grid, where
+    ``log1p(-u^2)`` costs XLA's erfinv up to 91 ulps in the tails);
+    float64: ``jax.scipy.special.erfinv`` of the float64 uniform."""
+    dtype = jnp.dtype(dtype)
+    if dtype == jnp.float64:
+        return np.sqrt(2.0) * jax.scipy.special.erfinv(uniform(key, shape, dtype))
+    if dtype not in (jnp.float32, jnp.float16, jnp.bfloat16):
+        raise ValueError(f"normal: unsupported dtype {dtype}")
+    return _normal32(bits(key, shape)).astype(dtype)
 
 
 def laplace(key, shape, dtype=jnp.float32) -> jax.Array:

@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 
 from .._arch import Architecture
+from .. import _xla
 from .._errors import GiftInputError, require
 from .._model import forward, sample_noise, squared_error
 from ..effects import Physics
@@ -117,8 +118,8 @@ def _block_quantity(what, method, theta, arch, params, physics, x, y, w, noise, 
         Q, D = _score_stats(noise, arch, physics)
         if method == "score_paper":
             # printed eq. sample_D0_Wi: (s0^-2 N^T N - d) R A^T with R A^T = -1/2 grad (y-M)^2
-            g = grad(params, physics, cw=base * (Q - D))
-            return jax.tree_util.tree_map(lambda a: -0.5 * a, g)
+            # (the -1/2 goes into the per-sample weights, not over the per-group gradients)
+            return grad(params, physics, cw=base * (Q - D) * -0.5)
         # derived: d/ds log phi_s(N) = (Q - D) / s
         return grad(params, physics, cw=base * _centre(Q - D) / s)
     if what == "d2":
@@ -143,11 +144,13 @@ def _block_quantity(what, method, theta, arch, params, physics, x, y, w, noise, 
 @partial(jax.jit, static_argnames=("arch", "shape", "dtype"))
 def _draws(key, physics, *, arch, shape, dtype):
     # compiled apart from the kernels: every method shares one compiled sampler, and the draws
-    # are written once (fused into the kernel, XLA recomputes them in every consumer)
+    # are written once (fused into the kernel, XLA recomputes them in every consumer; behind an
+    # optimization barrier in the kernel's program, it splits the sampler into many
+    # materialised pieces: measured slower)
     return sample_noise(key, arch, physics, shape, dtype)
 
 
-@partial(jax.jit, static_argnames=("what", "method", "theta", "arch"))
+@partial(_xla.jit, static_argnames=("what", "method", "theta", "arch"))
 def _kernel(xb, yb, wb, noise, params, physics, h, v, *, what, method, theta, arch):
     # one vmapped pass over the block's groups: the forward products of all groups are one
     # matmul, the per-group weight gradients one batched matmul (measured on 2 cores: as fast

@@ -141,7 +141,7 @@ def _block_quantity(what, method, theta, arch, params, physics, x, y, w, noise, 
     raise ValueError(what)
 
 
-@partial(jax.jit, static_argnames=("arch", "shape", "dtype"))
+@partial(_xla.jit, static_argnames=("arch", "shape", "dtype"))
 def _draws(key, physics, *, arch, shape, dtype):
     # compiled apart from the kernels: every method shares one compiled sampler, and the draws
     # are written once (fused into the kernel, XLA recomputes them in every consumer; behind an

@@ -85,7 +85,8 @@ def hierarchical_mean(block_fn: Callable, key, x, y, *, K2: int, groups: int = 1
             call += 1
             acc = out if acc is None else _add(acc, out)
         sums.append(acc)
-    return summarise(_groups(tuple(sums), plan.G), plan.n_g, keep_samples)
+    one = len(sums) == 1 and plan.Gpad == plan.G  # one block holding every group: nothing to stack
+    return summarise(sums[0] if one else _groups(tuple(sums), plan.G), plan.n_g, keep_samples)
 
 
 # the bookkeeping compiled: op by op, jnp's fancy indexing with a numpy index and a

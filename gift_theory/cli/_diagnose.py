@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 
+from ._fit import NO_TAPS_CAVEAT
 from ._labargs import add_common, figure_dir, key, load
 
 
@@ -35,6 +36,8 @@ def run(args):
     k = key(args)
     res = diagnose(k, meas, candidates=cands, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
+    if any("net_discrepancy_after" in r for r in out["ranking"]):
+        out["refit_null_calibrated"] = bool(meas.taps)
     sig = signatures(k, res.baseline, meas)
     out["signatures"] = sig
     folder = figure_dir(args)
@@ -64,6 +67,8 @@ def render(out) -> str:
         lines.append(f"  {i:2d}. {name:<28s} {r['discrepancy_after']:10.4g}  p = {r['p_value_after']:<9.3g} {ps}")
     if any("net_discrepancy_after" in r for r in out["ranking"]):
         lines.append("  (fitted weight offsets: p against the refit null, i.e. net of the offsets' estimation error)")
+        if not out.get("refit_null_calibrated", True):
+            lines.append(NO_TAPS_CAVEAT)
     if out.get("where"):
         lines.append("one-step check per layer (layer fed the measured layer before):")
         for w in out["where"]:

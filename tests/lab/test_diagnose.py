@@ -142,3 +142,17 @@ def test_signatures_point_at_the_effect():
     meas = _chip(HIDDEN["common_mode"], seed=6)
     base = fit_effects(jax.random.PRNGKey(14), meas, []).before
     assert signatures(jax.random.PRNGKey(14), base, meas)["common_mode"]["z"] > 3
+
+
+@pytest.mark.parametrize("taps", [True, False])
+def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, taps):
+    """The refit null is calibrated with taps only (docs/lab.md section 6): a fitted-offset
+    model on a file without taps says so, in the JSON and in the text."""
+    meas = _chip(HIDDEN["weight_error"], seed=5, n=60, r=16, taps=taps)
+    path = tmp_path / "we.npz"
+    save_measurement(path, meas)
+    assert main(["fit", str(path), "--add", "weight_error", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["refit_null_replicates"] > 0 and out["refit_null_calibrated"] is taps
+    assert main(["fit", str(path), "--add", "weight_error", "--quiet"]) == 0
+    assert ("no taps" in capsys.readouterr().out) is (not taps)

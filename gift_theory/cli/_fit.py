@@ -6,9 +6,9 @@ from __future__ import annotations
 from ._labargs import add_common, figure_dir, key, load
 
 # measured (docs/lab.md section 6): without taps the offsets of all but the smallest nets are
-# not identified, and the refit null then rejects a correct weight_error model far too often
+# not identified, and the refit null then rejects a correct weight_error model too often
 NO_TAPS_CAVEAT = ("  caution: this file has no taps; without them the refit null rejects a correct weight_error "
-                  "model too often\n  (39 of 100 at p < 0.01 on 8-16-8-4, docs/lab.md section 6): a small p here "
+                  "model too often\n  (8 of 100 at p < 0.01 on 8-16-8-4, docs/lab.md section 6): a small p here "
                   "does not rule weight_error out")
 
 

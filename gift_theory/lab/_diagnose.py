@@ -13,8 +13,9 @@ A model with fitted weight offsets has hundreds of parameters; their estimation 
 part of its held-out discrepancy (so ranking charges it for them), but its p-value is taken
 against a refit null (:func:`gift_theory.lab._fit.offset_replicates`: B = 8 replicates of
 simulate-refit-score), so that a correct offset model passes (measured with taps: 1/100
-false alarms at 0.01; without taps most offsets are unidentified and the refit null is
-not calibrated: 39/100, docs/lab.md section 6). The replicates are made once
+false alarms at 0.01; without taps most offsets are unidentified, the replicates' truths
+are drawn from the offsets' posterior, and the refit null is closer but still
+anti-conservative: 8/100, docs/lab.md section 6). The replicates are made once
 per call, for the first candidate with offsets, and reused by the others that have them.
 """
 

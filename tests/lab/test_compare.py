@@ -183,3 +183,27 @@ def test_null_false_alarms_cheap(setup):
         ps.append(compare(jax.random.PRNGKey(200 + i), Model(phys), meas).p_value)
     assert sum(p < 0.01 for p in ps) <= 2
     assert 0.05 < np.mean(ps) < 0.95
+
+
+def test_empirical_bayes_scale_of_unidentified_offsets():
+    """_marginal_e2 (the prior scale of weight offsets behind the no-taps refit null): on a
+    Jacobian with more offsets than means and a spread spectrum, the marginal-likelihood e
+    is nearly unbiased over devices and scatters no more than the moment equation
+    |rho|^2 = e^2 tr + n sigma^2. 300 simulated devices; tolerances from the observed spread
+    (4 standard errors)."""
+    from gift_theory.lab._fit import _marginal_e2
+
+    rng = np.random.default_rng(0)
+    n, P, e, sigma2 = 120, 300, 0.15, 1.5
+    d = 40.0 * np.geomspace(1.0, 1e-2, n)  # singular values of the whitened Jacobian
+    U, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    Vt, _ = np.linalg.qr(rng.standard_normal((P, n)))
+    Jw = (U * d) @ Vt.T
+    ml, mom = [], []
+    for _ in range(300):
+        rho = Jw @ (e * rng.standard_normal(P)) + np.sqrt(sigma2) * rng.standard_normal(n)
+        ml.append(np.log(np.sqrt(_marginal_e2(Jw, rho, sigma2))))
+        mom.append(np.log(np.sqrt(max(rho @ rho - n * sigma2, 1e-12) / np.sum(d ** 2))))
+    ml, mom = np.array(ml), np.array(mom)
+    assert abs(ml.mean() - np.log(e)) < 4 * ml.std() / np.sqrt(ml.size) + 0.02
+    assert ml.std() <= mom.std()

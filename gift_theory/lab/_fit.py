@@ -38,7 +38,7 @@ from .._errors import GiftInputError
 from .._model import forward, layer_step, sample_noise
 from .._params import Layer
 from ..effects import REGISTRY, Physics, make_effect
-from ._compare import Model, draws, layer_outputs, params32
+from ._compare import Model, _times, draws, layer_outputs, params32
 from ._measurement import Measurement
 
 #: candidate effects a diagnosis can add (awgn is the baseline)
@@ -476,7 +476,7 @@ def _posterior_spread(key, model: Model, meas: Measurement, e_fit: float, K: int
     arch, r = meas.arch, meas.r
     p_hat, p_0 = params32(model.params), params32(meas.params)
     noise = sample_noise(key, arch, model.physics, (meas.n, K), jnp.float32)
-    t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)[:, :K]
+    t = _times(meas, K)  # tiled when K exceeds the shots per input
     x = jnp.asarray(meas.x, jnp.float32)
     Y = meas.layers()[-1]
     target = np.mean(Y, axis=1).ravel()

@@ -75,11 +75,22 @@ def test_repaired_search_finds_and_confirms_a_real_improvement():
 
 
 def test_repaired_search_keeps_w0_at_the_optimum():
-    problem, u = _setup(0.0, sigma=0.05, seed=np.random.randint(1000))
-    w, info = paired_line_search(problem, u, C2=2.0, se_pair=0.05 ** 2 * 2 / np.sqrt(problem.K1))
-    # every candidate is truly worse: accepting one needs a > 6 sigma fluctuation
-    assert not info["accepted"]
-    assert problem.chip.true_loss(w) == problem.chip.true_loss(problem.w0)
+    """At w* = w0 every candidate is worse, but one a hair from w0 is worse by a^2 only, so
+    the confirmation accepts it at up to its level alpha = P(Z > 2.5) = 0.62 % overall -- its
+    looks after every fresh pair must not add up to more (at a fixed z per look they made it
+    1.1 %). 200 fixed devices: the number of acceptances against Binomial(200, alpha) at
+    1e-4, and any accepted point worse by a negligible amount only."""
+    from scipy import stats
+
+    accepted = 0
+    for seed in range(200):
+        problem, u = _setup(0.0, sigma=0.05, seed=seed)
+        se = 0.05 ** 2 * 2 / np.sqrt(problem.K1)
+        w, info = paired_line_search(problem, u, C2=2.0, se_pair=se)
+        worse = problem.chip.true_loss(w) - problem.chip.true_loss(problem.w0)
+        accepted += info["accepted"]
+        assert worse == 0.0 if not info["accepted"] else 0.0 <= worse < 0.1 * se
+    assert stats.binom.sf(accepted - 1, 200, stats.norm.sf(2.5)) > 1e-4, accepted
 
 
 def test_fit_quadratic_recovers_the_coefficients():

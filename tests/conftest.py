@@ -3,13 +3,19 @@
 * ``x64``: a fixture that runs a test in float64 (tests about mathematics use it).
 * The weight cache goes to a temporary folder so tests never touch the user's cache.
 * hypothesis: a profile with a deadline that tolerates JAX compilation.
+* numpy's global generator (tests that draw a fresh seed with ``np.random.randint`` each run)
+  is seeded per test from one run seed, ``GIFT_TEST_SEED`` (random unless set), printed in the
+  header and under a failing test: ``GIFT_TEST_SEED=N python -m pytest ...`` replays a run.
 """
 
 import os
+import random
 import shutil
 import tempfile
+import zlib
 
 import jax
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, settings
 
@@ -22,6 +28,8 @@ _MADE = []
 
 
 def pytest_configure(config):
+    # set once by the controller; xdist workers inherit it
+    os.environ.setdefault("GIFT_TEST_SEED", str(random.SystemRandom().randrange(2 ** 31)))
     if "GIFT_CACHE_DIR" not in os.environ:
         _MADE.append(tempfile.mkdtemp(prefix="gift-test-cache-"))
         os.environ["GIFT_CACHE_DIR"] = _MADE[-1]
@@ -34,6 +42,19 @@ def pytest_unconfigure(config):
         shutil.rmtree(folder, ignore_errors=True)
         if os.environ.get("GIFT_CACHE_DIR") == folder:
             del os.environ["GIFT_CACHE_DIR"]
+
+
+def pytest_report_header(config):
+    return f"GIFT_TEST_SEED={os.environ['GIFT_TEST_SEED']} (set it to replay this run's random seeds)"
+
+
+@pytest.fixture(autouse=True)
+def _seeded_numpy(request):
+    """numpy's global generator from the run seed and the test's id (order-independent)."""
+    seed = int(os.environ["GIFT_TEST_SEED"])
+    np.random.seed((seed + zlib.crc32(request.node.nodeid.encode())) % 2 ** 32)
+    request.node.add_report_section("call", "seed", f"GIFT_TEST_SEED={seed}")
+    yield
 
 
 @pytest.fixture

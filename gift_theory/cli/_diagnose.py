@@ -37,7 +37,7 @@ def run(args):
     res = diagnose(k, meas, candidates=cands, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
     if any("net_discrepancy_after" in r for r in out["ranking"]):
-        out["refit_null_calibrated"] = bool(meas.taps)
+        out["refit_null_calibrated"] = meas.has_taps
     sig = signatures(k, res.baseline, meas)
     out["signatures"] = sig
     folder = figure_dir(args)

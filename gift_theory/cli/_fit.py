@@ -34,7 +34,7 @@ def run(args):
     res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
     if "net_discrepancy_after" in out:
-        out["refit_null_calibrated"] = bool(meas.taps)
+        out["refit_null_calibrated"] = meas.has_taps
     folder = figure_dir(args)
     if folder:
         rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in res.ladder]

@@ -256,20 +256,14 @@ def _lbfgs(value_and_grad, shapes, iters: int = 300, start=None):
     """Minimise a function of a list of arrays of ``shapes`` by L-BFGS, given
     ``value_and_grad(list of float32 arrays) -> (value, list of gradients)``, from ``start``
     (default zero); returns the minimising arrays (float64)."""
-    sizes = [int(np.prod(sh)) for sh in shapes]
-
     def unflat(v):
-        out, i = [], 0
-        for sh, k in zip(shapes, sizes):
-            out.append(jnp.asarray(v[i:i + k].reshape(sh), jnp.float32))
-            i += k
-        return out
+        return [jnp.asarray(a, jnp.float32) for a in _unflat(v, shapes)]
 
     def f(v):
         val, g = value_and_grad(unflat(v))
         return float(val), np.concatenate([np.asarray(gi, np.float64).ravel() for gi in g])
 
-    v0 = np.zeros(sum(sizes)) if start is None else np.concatenate([np.ravel(a) for a in start]).astype(np.float64)
+    v0 = np.zeros(sum(int(np.prod(sh)) for sh in shapes)) if start is None else np.concatenate([np.ravel(a) for a in start]).astype(np.float64)
     res = optimize.minimize(f, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters})
     return [np.asarray(a, np.float64) for a in unflat(res.x)]
 
@@ -424,7 +418,8 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
         truth = model
         if spread is not None:
             z = spread @ np.asarray(jax.random.normal(jax.random.fold_in(kb, 5), (spread.shape[1],)), np.float64)
-            truth = Model(model.physics, _with_offsets(model.params, _unflat(z, E_hat)), model.extra)
+            truth = Model(model.physics, _with_offsets(model.params, _unflat(z, [a.shape for a in E_hat])),
+                          model.extra)
         sim_tr = _resimulate(k_tr, truth, fit_meas)
         deltas = _offsets(_Problem(k_fit, sim_tr, K), model.physics, params32(fit_meas.params), e, start=E_hat)
         refit = Model(model.physics, _with_offsets(fit_meas.params, deltas), model.extra)
@@ -432,25 +427,23 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
     return np.stack(out)
 
 
-def _unflat(v, like):
+def _unflat(v, shapes):
+    """A flat vector (numpy or traced) cut into arrays of ``shapes``, in order."""
     out, i = [], 0
-    for a in like:
-        out.append(np.reshape(v[i:i + a.size], a.shape))
-        i += a.size
+    for sh in shapes:
+        k = int(np.prod(sh))
+        out.append(v[i:i + k].reshape(sh))
+        i += k
     return out
 
 
-def _marginal_e2(Jw, rho, sigma2: float) -> float:
-    """Empirical-Bayes e^2: the maximiser of the Gaussian marginal likelihood of the whitened
-    residual ``rho ~ N(0, e^2 Jw Jw^T + sigma2 I)``. In the left singular basis of Jw
-    (singular values d_k) the coordinates c_k have variances e^2 d_k^2 + sigma2, so every
-    direction weighs in by its own precision (the plain moment equation
-    |rho|^2 = e^2 tr(Jw^T Jw) + n sigma2 is ruled by the largest d_k: on a 6-10-4 file
-    without taps, true e = 0.15, it gives 0.08 where this gives 0.13)."""
-    U, d, _ = np.linalg.svd(Jw, full_matrices=False)
-    c2 = (U.T @ rho) ** 2
-    d2 = d ** 2
-
+def _marginal_e2(d2, c2, sigma2: float) -> float:
+    """Empirical-Bayes e^2: the maximiser of the Gaussian marginal likelihood of a whitened
+    residual ``rho ~ N(0, e^2 Jw Jw^T + sigma2 I)``, given the squared singular values ``d2``
+    of Jw and the squared coordinates ``c2`` of rho in its left singular basis: they have
+    variances e^2 d_k^2 + sigma2, so every direction weighs in by its own precision (the
+    plain moment equation |rho|^2 = e^2 tr(Jw^T Jw) + n sigma2 is ruled by the largest d_k:
+    on a 6-10-4 file without taps, true e = 0.15, it gives 0.08 where this gives 0.13)."""
     def nll(log_e2):
         v = np.exp(log_e2) * d2 + sigma2
         return 0.5 * float(np.sum(np.log(v) + c2 / v))
@@ -466,7 +459,7 @@ def _marginal_e2(Jw, rho, sigma2: float) -> float:
 def _posterior_spread(key, model: Model, meas: Measurement, e_fit: float, K: int = 32, chunk: int = 64):
     """A square root S of the offsets' posterior covariance from the output means (no taps),
     linearised at the fit: with J the Jacobian of the model's mean outputs in the offsets and
-    V the inverse variance of the measured means, ``S S^T = (J^T V J + I / e^2)^-1``.
+    v the inverse variance of a measured mean, ``S S^T = (v J^T J + I / e^2)^-1``.
 
     e is the empirical-Bayes scale (:func:`_marginal_e2` on r0, the residual of the programmed
     weights' mean outputs; the model's K-draw mean adds r/K to the measured means' variance),
@@ -480,7 +473,7 @@ def _posterior_spread(key, model: Model, meas: Measurement, e_fit: float, K: int
     x = jnp.asarray(meas.x, jnp.float32)
     Y = meas.layers()[-1]
     target = np.mean(Y, axis=1).ravel()
-    V = np.full(target.size, r / max(float(np.mean(np.var(Y, axis=1))), 1e-12))  # as the fit weighs the means
+    v = r / max(float(np.mean(np.var(Y, axis=1))), 1e-12)  # inverse variance of a mean, as the fit weighs them
     shapes = [W.shape for W, _ in p_hat]
     P = sum(int(np.prod(sh)) for sh in shapes)
     cols = []
@@ -491,9 +484,12 @@ def _posterior_spread(key, model: Model, meas: Measurement, e_fit: float, K: int
                                                 tuple(shapes)), np.float64))
     J = np.concatenate(cols, axis=0).T  # (n d_L, P)
     r0 = target - np.asarray(_mean_output(p_0, x, noise, model.physics, t, arch), np.float64).ravel()
-    e2 = max(_marginal_e2(np.sqrt(V)[:, None] * J, np.sqrt(V) * r0, 1.0 + r / K), e_fit ** 2)
-    lam, U = np.linalg.eigh(J.T @ (V[:, None] * J) + np.eye(P) / e2)
-    return U * (1.0 / np.sqrt(np.maximum(lam, 1e-300)))[None, :]
+    U, d, _ = np.linalg.svd(np.sqrt(v) * J, full_matrices=False)
+    e2 = max(_marginal_e2(d ** 2, (U.T @ (np.sqrt(v) * r0)) ** 2, 1.0 + r / K), e_fit ** 2)
+    # the eigenbasis of the precision (not the SVD's right basis, which would draw the
+    # replicates' truths differently from the calibrated runs of docs/lab.md)
+    lam, W = np.linalg.eigh(v * (J.T @ J) + np.eye(P) / e2)
+    return W * (1.0 / np.sqrt(np.maximum(lam, 1e-300)))[None, :]
 
 
 def _mean_out(p32, x, noise, physics, t, arch):
@@ -508,12 +504,7 @@ def _mean_output_jvp(p32, x, noise, physics, t, basis, arch, shapes):
     """Directional derivatives of the mean outputs (n, d_L), flattened, along each row of
     ``basis`` (offsets of every weight matrix, flattened in layer order)."""
     def f(flat):
-        ds, i = [], 0
-        for sh in shapes:
-            k = sh[0] * sh[1]
-            ds.append(flat[i:i + k].reshape(sh))
-            i += k
-        ps = tuple(Layer(W + d, b) for (W, b), d in zip(p32, ds))
+        ps = tuple(Layer(W + d, b) for (W, b), d in zip(p32, _unflat(flat, shapes)))
         return _mean_out(ps, x, noise, physics, t, arch).ravel()
 
     zero = jnp.zeros(basis.shape[1], jnp.float32)

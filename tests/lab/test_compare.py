@@ -202,7 +202,7 @@ def test_empirical_bayes_scale_of_unidentified_offsets():
     ml, mom = [], []
     for _ in range(300):
         rho = Jw @ (e * rng.standard_normal(P)) + np.sqrt(sigma2) * rng.standard_normal(n)
-        ml.append(np.log(np.sqrt(_marginal_e2(Jw, rho, sigma2))))
+        ml.append(np.log(np.sqrt(_marginal_e2(d ** 2, (U.T @ rho) ** 2, sigma2))))
         mom.append(np.log(np.sqrt(max(rho @ rho - n * sigma2, 1e-12) / np.sum(d ** 2))))
     ml, mom = np.array(ml), np.array(mom)
     assert abs(ml.mean() - np.log(e)) < 4 * ml.std() / np.sqrt(ml.size) + 0.02

@@ -33,6 +33,7 @@ import numpy as np
 from scipy import stats
 
 from .._objective import per_input_loss
+from .._phases import phase
 from ._tree import axpy, norm, unit, vdot
 
 
@@ -129,8 +130,10 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     """
     u, u_norm = unit(direction)
     w0 = problem.w0
-    C2_model = curvature_model(problem, u) if C2 is None else float(C2)
-    se_pair = pair_se_model(problem) if se_pair is None else float(se_pair)
+    with phase("curvature"):
+        C2_model = curvature_model(problem, u) if C2 is None else float(C2)
+    with phase("pair_se"):
+        se_pair = pair_se_model(problem) if se_pair is None else float(se_pair)
     a = math.sqrt(2 * probe_z * se_pair / C2_model) if C2_model > 0 else 0.01 * float(norm(w0))
     info = {"C2_model": C2_model, "se_pair_model": se_pair, "probe": a, "accepted": False}
     if problem.evaluations_left() < 3 - 1e-9:

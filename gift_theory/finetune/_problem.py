@@ -16,6 +16,7 @@ import numpy as np
 from .._arch import Architecture
 from .._objective import accuracy, objective, per_input_loss
 from .._params import cast
+from .._phases import phase
 from ..chips import SimulatedChip, chip_eval
 from ..effects import Physics, awgn
 
@@ -55,7 +56,8 @@ class Problem(NamedTuple):
 
     def eval_chip(self, params) -> np.ndarray:
         """Per-input losses of one Eval_w(K1, K2) on the chip (charged: one unit)."""
-        return chip_eval(self.chip, params, self.x_ft, self.y_ft, self.K2)
+        with phase("chip"):
+            return chip_eval(self.chip, params, self.x_ft, self.y_ft, self.K2)
 
     def evaluations_left(self) -> float:
         return self.chip.ledger.remaining() / self.unit_shots

@@ -12,6 +12,7 @@ import numpy as np
 from .._arch import Architecture
 from .._errors import GiftInputError, require
 from .._params import cast
+from .._phases import phase
 from ..effects import Physics
 from ._directions import direction
 from ._linesearch import gift_printed, paired_line_search
@@ -27,7 +28,8 @@ METHODS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "sps
 
 def _line(kind):
     def run(problem, **kw):
-        u, dinfo = direction(problem, kind, K2=kw.pop("direction_K2", 16))
+        with phase("direction"):
+            u, dinfo = direction(problem, kind, K2=kw.pop("direction_K2", 16))
         w, info = paired_line_search(problem, u, **kw)
         info["direction"] = dict(dinfo, kind=kind)
         info["_u"] = u  # the direction itself, for curves and figures (not part of the JSON)
@@ -106,18 +108,21 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
                 budget: float = 20, K1=None, K2: int = 1, referee_K2: int = 32, chip=None, **options) -> dict:
     """Run ``method`` on a prepared setting; the CONTRACTS §4 finetune keys plus ``info``."""
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
-    problem = make_problem(arch, w0, ds.x_train, ds.y_train, s0=s0, true_physics=physics, budget=budget, K1=K1,
-                           K2=K2, seed=seed, chip=chip)
+    with phase("problem"):
+        problem = make_problem(arch, w0, ds.x_train, ds.y_train, s0=s0, true_physics=physics, budget=budget, K1=K1,
+                               K2=K2, seed=seed, chip=chip)
     t0 = time.perf_counter()
-    params, info = RUNNERS[method](problem, **options)
-    params = jax.block_until_ready(cast(params, jnp.float32))
+    with phase("method"):
+        params, info = RUNNERS[method](problem, **options)
+        params = jax.block_until_ready(cast(params, jnp.float32))
     seconds = time.perf_counter() - t0
     out = {"method": method, "s0": float(s0), "st": float(physics.s), "in_situ_evaluations": problem.evaluations_used(),
            "seconds": seconds}
     for split, x, y, lab in (("", ds.x_train, ds.y_train, ds.labels_train),
                              ("test_", ds.x_test, ds.y_test, ds.labels_test)):
-        before = referee(w0, x, y, lab, physics, arch, K2=referee_K2)
-        after = referee(params, x, y, lab, physics, arch, K2=referee_K2)
+        with phase("referee"):
+            before = referee(w0, x, y, lab, physics, arch, K2=referee_K2)
+            after = referee(params, x, y, lab, physics, arch, K2=referee_K2)
         out[f"{split}loss_before"], out[f"{split}loss_after"] = before["loss"], after["loss"]
         out[f"{split}accuracy_before"], out[f"{split}accuracy_after"] = before["accuracy"], after["accuracy"]
     out["direction"] = info.pop("_u", None)
@@ -148,7 +153,8 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
     """
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
     physics = true_physics(st, true_effects)  # bad input is reported before any training
-    ds, arch_, w0 = load_setting(dataset, arch, s0, seed, weights=weights)
+    with phase("setting"):
+        ds, arch_, w0 = load_setting(dataset, arch, s0, seed, weights=weights)
     out = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=method, seed=seed, **options)
     out.pop("params")
     out.pop("direction")

@@ -22,6 +22,7 @@ from .._arch import Architecture
 from .._errors import GiftInputError, require
 from .._objective import accuracy, objective
 from .._params import params_from_arrays, params_to_arrays
+from .._phases import phase
 from ..effects import Physics, awgn
 from ._sgd import TrainConfig, stderr_progress, train
 
@@ -127,10 +128,12 @@ def load_or_train(dataset: str, arch: Architecture, s0: float, seed: int = 0, *,
     label = f"train {dataset} {arch} s0={s0:g} seed={seed}"
     if progress:
         sys.stderr.write(f"{label}: training ({config.method}) ...\n")
-    params = train(jax.random.PRNGKey(seed), arch, ds.x_train, ds.y_train, physics, config,
-                   progress=stderr_progress(label) if progress else None)
+    with phase("train"):
+        params = train(jax.random.PRNGKey(seed), arch, ds.x_train, ds.y_train, physics, config,
+                       progress=stderr_progress(label) if progress else None)
     seconds = time.perf_counter() - t0
-    metrics = evaluate(jax.random.PRNGKey(10_000 + seed), params, ds, physics, arch)
+    with phase("train_evaluate"):
+        metrics = evaluate(jax.random.PRNGKey(10_000 + seed), params, ds, physics, arch)
     meta = {"dataset": dataset, "arch": str(arch), "activation": arch.activation, "noise_sites": arch.noise_sites,
             "s0": float(s0), "seed": int(seed), "method": config.method, "config": config.to_json(),
             "steps": int(config.steps if config.method == "projected_sgd"

@@ -48,6 +48,7 @@ def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
     import jax
 
     import gift_theory as gt
+    from gift_theory._params import cast
     from gift_theory._phases import PhaseClock, compile_totals, compiled_functions, listen
     from gift_theory.cli._bench import matmul_gflops
     from gift_theory.data import load_dataset
@@ -77,7 +78,7 @@ def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
     out["runs"].append(train)
     _log(f"training {epochs} epochs: {wall:.1f} s (compile {sgd.get('compile_seconds', 0):.1f} s), "
          f"{train['ratio_to_matmul']:.2f} of matmul")
-    w0 = gt.cast(w0, jax.numpy.float32)
+    w0 = cast(w0, jax.numpy.float32)
     for label, kind, st in POINTS:
         s_true, effects = true_noise(kind, st)
         physics = true_physics(s_true, effects)

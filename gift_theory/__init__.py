@@ -36,6 +36,10 @@ from .effects import awgn as awgn
 from .effects import make_effect as make_effect
 from .effects import parse_effect as parse_effect
 
+from . import _xla
+
+_xla.use_compilation_cache()  # compiled programs persist on disk across processes (see gift_theory._xla)
+
 __version__ = "0.1.0"
 
 #: subpackages, imported on first use (``gt.estimators``, ``gt.lab``, ...) to keep start-up fast

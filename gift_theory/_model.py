@@ -27,13 +27,13 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from . import _random
+from . import _random, _xla
 from ._arch import Architecture
 from .effects import Physics
 
 
-def _site_key(key: jax.Array, name: str) -> jax.Array:
-    """A subkey that depends only on the draw's name (stable when effects are added)."""
+def named_subkey(key: jax.Array, name: str) -> jax.Array:
+    """A subkey that depends only on ``name`` (stable when other names are added)."""
     return jax.random.fold_in(key, zlib.crc32(name.encode()) & 0x7FFFFFFF)
 
 
@@ -48,10 +48,22 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
     out = {}
     additive = set(_additive_names(arch)) if "awgn" in physics else set()
     for name, event in physics.draws(arch).items():
-        k = _site_key(key, name)
+        k = named_subkey(key, name)  # a site's draws are named by the site
         shape = batch_shape + tuple(event)
         out[name] = physics.standard(k, shape, dtype) if name in additive else _random.normal(k, shape, dtype)
     return out
+
+
+@partial(_xla.jit, static_argnames=("arch", "shape", "dtype"))
+def compiled_draws(key, physics, *, arch, shape, dtype):
+    """:func:`sample_noise` as its own compiled program (materialised draws).
+
+    Compiled apart from the kernels that consume them: fused into a kernel, XLA recomputes
+    the draws in every consumer; behind an optimization barrier it splits the sampler into
+    many materialised pieces (both measured slower). One compiled sampler per (arch, shape,
+    physics structure) serves every estimator, the referee and the objective.
+    """
+    return sample_noise(key, arch, physics, shape, dtype)
 
 
 def _additive_names(arch: Architecture):

@@ -16,7 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._arch import Architecture
-from ._model import forward, sample_noise, squared_error
+from . import _xla
+from ._model import compiled_draws, forward, squared_error
 from .effects import Physics
 
 
@@ -49,11 +50,73 @@ def estimate_from_samples(samples) -> Estimate:
     return Estimate(v.mean(axis=0), se, n, v)
 
 
-@partial(jax.jit, static_argnames=("arch", "K2"))
-def _per_input_loss(key, params, x, y, physics, arch, K2):
-    noise = sample_noise(key, arch, physics, (x.shape[0], K2), params[0].W.dtype)
-    out = forward(params, x[:, None, :].astype(params[0].W.dtype), noise, physics, arch).y
-    return jnp.mean(squared_error(out, y[:, None, :]), axis=1)
+def stack_weights(weight_sets):
+    """Weight sets (tuples of Layer, same shapes) stacked on a new leading axis of every leaf."""
+    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *weight_sets)
+
+
+@partial(_xla.jit, static_argnames=("arch",))
+def _scores(noise, P, x, y, labels, physics, arch):
+    # one pass per weight set over the same draws: vmapped, the first layer of every set is one
+    # product with the shared noisy input; loss and correctness come from the same outputs
+    def one(p):
+        out = forward(p, x[:, None, :].astype(p[0].W.dtype), noise, physics, arch).y
+        loss = None if y is None else jnp.mean(squared_error(out, y[:, None, :]), axis=1)
+        correct = None if labels is None else jnp.mean(jnp.argmax(out, axis=-1) == labels[:, None], axis=1)
+        return loss, correct
+
+    return jax.vmap(one)(P)
+
+
+@partial(_xla.jit, static_argnames=("arch",))
+def _slopes(noise, params, u, x, y, physics, arch):
+    def loss(p):
+        out = forward(p, x[:, None, :].astype(p[0].W.dtype), noise, physics, arch).y
+        return jnp.mean(squared_error(out, y[:, None, :]), axis=1)
+
+    return jax.jvp(loss, (params,), (u,))[1]
+
+
+def _chunks(key, n: int, K2: int, chunk: int):
+    """(subkey, start, stop) of every block of at most ``chunk`` samples: block i draws with fold_in(key, i)."""
+    rows = max(1, chunk // max(K2, 1))
+    return [(jax.random.fold_in(key, i), s, min(s + rows, n)) for i, s in enumerate(range(0, n, rows))]
+
+
+def per_input_scores(key, weight_sets, x, y, labels, physics: Physics, arch: Architecture, K2: int = 1,
+                     chunk: int = 4096):
+    """Per-input loss and correctness of several weight sets on the same noise draws.
+
+    For each weight set and input, the mean over K2 draws of (y - M_s(x, w, N))^2 and the
+    fraction of the K2 draws whose output's argmax is the label. Every weight set sees the same
+    draws (common random numbers), and both quantities come from one forward pass.
+
+    Parameters
+    ----------
+    key : PRNG key; block i of at most ``chunk`` samples uses ``fold_in(key, i)`` (so one weight
+        set gives exactly the losses of :func:`per_input_loss` with the same key)
+    weight_sets : sequence of P weight tuples (same architecture)
+    x : (K1, d_0); y : (K1, d_L) or None; labels : (K1,) ints or None
+    K2 : noise draws per input
+
+    Returns
+    -------
+    (losses, correct) : ndarrays of shape (P, K1) (None for a quantity whose targets are None)
+    """
+    P = stack_weights(weight_sets)
+    dtype = jnp.dtype(weight_sets[0][0].W.dtype)
+    x = np.asarray(x)
+    y = None if y is None else np.asarray(y, dtype)
+    labels = None if labels is None else np.asarray(labels)
+    parts = []
+    for k, a, b in _chunks(key, x.shape[0], K2, chunk):
+        noise = compiled_draws(k, physics, arch=arch, shape=(b - a, K2), dtype=dtype)
+        parts.append(_scores(noise, P, x[a:b], None if y is None else y[a:b],
+                             None if labels is None else labels[a:b], physics, arch))
+    # read back once at the end: the blocks are dispatched without waiting for each other
+    losses = None if y is None else np.concatenate([np.asarray(p[0]) for p in parts], axis=1)
+    correct = None if labels is None else np.concatenate([np.asarray(p[1]) for p in parts], axis=1)
+    return losses, correct
 
 
 def per_input_loss(key, params, x, y, physics: Physics, arch: Architecture, K2: int = 1,
@@ -71,15 +134,28 @@ def per_input_loss(key, params, x, y, physics: Physics, arch: Architecture, K2: 
     -------
     ndarray of shape (K1,)
     """
-    x = jnp.asarray(x)
-    y = jnp.asarray(y)
-    rows = max(1, chunk // max(K2, 1))
+    return per_input_scores(key, [params], x, y, None, physics, arch, K2, chunk)[0][0]
+
+
+def directional_derivative(key, params, u, x, y, physics: Physics, arch: Architecture, K2: int = 1,
+                           chunk: int = 4096) -> "Estimate":
+    """d/da J_s(w + a u) at a = 0, i.e. <grad_w J_s(w), u>, by forward-mode autodiff per input.
+
+    Same draws as :func:`per_input_loss` with the same key; ``u`` is a pytree like the weights.
+
+    Returns
+    -------
+    Estimate whose samples are the K1 per-input slopes (mean over K2 draws each).
+    """
+    dtype = jnp.dtype(params[0].W.dtype)
+    u = jax.tree_util.tree_map(lambda a, p: jnp.asarray(a, p.dtype), u, params)
+    x = np.asarray(x)
+    y = np.asarray(y, dtype)
     parts = []
-    for i, start in enumerate(range(0, x.shape[0], rows)):
-        k = jax.random.fold_in(key, i)
-        parts.append(np.asarray(_per_input_loss(k, params, x[start:start + rows], y[start:start + rows],
-                                                physics, arch, K2)))
-    return np.concatenate(parts)
+    for k, a, b in _chunks(key, x.shape[0], K2, chunk):
+        noise = compiled_draws(k, physics, arch=arch, shape=(b - a, K2), dtype=dtype)
+        parts.append(_slopes(noise, params, u, x[a:b], y[a:b], physics, arch))
+    return estimate_from_samples(np.concatenate([np.asarray(p) for p in parts]))
 
 
 def objective(key, params, x, y, physics: Physics, arch: Architecture, K2: int = 1) -> Estimate:
@@ -92,9 +168,8 @@ def objective(key, params, x, y, physics: Physics, arch: Architecture, K2: int =
 
 def paired_difference(key, params_a, params_b, x, y, physics: Physics, arch: Architecture, K2: int = 1) -> Estimate:
     """J(w_a) - J(w_b) with common random numbers (same inputs, same draws)."""
-    la = per_input_loss(key, params_a, x, y, physics, arch, K2)
-    lb = per_input_loss(key, params_b, x, y, physics, arch, K2)
-    return estimate_from_samples(la - lb)
+    losses = per_input_scores(key, [params_a, params_b], x, y, None, physics, arch, K2)[0]
+    return estimate_from_samples(losses[0] - losses[1])
 
 
 def eval_from_outputs(outputs, y) -> Estimate:
@@ -111,20 +186,7 @@ def eval_from_outputs(outputs, y) -> Estimate:
     return estimate_from_samples(per_input)
 
 
-@partial(jax.jit, static_argnames=("arch", "K2"))
-def _per_input_correct(key, params, x, labels, physics, arch, K2):
-    noise = sample_noise(key, arch, physics, (x.shape[0], K2), params[0].W.dtype)
-    out = forward(params, x[:, None, :].astype(params[0].W.dtype), noise, physics, arch).y
-    return jnp.mean(jnp.argmax(out, axis=-1) == labels[:, None], axis=1)
-
-
 def accuracy(key, params, x, labels, physics: Physics, arch: Architecture, K2: int = 1,
              chunk: int = 4096) -> Estimate:
     """Classification accuracy by argmax of the noisy output, with its standard error."""
-    x = jnp.asarray(x)
-    labels = jnp.asarray(labels)
-    rows = max(1, chunk // max(K2, 1))
-    parts = [np.asarray(_per_input_correct(jax.random.fold_in(key, i), params, x[s:s + rows], labels[s:s + rows],
-                                           physics, arch, K2))
-             for i, s in enumerate(range(0, x.shape[0], rows))]
-    return estimate_from_samples(np.concatenate(parts))
+    return estimate_from_samples(per_input_scores(key, [params], x, None, labels, physics, arch, K2, chunk)[1][0])

@@ -18,6 +18,14 @@ numbers). Machines without AVX-512 keep their widest vectors.
 The option is an experimental XLA flag: :func:`jit` probes once, on first use, whether the
 installed XLA knows it, and compiles without it otherwise -- same numbers up to float
 rounding, only slower. ``GIFT_XLA_DEFAULTS=1`` in the environment turns the options off.
+
+Compiled programs are also kept on disk (JAX's persistent compilation cache), so a new
+process -- a Dask worker of a sweep, the next ``gift`` command -- loads the programs an
+earlier one compiled instead of compiling them again: :func:`use_compilation_cache`, called
+when gift is imported, points JAX at ``$GIFT_COMPILATION_CACHE`` or, by default, the ``xla``
+folder of gift's cache (``$GIFT_CACHE_DIR`` or ``~/.cache/gift``), and keeps every program
+that took at least :data:`CACHE_MIN_COMPILE_SECONDS` to compile. ``GIFT_COMPILATION_CACHE=off``
+turns it off; a folder the user already gave JAX (``jax_compilation_cache_dir``) is kept.
 """
 
 from __future__ import annotations
@@ -30,6 +38,39 @@ import jax.numpy as jnp
 
 CPU_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_REDUCE",
                "xla_cpu_prefer_vector_width": 512}
+
+
+#: programs that compile faster than this are not written to the disk cache (reading one back
+#: costs a few milliseconds; gift's smallest kernels compile in ~0.1 s)
+CACHE_MIN_COMPILE_SECONDS = 0.2
+_OFF = ("0", "off", "none", "false", "no")  # values of GIFT_COMPILATION_CACHE that turn it off
+
+
+def compilation_cache_dir() -> str | None:
+    """The persistent cache folder gift uses: ``$GIFT_COMPILATION_CACHE``, else ``<gift cache>/xla``;
+    None when the variable says off."""
+    env = os.environ.get("GIFT_COMPILATION_CACHE", "").strip()
+    if env.lower() in _OFF:
+        return None
+    if env:
+        return env
+    base = os.environ.get("GIFT_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "gift")
+    return os.path.join(base, "xla")
+
+
+def use_compilation_cache() -> str | None:
+    """Point JAX's persistent compilation cache at :func:`compilation_cache_dir` (unless the
+    user set one already); returns the folder in use, or None. Sets configuration only: no
+    backend is started."""
+    current = jax.config.jax_compilation_cache_dir
+    if current:
+        return current
+    folder = compilation_cache_dir()
+    if folder is None:
+        return None
+    jax.config.update("jax_compilation_cache_dir", folder)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_SECONDS)
+    return folder
 
 
 @functools.lru_cache(maxsize=None)

@@ -84,14 +84,26 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     Returns
     -------
     dict : the numeric CONTRACTS §4 keys (loss/accuracy before/after on train and test,
-    in_situ_evaluations, seconds) and ``s_true`` (the chip's awgn level after the mapping).
+    in_situ_evaluations, seconds), ``s_true`` (the chip's awgn level after the mapping), the
+    referee's standard errors (``loss_before_se``, ..., ``loss_change_se``), whether the line
+    search's confirmation ``accepted``, and for line-search methods Theorem 1's prediction
+    against the realised change (``predicted_change``, ``realised_change``, ... see
+    :mod:`gift_theory.finetune._predict`).
     """
     s_true, effects = true_noise(noise_kind, st)
     run_finetune = _run_finetune()
+    opts = dict(options or {})
+    # Theorem 1's prediction in silico with AWGN at the chip's noise standard deviation (the
+    # multiplicative law has no additive noise: AWGN at the paper's st stands in for it)
+    opts.setdefault("predict_s", s_true if s_true > 0 else float(st))
     res = run_finetune(dataset=dataset, arch=arch, s0=float(s0), st=s_true, true_effects=effects, method=method,
-                       seed=int(seed), **(options or {}))
+                       seed=int(seed), **opts)
     # "s0"/"st" are grid dimensions here; run_finetune's "st" is the chip's awgn level, kept as s_true
-    out = {k: v for k, v in res.items()
+    info = res.get("info", {})
+    flat = dict(res, **info.get("referee", {}), **info.get("prediction", {}))
+    if "accepted" in info:
+        flat["accepted"] = bool(info["accepted"])
+    out = {k: v for k, v in flat.items()
            if isinstance(v, (int, float, bool, np.number)) and not isinstance(v, str) and k not in ("s0", "st")}
     out["s_true"] = s_true
     return out

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 from .._arch import Architecture
 from .. import _xla
 from .._errors import GiftInputError, require
-from .._model import forward, sample_noise, squared_error
+from .._model import compiled_draws, forward, squared_error
 from ..effects import Physics
 from ..effects.awgn import additive_sites
 from ._hierarchical import hierarchical_mean
@@ -141,15 +141,6 @@ def _block_quantity(what, method, theta, arch, params, physics, x, y, w, noise, 
     raise ValueError(what)
 
 
-@partial(_xla.jit, static_argnames=("arch", "shape", "dtype"))
-def _draws(key, physics, *, arch, shape, dtype):
-    # compiled apart from the kernels: every method shares one compiled sampler, and the draws
-    # are written once (fused into the kernel, XLA recomputes them in every consumer; behind an
-    # optimization barrier in the kernel's program, it splits the sampler into many
-    # materialised pieces: measured slower)
-    return sample_noise(key, arch, physics, shape, dtype)
-
-
 @partial(_xla.jit, static_argnames=("what", "method", "theta", "arch"))
 def _kernel(xb, yb, wb, noise, params, physics, h, v, *, what, method, theta, arch):
     # one vmapped pass over the block's groups: the forward products of all groups are one
@@ -161,7 +152,7 @@ def _kernel(xb, yb, wb, noise, params, physics, h, v, *, what, method, theta, ar
 
 def _block(key, xb, yb, wb, params, physics, h, v, *, what, method, theta, arch, K2):
     dtype = jnp.dtype(params[0].W.dtype)
-    noise = _draws(key, physics, arch=arch, shape=tuple(xb.shape[:2]) + (K2,), dtype=dtype)
+    noise = compiled_draws(key, physics, arch=arch, shape=tuple(xb.shape[:2]) + (K2,), dtype=dtype)
     return _kernel(xb, yb, wb, noise, params, physics, h, v, what=what, method=method, theta=theta, arch=arch)
 
 

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._arch import Architecture
-from .._objective import accuracy, objective, per_input_loss
+from .._objective import estimate_from_samples, per_input_loss, per_input_scores
 from .._params import cast
 from .._phases import phase
 from ..chips import SimulatedChip, chip_eval
@@ -86,13 +86,27 @@ def make_problem(arch: Architecture, w0, x, y, *, s0: float, true_physics: Physi
                    float(budget), jax.random.fold_in(key, 11))
 
 
+def referee_scores(weight_sets, x, y, labels, physics: Physics, arch: Architecture, *, K2: int = 32,
+                   seed: int = 12345):
+    """Per-input true losses and correctness, (P, K1) each, of P weight sets on the same draws.
+
+    One pass over the inputs scores every weight set (common random numbers) and gives loss
+    and accuracy from the same noisy outputs; the draws are those of :func:`referee_losses`.
+    """
+    return per_input_scores(jax.random.PRNGKey(seed), [cast(p, jnp.float32) for p in weight_sets], x, y, labels,
+                            physics, arch, K2)
+
+
+def summary(losses, correct) -> dict:
+    """Referee numbers of one weight set from its per-input losses and correctness."""
+    j, a = estimate_from_samples(losses), estimate_from_samples(correct)
+    return {"loss": float(j.mean), "loss_se": float(j.se), "accuracy": float(a.mean), "accuracy_se": float(a.se)}
+
+
 def referee(params, x, y, labels, physics: Physics, arch: Architecture, *, K2: int = 32, seed: int = 12345) -> dict:
     """True loss and accuracy under ``physics`` (many draws, fixed key: common random numbers)."""
-    key = jax.random.PRNGKey(seed)
-    params = cast(params, jnp.float32)
-    j = objective(key, params, x, y, physics, arch, K2)
-    a = accuracy(jax.random.fold_in(key, 1), params, x, labels, physics, arch, K2)
-    return {"loss": float(j.mean), "loss_se": float(j.se), "accuracy": float(a.mean), "accuracy_se": float(a.se)}
+    losses, correct = referee_scores([params], x, y, labels, physics, arch, K2=K2, seed=seed)
+    return summary(losses[0], correct[0])
 
 
 def referee_losses(params, x, y, physics: Physics, arch: Architecture, *, K2: int = 32, seed: int = 12345):

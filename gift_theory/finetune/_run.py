@@ -16,7 +16,8 @@ from .._phases import phase
 from ..effects import Physics
 from ._directions import direction
 from ._linesearch import gift_printed, paired_line_search
-from ._problem import make_problem, referee
+from ._predict import candidate, first_order_prediction, realised_change
+from ._problem import make_problem, referee_scores, summary
 from ._rivals import identify_retrain, pat, retrain, spsa
 from ._tree import norm
 from ..estimators import paper_constant
@@ -105,8 +106,16 @@ def true_physics(st: float, true_effects=()) -> Physics:
 
 
 def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gift", seed: int = 0,
-                budget: float = 20, K1=None, K2: int = 1, referee_K2: int = 32, chip=None, **options) -> dict:
-    """Run ``method`` on a prepared setting; the CONTRACTS §4 finetune keys plus ``info``."""
+                budget: float = 20, K1=None, K2: int = 1, referee_K2: int = 32, chip=None,
+                predict_s: float | None = None, **options) -> dict:
+    """Run ``method`` on a prepared setting; the CONTRACTS §4 finetune keys plus ``info``.
+
+    The referee scores w0 and the returned weights on the same draws, loss and accuracy from
+    one pass (``info["referee"]``: standard errors of each number and of the paired changes).
+    ``predict_s``: for a line-search method, also Theorem 1's first-order prediction of the
+    change of J_st at the best measured step, in silico with AWGN at ``predict_s``, against the
+    referee's realised change (``info["prediction"]``, :mod:`gift_theory.finetune._predict`).
+    """
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
     with phase("problem"):
         problem = make_problem(arch, w0, ds.x_train, ds.y_train, s0=s0, true_physics=physics, budget=budget, K1=K1,
@@ -118,14 +127,33 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
     seconds = time.perf_counter() - t0
     out = {"method": method, "s0": float(s0), "st": float(physics.s), "in_situ_evaluations": problem.evaluations_used(),
            "seconds": seconds}
+    u = info.pop("_u", None)
+    cand = None
+    if predict_s is not None and u is not None and info.get("alpha_best") is not None:
+        cand, u_unit = candidate(w0, u, info["alpha_best"])
+        with phase("prediction"):
+            prediction = first_order_prediction(problem, u_unit, info["alpha_best"], predict_s, info.get("C2_model"),
+                                                K2=referee_K2)
+    scores = {}
     for split, x, y, lab in (("", ds.x_train, ds.y_train, ds.labels_train),
                              ("test_", ds.x_test, ds.y_test, ds.labels_test)):
+        sets = [w0, params] + ([cand] if cand is not None and split == "" else [])
         with phase("referee"):
-            before = referee(w0, x, y, lab, physics, arch, K2=referee_K2)
-            after = referee(params, x, y, lab, physics, arch, K2=referee_K2)
+            losses, correct = referee_scores(sets, x, y, lab, physics, arch, K2=referee_K2)
+        before, after = summary(losses[0], correct[0]), summary(losses[1], correct[1])
         out[f"{split}loss_before"], out[f"{split}loss_after"] = before["loss"], after["loss"]
         out[f"{split}accuracy_before"], out[f"{split}accuracy_after"] = before["accuracy"], after["accuracy"]
-    out["direction"] = info.pop("_u", None)
+        change = summary(losses[1] - losses[0], correct[1] - correct[0])
+        scores.update({f"{split}loss_before_se": before["loss_se"], f"{split}loss_after_se": after["loss_se"],
+                       f"{split}accuracy_before_se": before["accuracy_se"],
+                       f"{split}accuracy_after_se": after["accuracy_se"],
+                       f"{split}loss_change_se": change["loss_se"], f"{split}accuracy_change_se": change["accuracy_se"]})
+        if len(sets) == 3:
+            prediction.update(realised_change(losses[0], losses[2]))
+    info["referee"] = scores
+    if cand is not None:
+        info["prediction"] = prediction
+    out["direction"] = u
     out["info"] = info
     out["params"] = params
     return out

@@ -56,9 +56,12 @@ def stack_weights(weight_sets):
 
 
 @partial(_xla.jit, static_argnames=("arch",))
-def _scores(noise, P, x, y, labels, physics, arch):
+def _scores(noise, weight_sets, x, y, labels, physics, arch):
     # one pass per weight set over the same draws: vmapped, the first layer of every set is one
-    # product with the shared noisy input; loss and correctness come from the same outputs
+    # product with the shared noisy input; loss and correctness come from the same outputs.
+    # The sets are stacked here, inside the program (op by op, a program per leaf shape)
+    P = stack_weights(weight_sets)
+
     def one(p):
         out = forward(p, x[:, None, :].astype(p[0].W.dtype), noise, physics, arch).y
         loss = None if y is None else jnp.mean(squared_error(out, y[:, None, :]), axis=1)
@@ -103,7 +106,7 @@ def per_input_scores(key, weight_sets, x, y, labels, physics: Physics, arch: Arc
     -------
     (losses, correct) : ndarrays of shape (P, K1) (None for a quantity whose targets are None)
     """
-    P = stack_weights(weight_sets)
+    weight_sets = tuple(weight_sets)
     dtype = jnp.dtype(weight_sets[0][0].W.dtype)
     x = np.asarray(x)
     y = None if y is None else np.asarray(y, dtype)
@@ -111,7 +114,7 @@ def per_input_scores(key, weight_sets, x, y, labels, physics: Physics, arch: Arc
     parts = []
     for k, a, b in _chunks(key, x.shape[0], K2, chunk):
         noise = compiled_draws(k, physics, arch=arch, shape=(b - a, K2), dtype=dtype)
-        parts.append(_scores(noise, P, x[a:b], None if y is None else y[a:b],
+        parts.append(_scores(noise, weight_sets, x[a:b], None if y is None else y[a:b],
                              None if labels is None else labels[a:b], physics, arch))
     # read back once at the end: the blocks are dispatched without waiting for each other
     losses = None if y is None else np.concatenate([np.asarray(p[0]) for p in parts], axis=1)

@@ -25,6 +25,7 @@ _COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/
 _lock = threading.Lock()
 _totals = {"seconds": 0.0, "compiles": 0}
 _by_function: Counter = Counter()
+_seconds_by_function: Counter = Counter()
 _listening = False
 _current: contextvars.ContextVar = contextvars.ContextVar("gift_phase_clock", default=None)
 _path: contextvars.ContextVar = contextvars.ContextVar("gift_phase_path", default=())
@@ -35,9 +36,10 @@ def _on_duration(event: str, seconds: float, **kw) -> None:
         return
     with _lock:
         _totals["seconds"] += seconds
+        _seconds_by_function[str(kw.get("fun_name", "?")).removeprefix("jit(").removesuffix(")")] += seconds
         if event == "/jax/core/compile/backend_compile_duration":
             _totals["compiles"] += 1
-            _by_function[str(kw.get("fun_name", "?"))] += 1
+            _by_function[str(kw.get("fun_name", "?")).removeprefix("jit(").removesuffix(")")] += 1
 
 
 def listen() -> None:
@@ -57,10 +59,11 @@ def compile_totals() -> tuple[float, int]:
         return _totals["seconds"], _totals["compiles"]
 
 
-def compiled_functions() -> dict[str, int]:
-    """How many programs were compiled per function name since :func:`listen`."""
+def compiled_functions() -> dict[str, dict]:
+    """Per function name since :func:`listen`: programs compiled and seconds spent compiling them."""
     with _lock:
-        return dict(_by_function)
+        return {k: {"programs": _by_function[k], "seconds": _seconds_by_function[k]}
+                for k in sorted(_seconds_by_function, key=lambda k: -_seconds_by_function[k])}
 
 
 class PhaseClock:

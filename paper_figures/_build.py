@@ -37,6 +37,7 @@ FIGURES = (
     "estimator_convergence",
     "bound_region",
     "error_ladder",
+    "predicted_vs_realised",
 )
 
 
@@ -180,7 +181,8 @@ def _build(sc, mods, all_sweeps, needed, data_dir, figure_dir, compute, progress
 def add_arguments(parser) -> None:
     parser.add_argument("--scale", default="quick", choices=tuple(SCALES),
                         help="quick (digits, small nets, 2 seeds: minutes) | paper (the paper's nets, mnist5k, "
-                             "10 seeds: hours) | tiny (tests)")
+                             "10 seeds: hours) | paper-subset (the paper's nets, 3 seeds, two pairs for the "
+                             "violated laws and rivals) | tiny (tests)")
     parser.add_argument("--only", default=None, choices=FIGURES, metavar="NAME",
                         help=f"one figure: {', '.join(FIGURES)}")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",

@@ -31,14 +31,23 @@ POINTS = (("first", "awgn", 0.2), ("steady", "awgn", 0.05), ("new_law", "laplace
 
 
 def _credited(arch, n_train: int, n_test: int, *, budget: float, K1: int, K2: int, referee_K2: int,
-              direction_K2: int = 16, curvature_K2: int = 8) -> dict:
-    """Credited flops of one GIFT point by phase (run_finetune's defaults)."""
+              direction_K2: int = 16, curvature_K2: int = 8, prediction: bool = False,
+              prediction_K2: int = 8) -> dict:
+    """Credited flops of one GIFT point by phase (run_finetune's defaults).
+
+    The referee scores w0 and the fine-tuned weights on training and test data (and, with a
+    prediction, the line search's candidate on training data); the prediction is two
+    forward-mode derivatives (4 x weights flops per sample) at s0 and st.
+    """
     W = arch.n_weights
-    return {"referee": 2.0 * W * (n_train + n_test) * referee_K2 * 2,   # before and after, train and test
-            "method/direction": 6.0 * W * n_train * direction_K2,
-            "method/curvature": 6.0 * W * n_train * curvature_K2,
-            "method/pair_se": 2.0 * W * K1 * K2 * 2,
-            "method/chip": 2.0 * W * K1 * K2 * budget}
+    out = {"referee": 2.0 * W * ((2 + prediction) * n_train + 2 * n_test) * referee_K2,
+           "method/direction": 6.0 * W * n_train * direction_K2,
+           "method/curvature": 6.0 * W * n_train * curvature_K2,
+           "method/pair_se": 2.0 * W * K1 * K2 * 2,
+           "method/chip": 2.0 * W * K1 * K2 * budget}
+    if prediction:
+        out["prediction"] = 4.0 * W * n_train * prediction_K2 * 2
+    return out
 
 
 def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
@@ -85,11 +94,11 @@ def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
         c0, n0 = compile_totals()
         with PhaseClock() as clock:
             t0 = time.perf_counter()
-            res = finetune_on(ds, arch, w0, s0=s0, physics=physics, method="gift", seed=seed)
+            res = finetune_on(ds, arch, w0, s0=s0, physics=physics, method="gift", seed=seed, **_predict(s_true, st))
             wall = time.perf_counter() - t0
         c1, n1 = compile_totals()
         credited = _credited(arch, ds.x_train.shape[0], ds.x_test.shape[0], budget=20, K1=ds.x_train.shape[0],
-                             K2=1, referee_K2=32)
+                             K2=1, referee_K2=32, prediction="prediction" in clock.phases)
         total = sum(credited.values())
         run = {"label": label, "noise_kind": kind, "st": st, "seconds": wall, "compile_seconds": c1 - c0,
                "compiles": n1 - n0, "phases": clock.phases, "credited_flops": credited,
@@ -105,6 +114,17 @@ def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
              f" {run['ratio_to_matmul']:.3f} of matmul")
     out["compiled_functions"] = compiled_functions()
     return out
+
+
+def _predict(s_true: float, st: float) -> dict:
+    """The sweep job's prediction option, where finetune_on knows it (absent before it did)."""
+    import inspect
+
+    from gift_theory.finetune import finetune_on
+
+    if "predict_s" not in inspect.signature(finetune_on).parameters:
+        return {}
+    return {"predict_s": s_true if s_true > 0 else st}
 
 
 def _log(msg: str) -> None:

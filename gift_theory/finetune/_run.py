@@ -107,14 +107,15 @@ def true_physics(st: float, true_effects=()) -> Physics:
 
 def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gift", seed: int = 0,
                 budget: float = 20, K1=None, K2: int = 1, referee_K2: int = 32, chip=None,
-                predict_s: float | None = None, **options) -> dict:
+                predict_s: float | None = None, prediction_K2: int = 8, **options) -> dict:
     """Run ``method`` on a prepared setting; the CONTRACTS §4 finetune keys plus ``info``.
 
     The referee scores w0 and the returned weights on the same draws, loss and accuracy from
     one pass (``info["referee"]``: standard errors of each number and of the paired changes).
     ``predict_s``: for a line-search method, also Theorem 1's first-order prediction of the
-    change of J_st at the best measured step, in silico with AWGN at ``predict_s``, against the
-    referee's realised change (``info["prediction"]``, :mod:`gift_theory.finetune._predict`).
+    change of J_st at the best measured step, in silico with AWGN at ``predict_s`` and
+    ``prediction_K2`` draws per training input, against the referee's realised change
+    (``info["prediction"]``, :mod:`gift_theory.finetune._predict`).
     """
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
     with phase("problem"):
@@ -133,7 +134,7 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
         cand, u_unit = candidate(w0, u, info["alpha_best"])
         with phase("prediction"):
             prediction = first_order_prediction(problem, u_unit, info["alpha_best"], predict_s, info.get("C2_model"),
-                                                K2=referee_K2)
+                                                K2=prediction_K2)
     scores = {}
     for split, x, y, lab in (("", ds.x_train, ds.y_train, ds.labels_train),
                              ("test_", ds.x_test, ds.y_test, ds.labels_test)):

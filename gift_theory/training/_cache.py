@@ -20,7 +20,7 @@ import numpy as np
 
 from .._arch import Architecture
 from .._errors import GiftInputError, require
-from .._objective import accuracy, objective
+from .._objective import estimate_from_samples, per_input_scores
 from .._params import params_from_arrays, params_to_arrays
 from .._phases import phase
 from ..effects import Physics, awgn
@@ -77,12 +77,13 @@ def load_weights(path: str):
 
 
 def evaluate(key, params, ds, physics: Physics, arch: Architecture, K2: int = 4) -> dict:
-    """Train/test loss and accuracy (noisy, at ``physics``) with standard errors."""
+    """Train/test loss and accuracy (noisy, at ``physics``) with standard errors; loss and
+    accuracy of a split come from one pass over the same draws."""
     out = {}
     for split in ("train", "test"):
         x, y, lab = getattr(ds, f"x_{split}"), getattr(ds, f"y_{split}"), getattr(ds, f"labels_{split}")
-        j = objective(jax.random.fold_in(key, 0), params, x, y, physics, arch, K2)
-        a = accuracy(jax.random.fold_in(key, 1), params, x, lab, physics, arch, K2)
+        losses, correct = per_input_scores(jax.random.fold_in(key, 0), [params], x, y, lab, physics, arch, K2)
+        j, a = estimate_from_samples(losses[0]), estimate_from_samples(correct[0])
         out[f"{split}_loss"], out[f"{split}_loss_se"] = float(j.mean), float(j.se)
         out[f"{split}_accuracy"], out[f"{split}_accuracy_se"] = float(a.mean), float(a.se)
     return out

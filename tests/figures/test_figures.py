@@ -18,7 +18,9 @@ SWEEP_FIGURES = [n for n in FIGURES if n not in ("example_fine_tuning", "bound_r
 
 def fake_run_finetune(dataset, arch, s0, st, true_effects, method, seed, **options):
     """A stand-in chip + GIFT with known improvements: deep nets gain 10 points of % more accuracy
-    than shallow ones, test gains = train gains + 1, multiplicative noise loses accuracy."""
+    than shallow ones, test gains = train gains + 1, multiplicative noise loses accuracy; the
+    first-order prediction is exact but under multiplicative noise, where the realised change
+    has the wrong sign."""
     depth = arch.count("-")
     acc_gain = 20.0 + 40.0 * st + 0.5 * seed - (10.0 if depth < 3 else 0.0)
     loss_gain = 10.0 + 20.0 * st + 0.5 * seed - (5.0 if depth < 3 else 0.0)
@@ -29,6 +31,11 @@ def fake_run_finetune(dataset, arch, s0, st, true_effects, method, seed, **optio
     for p, extra in (("", 0.0), ("test_", 1.0)):
         out[f"{p}loss_before"], out[f"{p}loss_after"] = 0.5, 0.5 * (1 - (loss_gain + extra) / 100)
         out[f"{p}accuracy_before"], out[f"{p}accuracy_after"] = 0.8, 0.8 * (1 + (acc_gain + extra) / 100)
+    pred = -(0.01 + 0.1 * st + 0.001 * seed + 0.002 * depth)
+    real = -pred if any(e.startswith("multiplicative") for e in true_effects) else pred
+    out["info"] = {"accepted": True, "prediction": {
+        "predicted_change": pred, "predicted_change_se": 1e-4, "predicted_change_2nd": pred,
+        "realised_change": real, "realised_change_se": 1e-4, "s_model": options["predict_s"]}}
     return out
 
 
@@ -74,6 +81,11 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
     diag = c["gains_at_s0_eq_st"]
     assert diag["n"] == 4 and diag["loss_pct_mean"] == pytest.approx(13.25, abs=1e-6)
     assert diag["verdict"] == "supported"
+    fo = c["theorem1_first_order"]  # 8 + 8 awgn points exact, 2 of 6 violated ones (multiplicative) of the wrong sign
+    assert fo["points"] == 22 and fo["wrong"] == 2 and fo["sign_wrong"] == 2
+    assert {p["noise_kind"] for p in fo["wrong_points"]} == {"multiplicative"}
+    assert fo["verdict"] == "fails"  # 2/22 > 5 %
+    assert all(v["scope"] == "outside" for v in c.values())  # tiny nets on digits: not the paper's instance
 
 
 def test_figures_without_their_inputs_say_what_they_need(tmp_path, monkeypatch):

@@ -14,6 +14,10 @@
   ``--eff-K1`` x 8 samples; D is a long pathwise reference run over the same inputs, and
   the observed error of each run against it is reported next to the predicted one.
 
+* ``referee_deep``: the referee of one fine-tuning point on the same net: loss and accuracy of
+  two weight sets (before and after) on 4000 + 1000 inputs x 32 draws, one pass over shared
+  draws, credited with 2 x (number of weights) flops per sample and weight set (the forward
+  products; the draws are not credited); compile excluded, best of ``--repeats``.
 * ``d0_deep_paper_torch`` (only where PyTorch is installed; gift does not need it): the same
   estimate written as a careful batched PyTorch program (one forward pass of all K1 K2
   samples, one backward pass of the score-weighted loss), the peer the issue names, timed in
@@ -93,6 +97,7 @@ def run(args) -> dict:
                            "method": method, "K1": K1, "K2": K2, "arch": list(DEEP), "credited_flops": flops,
                            "first_call_seconds": compile_s})
         _log(f"{name}: {best:.3f} s, {gflops:.1f} GFLOP/s, {gflops / roof:.2f} of matmul")
+    benchmarks.append(_referee(arch, params, roof, args.repeats))
     peer = _torch_peer(params, x, y, s0, K2, args.repeats)
     if peer is not None:
         gflops = flops / peer["seconds"] / 1e9
@@ -107,6 +112,35 @@ def run(args) -> dict:
         benchmarks.append(_efficiency(args, arch, params, x, y, phys, roof))
         benchmarks.append(_million(roof))
     return {"matmul_gflops": roof, "benchmarks": benchmarks}
+
+
+def _referee(arch, params, roof: float, repeats: int) -> dict:
+    """``referee_deep``: one point's referee (two weight sets, train + test sizes of mnist5k)."""
+    import jax
+    import jax.numpy as jnp
+
+    import gift_theory as gt
+    from ..finetune._problem import referee_scores
+
+    n, K2 = 5000, 32
+    x = jax.random.uniform(jax.random.PRNGKey(3), (n, DEEP[0]))
+    labels = jnp.arange(n) % DEEP[-1]
+    y = jax.nn.one_hot(labels, DEEP[-1])
+    after = gt.init_params(jax.random.PRNGKey(4), arch)
+    phys = gt.awgn(0.1)
+
+    def once():
+        for a, b in ((0, 4000), (4000, n)):  # the training and test splits, as a point scores them
+            referee_scores([params, after], x[a:b], y[a:b], labels[a:b], phys, arch, K2=K2)
+
+    first = _timed(once)
+    best = min(_timed(once) for _ in range(repeats))
+    flops = 2.0 * arch.n_weights * n * K2 * 2
+    gflops = flops / best / 1e9
+    _log(f"referee_deep: {best:.3f} s, {gflops:.1f} GFLOP/s, {gflops / roof:.2f} of matmul")
+    return {"name": "referee_deep", "seconds": best, "gflops": gflops, "ratio_to_matmul": gflops / roof,
+            "inputs": n, "K2": K2, "weight_sets": 2, "arch": list(DEEP), "credited_flops": flops,
+            "first_call_seconds": first}
 
 
 def _torch_peer(params, x, y, s0: float, K2: int, repeats: int):

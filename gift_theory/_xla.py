@@ -26,6 +26,11 @@ when gift is imported, points JAX at ``$GIFT_COMPILATION_CACHE`` or, by default,
 folder of gift's cache (``$GIFT_CACHE_DIR`` or ``~/.cache/gift``), and keeps every program
 that took at least :data:`CACHE_MIN_COMPILE_SECONDS` to compile. ``GIFT_COMPILATION_CACHE=off``
 turns it off; a folder the user already gave JAX (``jax_compilation_cache_dir``) is kept.
+Processes may share the folder (the workers of a sweep): JAX writes an entry in one piece and
+reads it back whole; without the ``filelock`` package it takes no lock, so a process reading
+an entry at the very moment another writes the same one may see it truncated -- JAX then
+warns and compiles the program itself (the compressed entry fails to decompress: a lost
+shortcut, not a wrong program).
 """
 
 from __future__ import annotations

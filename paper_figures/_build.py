@@ -239,7 +239,15 @@ def failed(result: dict) -> bool:
 
 
 def main(argv=None, only: str | None = None) -> int:
-    """``python -m paper_figures`` (or a figure script with ``only``): build, print a summary."""
+    """``python -m paper_figures`` (or a figure script with ``only``): build, print a summary.
+
+    ``python -m paper_figures --profile [--net deep|shallow] ...`` profiles one paper-scale net
+    instead (:mod:`paper_figures._profile`)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if only is None and "--profile" in argv:
+        from ._profile import main as profile_main
+
+        return profile_main([a for a in argv if a != "--profile"])
     parser = argparse.ArgumentParser(prog="python -m paper_figures" + (f".{only}" if only else ""),
                                      description=__doc__.splitlines()[0])
     add_arguments(parser)

@@ -59,6 +59,12 @@ def true_noise(noise_kind: str, st: float) -> tuple[float, tuple[str, ...]]:
     raise ValueError(f"noise_kind {noise_kind!r} unknown; known: {', '.join(NOISE_KINDS)}")
 
 
+def prediction_level(s_true: float, st: float) -> float:
+    """The AWGN level of Theorem 1's in-silico prediction: the chip's additive noise standard
+    deviation (the multiplicative law has none: AWGN at the paper's st stands in for it)."""
+    return float(s_true) if s_true > 0 else float(st)
+
+
 def _run_finetune():
     try:
         from gift_theory.finetune import run_finetune
@@ -86,18 +92,21 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     dict : the numeric CONTRACTS §4 keys (loss/accuracy before/after on train and test,
     in_situ_evaluations, seconds), ``s_true`` (the chip's awgn level after the mapping), the
     referee's standard errors (``loss_before_se``, ..., ``loss_change_se``), whether the line
-    search's confirmation ``accepted``, and for line-search methods Theorem 1's prediction
+    search's confirmation ``accepted``, for line-search methods Theorem 1's prediction
     against the realised change (``predicted_change``, ``realised_change``, ... see
-    :mod:`gift_theory.finetune._predict`).
+    :mod:`gift_theory.finetune._predict`), and the wall seconds of each phase
+    (``seconds_setting``: training or loading w0; ``seconds_method``; ``seconds_referee``; ...)
+    with ``seconds_compiling``, the part JAX spent compiling.
     """
     s_true, effects = true_noise(noise_kind, st)
     run_finetune = _run_finetune()
     opts = dict(options or {})
-    # Theorem 1's prediction in silico with AWGN at the chip's noise standard deviation (the
-    # multiplicative law has no additive noise: AWGN at the paper's st stands in for it)
-    opts.setdefault("predict_s", s_true if s_true > 0 else float(st))
-    res = run_finetune(dataset=dataset, arch=arch, s0=float(s0), st=s_true, true_effects=effects, method=method,
-                       seed=int(seed), **opts)
+    opts.setdefault("predict_s", prediction_level(s_true, st))
+    from gift_theory._phases import PhaseClock
+
+    with PhaseClock() as clock:  # where the point's time went: setting (training or loading), method, referee
+        res = run_finetune(dataset=dataset, arch=arch, s0=float(s0), st=s_true, true_effects=effects, method=method,
+                           seed=int(seed), **opts)
     # "s0"/"st" are grid dimensions here; run_finetune's "st" is the chip's awgn level, kept as s_true
     info = res.get("info", {})
     flat = dict(res, **info.get("referee", {}), **info.get("prediction", {}))
@@ -106,6 +115,10 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     out = {k: v for k, v in flat.items()
            if isinstance(v, (int, float, bool, np.number)) and not isinstance(v, str) and k not in ("s0", "st")}
     out["s_true"] = s_true
+    for name, p in clock.phases.items():
+        if "/" not in name:
+            out[f"seconds_{name}"] = p["seconds"]
+    out["seconds_compiling"] = sum(p["compile_seconds"] for n, p in clock.phases.items() if "/" not in n)
     return out
 
 

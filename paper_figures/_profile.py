@@ -124,7 +124,9 @@ def _predict(s_true: float, st: float) -> dict:
 
     if "predict_s" not in inspect.signature(finetune_on).parameters:
         return {}
-    return {"predict_s": s_true if s_true > 0 else st}
+    from ._jobs import prediction_level
+
+    return {"predict_s": prediction_level(s_true, st)}
 
 
 def _log(msg: str) -> None:

@@ -102,7 +102,7 @@ def draw(data: dict):
     pts = points(data)
     s = summarise(data)
     groups = sorted({p["group"] for p in pts})
-    fig, axes = plt.subplots(1, 2, figsize=(11, 5))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.5))
     for ax, key, title, (r, ci) in (
             (axes[0], "predicted_change", "first order (Theorem 1)", (s["correlation"], s["correlation_ci95"])),
             (axes[1], "predicted_change_2nd", "first order + in-silico curvature",
@@ -130,10 +130,10 @@ def draw(data: dict):
         ax.set_ylabel(r"realised $\Delta J_{s_t}$ (referee)")
         ax.set_title(f"{title}: r = {r:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]", fontsize=9)
     axes[0].legend(fontsize=7, loc="upper left")
-    notes = "; ".join(f"{k.replace('gift_', '')}: {grid_note(data[k])}" for k in SWEEPS if k in data)
-    fig.suptitle(f"Theorem 1's first-order change of J_st along the GIFT direction vs the referee ({s['points']} "
-                 f"points, {s['wrong']} wrong by the rule, {s['sign_wrong']} of the wrong sign); hollow: not "
-                 f"accepted\n{notes}", fontsize=8)
+    notes = "\n".join(f"{k.replace('gift_', '')}: {grid_note(data[k])}" for k in SWEEPS if k in data)
+    fig.suptitle(f"Theorem 1's first-order change of J_st along the GIFT direction vs the referee: {s['points']} "
+                 f"points, {s['wrong']} wrong by the rule ({s['sign_wrong']} of the wrong sign), realised/predicted "
+                 f"median {s['median_realised_over_predicted']:.2f}; hollow: not accepted\n{notes}", fontsize=8)
     fig.tight_layout()
     return fig
 

@@ -34,6 +34,9 @@ def pytest_configure(config):
         _MADE.append(tempfile.mkdtemp(prefix="gift-test-cache-"))
         os.environ["GIFT_CACHE_DIR"] = _MADE[-1]
     os.environ.setdefault("MPLBACKEND", "agg")
+    # no persistent compilation cache in tests (hermetic runs; JAX writes its entries without a
+    # lock unless the filelock package is there); tests of the cache turn it on in a subprocess
+    os.environ.setdefault("GIFT_COMPILATION_CACHE", "off")
 
 
 def pytest_unconfigure(config):

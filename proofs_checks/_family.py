@@ -297,7 +297,7 @@ def _line_descent(Jt, ws, w0, v, order: int = 8):
             return True, f"phi(alpha) = J_st(w0 - alpha v) - J_st(w0) = ({c}) alpha^{k} + ...: decreases for small alpha of sign {-sg:+d}"
         if sg < 0:
             return True, f"phi(alpha) = ({c}) alpha^{k} + ...: decreases for every small alpha"
-        return False, f"phi(alpha) = ({c}) alpha^{k} + ... >= 0 near 0: no small step along v lowers J_st"
+        return False, f"phi(alpha) = J_st(w0 - alpha v) - J_st(w0) = ({c}) alpha^{k} + ... >= 0 near 0"
     return None, f"the first {order} derivatives of phi vanish at 0"
 
 

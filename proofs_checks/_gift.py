@@ -90,7 +90,7 @@ def algorithm1(eval_fn, w0, D, eta: float, *, max_iter: int = 50, keep_w0: bool 
 def _true_difference(key, wa, wb, problem, s, K2):
     phys = problem.physics.replace(s=s)
     with jax.enable_x64(True):
-        d = gt.paired_difference(key, wa, wb, problem.x, problem.y, phys, problem.arch, K2=K2)
+        d = _mc.paired_difference_on_mu(key, wa, wb, problem.x, problem.y, phys, problem.arch, K2=K2)
     return float(d.mean), float(d.se)
 
 
@@ -130,7 +130,7 @@ def theorem2_guarantee(key=None, precise: bool = False) -> dict:
         c, sign = info["chosen"]
         alpha = abs(c * eta * float(Dm @ v) / float(v @ v))
         small = 0 < alpha < alpha_max_lo
-        diff, se = _true_difference(jax.random.fold_in(key, 20 + j), w_ft, st_.w0, p, st_.st, K2=1024 if precise else 512)
+        diff, se = _true_difference(jax.random.fold_in(key, 20 + j), w_ft, st_.w0, p, st_.st, K2=256 if precise else 128)
         vd, z = sign_verdict(diff, se, "negative", confidence=lev.confidence)
         tests.append((small, vd))
         rows.append(f"eta = {kappa:g} ||w0||/||D|| = {fmt(eta)}: stopped at i = {info['iterations']}, chose c = {c} "
@@ -282,8 +282,8 @@ def algorithm1_stopping_rule(key=None, precise: bool = False) -> dict:
     v = np.asarray(th1["v_bar"])
     step_alpha = abs(eta * float(Dm @ v) / float(v @ v))
     c_star = th1["alpha"] / step_alpha                  # the quadratic model's optimum, in ray steps
-    R = 24 if precise else 12
-    K2e = 256
+    R = 16 if precise else 8
+    K2e = 128
     stops, diffs = [], []
     for r in range(R):
         kr = jax.random.fold_in(key, 100 + r)
@@ -293,7 +293,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False) -> dict:
             w_b, ib = algorithm1(make_eval(jax.random.fold_in(kr, 1), p.x, p.y, p.physics.replace(s=st_.st), p.arch,
                                            K2=K2e), st_.w0, Dm, eta, stop="both")
         stops.append((ip["iterations"], ib["iterations"], ib["chosen"][0]))
-        diffs.append(_true_difference(jax.random.fold_in(kr, 2), w_b, w_p, p, st_.st, K2=256)[0])
+        diffs.append(_true_difference(jax.random.fold_in(kr, 2), w_b, w_p, p, st_.st, K2=64)[0])
     stops = np.array(stops)
     d = np.array(diffs)
     better, z = sign_verdict(float(d.mean()), float(d.std(ddof=1) / math.sqrt(R)), "negative",

@@ -51,6 +51,7 @@ def onn_family(n: int = 1024, K2: int = 16, s0: float = S0, steps: int = 1500):
         draws = _mc.draws(jax.random.PRNGKey(13), arch, prob.physics, n, K2)
         flat, unravel = ravel_pytree(w0)
         wt = trivial_critical_point(arch, prob.y)
+        wt_flat = np.asarray(ravel_pytree(wt)[0])
     x = jnp.asarray(prob.x)[:, None, :]
     y = jnp.asarray(prob.y)[:, None, :]
 
@@ -58,7 +59,7 @@ def onn_family(n: int = 1024, K2: int = 16, s0: float = S0, steps: int = 1500):
         out = gt.forward(unravel(w), x, draws, prob.physics.replace(s=s), arch).y
         return jnp.mean(jnp.sum((y - out) ** 2, axis=-1), axis=1)
 
-    return J, np.asarray(flat), np.asarray(ravel_pytree(wt)[0]), prob, w0, wt
+    return J, np.asarray(flat), wt_flat, prob, w0, wt
 
 
 def setup(precise: bool = False, s0: float = S0, st: float = ST) -> Setup:

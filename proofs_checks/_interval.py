@@ -257,7 +257,8 @@ _ELEMENTWISE = {
 # primitives applied to lo and hi separately: rearrangements, or monotone non-decreasing in every input
 _SEPARATE = {"broadcast_in_dim", "reshape", "transpose", "squeeze", "expand_dims", "slice", "rev", "copy",
              "copy_p", "reduce_max", "reduce_min", "max", "min", "concatenate", "pad", "dynamic_slice",
-             "gather", "select_n", "split", "convert_element_type", "reduce_precision", "optimization_barrier"}
+             "gather", "select_n", "split", "convert_element_type", "reduce_precision", "optimization_barrier",
+             "stack", "unstack", "tile", "clamp"}
 _CALLS = {"pjit", "closed_call", "core_call", "custom_jvp_call", "custom_vjp_call", "custom_vjp_call_jaxpr",
           "remat", "checkpoint", "jit"}
 
@@ -266,6 +267,8 @@ def _separate(prim, ins, params):
     """Bind ``prim`` on the lower and on the upper ends; a select's predicate and an index
     must not depend on the variable."""
     name = prim.name
+    if name == "clamp" and (isinstance(ins[0], IV) or isinstance(ins[2], IV)):
+        raise ValueError("clamp bounds depend on the variable")
     if name == "select_n" and isinstance(ins[0], IV):
         raise ValueError("a branch (select) depends on the variable")
     if name in ("dynamic_slice", "gather") and any(isinstance(x, IV) for x in ins[1:]):
@@ -405,8 +408,9 @@ def sympy_enclosure(expr, var, dps: int = 40):
         if e.is_Rational:
             return iv.mpf(int(e.p)) / iv.mpf(int(e.q))
         if e.is_Number or e.is_NumberSymbol:
-            v = sp.N(e, dps + 10)
-            return iv.mpf([str(v)]) + iv.mpf([-abs(v) * 10 ** (-dps) - 10 ** (-dps), abs(v) * 10 ** (-dps) + 10 ** (-dps)])
+            v = mpmath.mpf(str(sp.N(e, dps + 10)))
+            eps = abs(v) * mpmath.mpf(10) ** (-dps) + mpmath.mpf(10) ** (-dps)
+            return iv.mpf([v - eps, v + eps])
         if e.is_Add:
             out = iv.mpf(0)
             for a in e.args:
@@ -438,8 +442,12 @@ def sympy_enclosure(expr, var, dps: int = 40):
         raise ValueError(f"no interval rule for {e.func}")
 
     def enclose(lo: float, hi: float):
-        with iv.workdps(dps):
+        old = iv.dps
+        iv.dps = dps
+        try:
             return ev(expr, iv.mpf([float(lo), float(hi)]))
+        finally:
+            iv.dps = old
 
     return enclose
 

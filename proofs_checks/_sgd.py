@@ -80,17 +80,6 @@ def exact_grad(params, s):
     return jnp.concatenate([jnp.ravel(a) for a in jax.tree_util.tree_leaves(g)])
 
 
-def projected_gradient(params, s, box):
-    """The projected gradient -grad J + pi (zero exactly at a KKT point of J on the box)."""
-    flat, _ = gt.flatten(params)
-    g = exact_grad(params, s)
-    lo, _ = gt.flatten(tuple(gt.Layer(jnp.full_like(l.W, box.W_min), jnp.full_like(l.b, box.b_min)) for l in params))
-    hi, _ = gt.flatten(tuple(gt.Layer(jnp.full_like(l.W, box.W_max), jnp.full_like(l.b, box.b_max)) for l in params))
-    # a coordinate at a bound keeps only the part of -g that points into H
-    pg = jnp.where((flat >= hi) & (g < 0), 0.0, jnp.where((flat <= lo) & (g > 0), 0.0, g))
-    return pg
-
-
 def run_replicates(key, arch, s, box, n_steps_list, *, R, eps0, k0, power, init_scale=0.3):
     """R independent projected-SGD runs; returns the iterates (R, P) after each n in ``n_steps_list``."""
     step = make_sgd(arch, s, box, eps0=eps0, k0=k0, power=power)
@@ -195,6 +184,8 @@ def ode_shadowing(key, arch, s, box, windows, T, *, R, eps0, k0, power, substeps
     ODE dw/dt = -grad J_{s_ode}(w) + pi(w) (projected Euler, ``substeps`` per SGD step, exact
     gradient from the closed form) over ODE time T; returns (len(windows), R) maxima of
     ||w_sgd(t_k) - w_ode(t_k)|| over the window, for s_ode = s and for s_ode = 0 (control)."""
+    if power != 1.0:
+        raise ValueError("the window lengths use t_k = eps0 k0 log(1 + k/k0), i.e. power = 1")
     step = make_sgd(arch, s, box, eps0=eps0, k0=k0, power=power)
     k_init, k_run = jax.random.split(key)
     w = jax.vmap(lambda k: gt.project(gt.init_params(k, arch, dtype=jnp.float64, gain=0.3), box))(
@@ -240,7 +231,7 @@ def ode_shadowing(key, arch, s, box, windows, T, *, R, eps0, k0, power, substeps
     for kj in windows:
         w = advance(w, done, kj - done)
         # the window covers ODE time T: n steps with sum eps = T
-        t_k = lambda k: eps0 * k0 * math.log1p(k / k0) if power == 1.0 else None
+        t_k = lambda k: eps0 * k0 * math.log1p(k / k0)
         n = int(math.ceil(k0 * (math.exp((t_k(kj) + T) / (eps0 * k0)) - 1) - kj))
         w, _, _, m, m0 = window(w, kj, n)
         done = kj + n

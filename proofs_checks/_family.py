@@ -38,7 +38,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._interval import jaxpr_enclosure, sup_bound, sympy_enclosure
+from ._interval import float_up, jaxpr_enclosure, sup_bound, sympy_enclosure
 from ._record import fmt
 
 #: what a family file must define (CONTRACTS §5b)
@@ -185,6 +185,22 @@ def _f(e) -> float:
     return float(sp.N(e, 30))
 
 
+def _real_roots(expr, x):
+    """The real roots of a polynomial in x: exact CRootOf over the rationals, radicals (sympy
+    solve, degree <= 4) when the coefficients are other constants; None when neither works."""
+    import sympy as sp
+
+    p = sp.Poly(expr, x)
+    try:
+        return sorted(set(p.real_roots()), key=_f)
+    except (NotImplementedError, sp.PolynomialError):
+        pass
+    if p.degree() > 4:
+        return None
+    roots = [r for r in sp.solve(p.as_expr(), x) if _sign(sp.im(r)) == 0]
+    return sorted({sp.simplify(sp.re(r)) for r in roots}, key=_f)
+
+
 def exact_sup_abs(h, z, a, b):
     """sup of |h(z)| over [a, b] exactly: critical points of h in (a, b) (sympy) and the
     endpoints. Returns dict(value, interior, endpoints, points, how) with sympy numbers
@@ -202,13 +218,17 @@ def exact_sup_abs(h, z, a, b):
     crit = None
     how = ""
     if num.is_polynomial(z) and den.is_polynomial(z):
+        poles_known = True
         if sp.Poly(den, z).degree() > 0:
-            poles = [r for r in sp.Poly(sp.fraction(sp.together(h))[1], z).real_roots() if a <= r <= b]
+            pr = _real_roots(sp.fraction(sp.together(h))[1], z)
+            poles_known = pr is not None
+            poles = [r for r in pr or [] if _sign(r - a) >= 0 and _sign(b - r) >= 0]
             if poles:
                 return dict(value=sp.oo, interior=sp.oo, endpoints=sp.oo, points=poles, how="pole in the interval")
-        pnum = sp.Poly(num, z)
-        crit = [] if pnum.is_zero else sorted({r for r in pnum.real_roots() if a < r < b}, key=lambda r: _f(r))
-        how = f"exact: {len(crit)} critical point(s) of a rational function in (a, b) (real roots) and both ends"
+        roots = [] if sp.Poly(num, z).is_zero else _real_roots(num, z)
+        if poles_known and roots is not None:
+            crit = [r for r in roots if _sign(r - a) > 0 and _sign(b - r) > 0]
+            how = f"exact: {len(crit)} critical point(s) of a rational function in (a, b) (real roots) and both ends"
     else:
         S = sp.solveset(sp.diff(h, z), z, sp.Interval.open(a, b))
         if isinstance(S, sp.FiniteSet):
@@ -242,8 +262,10 @@ def _critical_points(Jt, ws):
             p = sp.Poly(num, x)
             if p.is_zero:
                 return [], False, "grad J_st vanishes identically (every w is critical)"
-            roots = [r for r in p.real_roots() if den.subs(x, r) != 0]
-            roots = sorted(set(roots), key=_f)
+            roots = _real_roots(num, x)
+            if roots is None:
+                return [], False, "sympy cannot list the real roots of dJ_st/dw (degree > 4, non-rational coefficients)"
+            roots = [r for r in roots if _sign(den.subs(x, r)) != 0]
             return [(r,) for r in roots], True, f"real roots of the numerator of dJ_st/dw ({len(roots)})"
         S = sp.solveset(grads[0], x, sp.S.Reals)
         if isinstance(S, sp.FiniteSet):
@@ -370,8 +392,8 @@ def _theorem1_sympy(fam: Family, s0, st, *, rtol, max_pieces) -> dict:
             enc = sympy_enclosure(h, z)
 
             def upper_on(p, q):
-                r = enc(p, q)
-                return float(max(abs(r.a), abs(r.b)))
+                lo_, hi_ = enc(p, q)
+                return float_up(max(abs(lo_), abs(hi_)))
 
             lo_end, hi_end = np.nextafter(float(a), -np.inf), np.nextafter(float(b), np.inf)   # cover the ends
             bound = sup_bound(upper_on, lambda t: float(abs(h.subs(z, sp.Rational(t)).evalf(30))) * (1 - 1e-25),

@@ -372,8 +372,9 @@ def jaxpr_enclosure(fn: Callable, at: float):
 # sympy expressions with mpmath.iv
 # --------------------------------------------------------------------------------------
 def sympy_enclosure(expr, var, dps: int = 40):
-    """An enclosure ``(lo, hi) -> (L, U)`` (mpmath intervals, directed rounding) of the
-    sympy expression ``expr`` in the single symbol ``var``."""
+    """An enclosure ``(lo, hi) -> (L, U)`` (mpmath interval arithmetic at ``dps`` digits,
+    directed rounding; L, U returned as exact mpf numbers) of the sympy expression ``expr`` in
+    the single symbol ``var``."""
     import mpmath
     import sympy as sp
     from mpmath import iv
@@ -382,21 +383,29 @@ def sympy_enclosure(expr, var, dps: int = 40):
     if free:
         raise ValueError(f"the expression depends on other symbols: {sorted(map(str, free))}")
 
+    def ends(x):
+        """The endpoints of an mpmath interval as exact mpf numbers."""
+        return mpmath.mpf(x._mpi_[0]), mpmath.mpf(x._mpi_[1])
+
+    def widen(lo, hi):
+        """[lo, hi] widened by 10^-dps relatively (far beyond any rounding at dps + 10 digits)."""
+        eps = mpmath.mpf(10) ** (-dps)
+        return iv.mpf([lo - abs(lo) * eps - eps, hi + abs(hi) * eps + eps])
+
     def mono(f, increasing=True):
         def g(x):
             with mpmath.workdps(dps + 10):
-                a, b = f(mpmath.mpf(x.a)), f(mpmath.mpf(x.b))
-            lo, hi = (a, b) if increasing else (b, a)
-            eps = mpmath.mpf(2) ** (-(3 * dps))
-            return iv.mpf([lo - abs(lo) * eps - eps, hi + abs(hi) * eps + eps])
+                a, b = (f(t) for t in ends(x))
+                lo, hi = (a, b) if increasing else (b, a)
+                return widen(lo, hi)
         return g
 
     def cosh(x):  # even, minimum 1 at 0
         with mpmath.workdps(dps + 10):
-            ends = (mpmath.cosh(mpmath.mpf(x.a)), mpmath.cosh(mpmath.mpf(x.b)))
-        bottom = 1 if x.a <= 0 <= x.b else min(ends)
-        eps = mpmath.mpf(2) ** (-(3 * dps))
-        return iv.mpf([bottom - abs(bottom) * eps, max(ends) * (1 + eps)])
+            lo_, hi_ = ends(x)
+            vals = (mpmath.cosh(lo_), mpmath.cosh(hi_))
+            bottom = mpmath.mpf(1) if lo_ <= 0 <= hi_ else min(vals)
+            return widen(bottom, max(vals))
 
     funcs = {sp.exp: iv.exp, sp.log: iv.log, sp.sin: iv.sin, sp.cos: iv.cos, sp.tan: iv.tan,
              sp.tanh: mono(mpmath.tanh), sp.sinh: mono(mpmath.sinh), sp.atan: mono(mpmath.atan),
@@ -408,9 +417,9 @@ def sympy_enclosure(expr, var, dps: int = 40):
         if e.is_Rational:
             return iv.mpf(int(e.p)) / iv.mpf(int(e.q))
         if e.is_Number or e.is_NumberSymbol:
-            v = mpmath.mpf(str(sp.N(e, dps + 10)))
-            eps = abs(v) * mpmath.mpf(10) ** (-dps) + mpmath.mpf(10) ** (-dps)
-            return iv.mpf([v - eps, v + eps])
+            with mpmath.workdps(dps + 10):
+                v = mpmath.mpf(str(sp.N(e, dps + 10)))
+                return widen(v, v)
         if e.is_Add:
             out = iv.mpf(0)
             for a in e.args:
@@ -434,8 +443,9 @@ def sympy_enclosure(expr, var, dps: int = 40):
             return iv.exp(ev(ex, x) * iv.log(ev(base, x)))
         if isinstance(e, sp.Abs):
             a = ev(e.args[0], x)
-            lo = 0 if a.a <= 0 <= a.b else min(abs(a.a), abs(a.b))
-            return iv.mpf([lo, max(abs(a.a), abs(a.b))])
+            lo_, hi_ = ends(a)
+            lo = 0 if lo_ <= 0 <= hi_ else min(abs(lo_), abs(hi_))
+            return iv.mpf([lo, max(abs(lo_), abs(hi_))])
         f = funcs.get(e.func)
         if f is not None:
             return f(ev(e.args[0], x))
@@ -445,7 +455,9 @@ def sympy_enclosure(expr, var, dps: int = 40):
         old = iv.dps
         iv.dps = dps
         try:
-            return ev(expr, iv.mpf([float(lo), float(hi)]))
+            r = ev(expr, iv.mpf([float(lo), float(hi)]))
+            with mpmath.workdps(dps + 10):
+                return ends(r)
         finally:
             iv.dps = old
 
@@ -510,3 +522,12 @@ def sup_bound(upper_on: Callable[[float, float], float], lower_at: Callable[[flo
             heapq.heappush(heap, (-upper_on(p, q), p, q))
         n += 1
     return SupBound(lower, max(-heap[0][0], lower), arg, n)
+
+
+def float_up(x) -> float:
+    """The float nearest to the mpf ``x``, moved up if needed so that it is >= x."""
+    import mpmath
+
+    f = float(x)
+    with mpmath.workdps(60):
+        return f if mpmath.mpf(f) >= x else float(np.nextafter(f, np.inf))

@@ -39,7 +39,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ._interval import float_up, jaxpr_enclosure, sup_bound, sympy_enclosure
-from ._record import fmt
+from ._record import decide, fmt
 
 #: what a family file must define (CONTRACTS §5b)
 FAMILY_NAMES = ("s", "w", "J", "w0")
@@ -414,12 +414,7 @@ def _theorem1_sympy(fam: Family, s0, st, *, rtol, max_pieces) -> dict:
     bad = [i for i, sg in enumerate(signs) if sg >= 0]
     hyps.append(_hyp("wt_exists", "{grad J_st = 0} nonempty (ass:Nonempty-minimizer-sets)",
                      bool(pts) if (pts or complete) else None, how_pts))
-    if bad:
-        conclusion = "fails"
-    elif pts and complete:
-        conclusion = "holds"
-    else:
-        conclusion = "inconclusive"
+    conclusion = decide(fails=bool(bad), holds=bool(pts) and complete)
     descent, descent_detail = _line_descent(Jt, ws, fam.w0, v) if any(_sign(x) for x in v) else \
         (False, "v = d/ds grad J_s0(w0) = 0: no direction")
     res = {
@@ -675,7 +670,7 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
             wt_rows.append({"max_abs_z_grad": float(np.max(zs)), "z_crit": zc, "consistent_with_critical":
                             bool(np.max(zs) < zc), "J_st_wt_minus_J_st_w0": _iv(dm, dm - z * dse, dm + z * dse)})
     refuting = [r for r in wt_rows if r["consistent_with_critical"] and r["J_st_wt_minus_J_st_w0"]["lo"] >= 0]
-    conclusion = "fails" if refuting else "inconclusive"
+    conclusion = decide(fails=bool(refuting))
     hyps = [_hyp("s_positive", "s0, st in (0, inf)", s0 > 0 and st > 0, f"s0 = {s0:g}, st = {st:g}"),
             _hyp("w0_critical", "w0 in {grad J_s0 = 0} (ass:Nonempty-minimizer-sets)", bool(crit_ok),
                  f"grad J_s0(w0)^T v = {fmt(res0)} +- {fmt(res0_se)} (C1 = {fmt(C1)}); max |grad J_s0(w0)| = "

@@ -16,7 +16,7 @@ from scipy import stats
 import gift_theory as gt
 
 from . import _mc, _onn
-from ._record import fmt, hypothesis, level, record, sign_verdict
+from ._record import decide, fmt, hypothesis, level, record, sign_verdict
 
 #: the two stopping rules of the repeat loop: printed "until L+ v L- >= L0" (either side no
 #: better), corrected "until L+ ^ L- >= L0" (both sides no better)
@@ -140,14 +140,8 @@ def theorem2_guarantee(key=None, precise: bool = False) -> dict:
     inside = [vd for small, vd in tests if small]
     hyp_th1 = _onn.hypotheses_of_theorem1(th1)
     hyps_ok = all(h["verified"] for h in hyp_th1 if h["needed_for_refutation"])
-    if not (hyps_ok and inside):
-        verdict = "inconclusive"
-    elif any(v_ == "fails" for v_ in inside):
-        verdict = "fails"
-    elif all(v_ == "holds" for v_ in inside):
-        verdict = "holds"
-    else:
-        verdict = "inconclusive"
+    ok = hyps_ok and bool(inside)
+    verdict = decide(fails=ok and any(v_ == "fails" for v_ in inside), holds=ok and all(v_ == "holds" for v_ in inside))
     hyps = hyp_th1 + [hypothesis("eta_small", "eta sufficiently small (the proof: the step lies in Table "
                                  "alpha-values' range)", bool(inside), f"{len(inside)} of {len(kappas)} eta inside "
                                  f"(0, C1/C2) at the confidence"),
@@ -211,9 +205,9 @@ def gift_never_worse(key=None, precise: bool = False) -> dict:
             worse += truth[inf["chosen"]][0] > 0
     _, hi = _clopper_pearson(worse, R, 1 - 2 * lev.alpha)        # one-sided upper bound at lev.alpha
     lo_strict, _ = _clopper_pearson(worse, R, 1 - 2 * lev.alpha)
-    corrected_v = "holds" if hi <= delta else ("fails" if lo_strict > delta else "inconclusive")
+    corrected_v = decide(fails=lo_strict > delta, holds=hi <= delta)
     # "never worse" is universal: one significantly worse run refutes it
-    verdict = "fails" if worse_v == "holds" else "inconclusive"
+    verdict = decide(fails=worse_v == "holds")
     correction = None
     if corrected_v == "holds":
         correction = (f"keep w0 among the candidates and let a candidate w0 +- c eta D replace w0 only if a one-sided "
@@ -300,7 +294,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False) -> dict:
                              confidence=lev.confidence)
     one_step = int(np.sum(stops[:, 0] == 1))
     line_ok = ex["printed"] == {"iterations": 1, "chosen": (1, 1)} and ex["both"]["chosen"] == (13, 1)
-    verdict = "fails" if (exact_fails and ex["printed"]["iterations"] == 1) else "inconclusive"
+    verdict = decide(fails=exact_fails and ex["printed"]["iterations"] == 1)
     corrected_ok = line_ok and better != "fails"
     hyps = [hypothesis("require", "Require of alg:GIFT: s0 > 0, eta > 0, K1, K2 >= 1, Eval evaluable in situ", True,
                        f"s0 = {st_.s0:g}, eta = {fmt(eta)}, K1 = {p.x.shape[0]}, K2 = {K2e}"),

@@ -99,6 +99,14 @@ def hypothesis(name: str, statement: str, verified, detail: str = "", *, needed_
             "detail": detail, "needed_for_refutation": needed_for_refutation}
 
 
+def decide(*, fails: bool = False, holds: bool = False) -> str:
+    """The verdict from computed conditions: "fails" when the refutation condition is met (it
+    wins), else "holds" when the confirmation condition is met, else "inconclusive"."""
+    if bool(fails):
+        return VERDICTS[1]
+    return VERDICTS[0] if bool(holds) else VERDICTS[2]
+
+
 def symbolic_verdict(is_zero: bool) -> str:
     """A printed identity holds iff the symbolic difference simplifies to zero."""
     return VERDICTS[0] if bool(is_zero) else VERDICTS[1]

@@ -23,7 +23,7 @@ import sympy as sp
 import gift_theory as gt
 import linear_case as lc
 
-from ._record import fmt, hypothesis, level, record, sign_verdict
+from ._record import decide, fmt, hypothesis, level, record, sign_verdict
 
 _TASK = lc.isotropic_task([[0.6, -0.8]], 1.0)
 
@@ -139,8 +139,7 @@ def sgd_limit_points(key=None, precise: bool = False) -> dict:
         tests.append(sign_verdict(float(lr.mean()), float(lr.std(ddof=1) / math.sqrt(R)), "negative",
                                   confidence=lev.confidence))
     logr = np.log(inn["g"][-1] / inn["g"][0])
-    verdict = "holds" if all(v == "holds" for v, _ in tests) else (
-        "fails" if any(v == "fails" for v, _ in tests) else "inconclusive")
+    verdict = decide(fails=any(v == "fails" for v, _ in tests), holds=all(v == "holds" for v, _ in tests))
     # the binding box: (B2) fails at the constrained minimiser, where grad J != 0 and the projected gradient is 0
     tb = rows["tight"]
     hyps = common_hypotheses() + [
@@ -256,8 +255,7 @@ def proposition1_ode_limit(key=None, precise: bool = False) -> dict:
     v_ctrl, z_ctrl = sign_verdict(float(ctrl.mean()), float(ctrl.std(ddof=1) / math.sqrt(R)), "positive",
                                   confidence=lev.confidence)
     eps_ratio = _eps(windows[-1], eps0, k0, power) / _eps(windows[0], eps0, k0, power)
-    verdict = "holds" if (v_dec == "holds" and v_ctrl == "holds") else ("fails" if v_dec == "fails" else
-                                                                         "inconclusive")
+    verdict = decide(fails=v_dec == "fails", holds=v_dec == "holds" and v_ctrl == "holds")
     hyps = common_hypotheses() + [steps_hypothesis(eps0, k0, power)]
     evidence = (
         f"linear M_s 2-2-1 with biases, noise at every site, s = {s:g}, box [-0.5, 0.5], {R} runs, eps_k = "

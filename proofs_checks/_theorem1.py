@@ -20,7 +20,7 @@ import gift_theory as gt
 
 from . import _mc
 from ._family import family, load_family, render, theorem1
-from ._record import fmt, hypothesis, level, record, sign_verdict, symbolic_verdict
+from ._record import decide, fmt, hypothesis, level, record, sign_verdict, symbolic_verdict
 
 
 # --------------------------------------------------------------------------------------
@@ -246,7 +246,7 @@ def theorem1_conclusion(key=None, precise: bool = False) -> dict:
     inside = lambda r: all(h["verified"] for h in r["hypotheses"])
     exact_refuted = [r for r in (quartic, chain) if inside(r) and r["conclusion"] == "fails"]
     onn_refuted = inside(onn) and onn["conclusion"] == "fails"
-    verdict = "fails" if (exact_refuted or onn_refuted) else "inconclusive"
+    verdict = decide(fails=bool(exact_refuted) or onn_refuted)
     d_v, d_mean, d_se, d_z = descent_confirmation(jax.random.fold_in(key, 1), st_, lev)
     corrected_ok = (quartic["corrected_condition"] != "holds" and chain["descent"]["exists"] is True
                     and d_v == "holds")

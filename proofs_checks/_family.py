@@ -386,7 +386,7 @@ def _theorem1_sympy(fam: Family, s0, st, *, rtol, max_pieces) -> dict:
     if gap != 0:
         ex = exact_sup_abs(h, z, a, b)
         if ex is not None:
-            M, M_int, M_end = ex["value"], ex["interior"], ex["endpoints"]
+            M, M_int, M_end = ex["value"], ex["interior"], ex["endpoints"]      # exact sup, interior / ends
             sup = dict(lo=M, hi=M, how=ex["how"], exact=True)
         else:
             enc = sympy_enclosure(h, z)
@@ -459,14 +459,14 @@ def _conditions_exact(vv, vn, gap, sup, M_int, M_end):
         corrected = "holds" if _sign(vv - gap * hi / 2) > 0 else "not met"
         return printed, corrected, prhs, crhs
 
-    def decide(num):
+    def status(num):
         if _sign(num - gap * hi / 2) > 0:
             return "holds"
         if _sign(num - gap * lo / 2) <= 0:
             return "not met"
         return "undecided"
 
-    return decide(vn), decide(vv), prhs, crhs
+    return status(vn), status(vv), prhs, crhs
 
 
 def _evidence(res: dict, extra: str = "") -> str:

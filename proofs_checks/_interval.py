@@ -22,7 +22,6 @@ Two evaluators of an enclosure ``[lo, hi] -> (L, U)`` with L <= h(zeta) <= U for
 from __future__ import annotations
 
 import heapq
-import math
 from typing import Callable, NamedTuple
 
 import numpy as np

@@ -6,7 +6,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import sympy as sp
-from jax.flatten_util import ravel_pytree
 
 import gift_theory as gt
 import linear_case as lc

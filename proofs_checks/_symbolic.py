@@ -7,7 +7,6 @@ simplification computed on this run.
 
 from __future__ import annotations
 
-import itertools
 
 import sympy as sp
 

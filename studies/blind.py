@@ -1,7 +1,7 @@
 """A blind identification study: measurement files from an independent simulator.
 
-    python -m gift_theory.lab.blind write DIR [--files-per-effect 3] [--seed 0] [--no-taps]
-    python -m gift_theory.lab.blind score DIR [--limit N]
+    python -m studies.blind write DIR [--files-per-effect 3] [--seed 0] [--no-taps]
+    python -m studies.blind score DIR [--limit N]
 
 ``write`` draws, per file, a random architecture (2-4 layers, widths 3-28, tanh), random
 weights, inputs, noise level and effect strength, and simulates the chip with a plain-numpy
@@ -26,13 +26,11 @@ import time
 
 import numpy as np
 
+from .contract_sim import loguniform, simulate_contract
+
 #: effects of the study and the range each parameter is drawn from (log-uniform for scales)
 EFFECTS = ("none", "laplace", "uniform", "multiplicative", "common_mode", "drift", "crosstalk", "weight_error",
            "shot", "saturation", "quantization", "shot+crosstalk", "multiplicative+common_mode")
-
-
-def _loguniform(rng, lo, hi):
-    return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
 
 
 def _draw_setting(rng, taps: bool):
@@ -46,90 +44,29 @@ def _draw_setting(rng, taps: bool):
     kind = rng.integers(3)
     x = (rng.uniform(0, 1, (n, widths[0])) if kind == 0 else rng.uniform(-1, 1, (n, widths[0])) if kind == 1
          else rng.normal(0, 1, (n, widths[0])))
-    s = _loguniform(rng, 0.03, 0.15)
+    s = loguniform(rng, 0.03, 0.15)
     return widths, Ws, bs, x, n, r, s
 
 
 def _effect_params(rng, name, typical):
     """A visible but not overwhelming strength of ``name``; ``typical`` = rms of layer outputs."""
     if name == "multiplicative":
-        return {"m": _loguniform(rng, 0.1, 0.3)}
+        return {"m": loguniform(rng, 0.1, 0.3)}
     if name == "common_mode":
-        return {"c": _loguniform(rng, 0.05, 0.2)}
+        return {"c": loguniform(rng, 0.05, 0.2)}
     if name == "drift":
         return {"r": float(rng.choice([-1, 1]) * rng.uniform(0.15, 0.5))}
     if name == "crosstalk":
         return {"k": float(rng.choice([-1, 1]) * rng.uniform(0.1, 0.3))}
     if name == "weight_error":
-        return {"e": _loguniform(rng, 0.05, 0.2)}
+        return {"e": loguniform(rng, 0.05, 0.2)}
     if name == "shot":
-        return {"q": _loguniform(rng, 0.01, 0.05)}
+        return {"q": loguniform(rng, 0.01, 0.05)}
     if name == "saturation":
         return {"v_max": float(typical * rng.uniform(0.8, 2.0))}
     if name == "quantization":
         return {"bits": float(rng.integers(4, 8)), "v_range": float(typical * rng.uniform(2.5, 5.0))}
     return {}
-
-
-def simulate_contract(rng, widths, Ws, bs, x, r, s, effects: dict, activation=np.tanh):
-    """CONTRACTS §2 in plain numpy: returns y (n, r, d_L), taps [a_1 .. a_{L-1}], t (n, r)."""
-    n = x.shape[0]
-    L = len(Ws)
-    law = "laplace" if "laplace" in effects else "uniform" if "uniform" in effects else "gaussian"
-
-    def additive(shape):
-        if law == "laplace":
-            return rng.laplace(0.0, s / np.sqrt(2.0), shape)
-        if law == "uniform":
-            return rng.uniform(-np.sqrt(3.0) * s, np.sqrt(3.0) * s, shape)
-        return rng.normal(0.0, s, shape)
-
-    order = rng.permutation(n * r)  # acquisition order of the (input, shot) pairs
-    t = (np.argsort(order).reshape(n, r) / max(n * r - 1, 1)).astype(np.float64)
-    Weffs = []
-    for W in Ws:
-        We = W.copy()
-        if "crosstalk" in effects:
-            k = effects["crosstalk"]["k"]
-            left = np.zeros_like(W)
-            left[:, 1:] = W[:, :-1]
-            right = np.zeros_like(W)
-            right[:, :-1] = W[:, 1:]
-            We = We + k * (left + right)
-        if "weight_error" in effects:
-            We = We + rng.normal(0.0, effects["weight_error"]["e"], W.shape)  # fixed for the device
-        Weffs.append(We)
-
-    def readout(v):
-        if "saturation" in effects:
-            vm = effects["saturation"]["v_max"]
-            v = vm * np.tanh(v / vm)
-        if "shot" in effects:
-            v = v + np.sqrt(effects["shot"]["q"] * np.abs(v)) * rng.standard_normal(v.shape)
-        if "quantization" in effects:
-            bits, vr = effects["quantization"]["bits"], effects["quantization"]["v_range"]
-            step = 2 * vr / 2 ** bits
-            v = np.clip(np.round(v / step) * step, -vr, vr)
-        return v
-
-    a = x[:, None, :] + additive((n, r, widths[0]))
-    taps = []
-    for l in range(L):
-        u = a @ Weffs[l].T
-        g = np.ones_like(u)
-        if "multiplicative" in effects:
-            g = g * (1 + effects["multiplicative"]["m"] * rng.standard_normal(u.shape))
-        if "common_mode" in effects:
-            g = g * (1 + effects["common_mode"]["c"] * rng.standard_normal(u.shape[:2] + (1,)))
-        if "drift" in effects:
-            g = g * (1 + effects["drift"]["r"] * t[:, :, None])
-        z = g * u + bs[l] + additive(u.shape)
-        if l < L - 1:
-            a = readout(activation(z) + additive(u.shape))
-            taps.append(a)
-        else:
-            a = readout(z)
-    return a, taps, t
 
 
 def write(folder, files_per_effect: int, seed: int, taps: bool, effects=EFFECTS):
@@ -162,7 +99,7 @@ def write(folder, files_per_effect: int, seed: int, taps: bool, effects=EFFECTS)
 def score(folder, limit=None, out=sys.stdout):
     import jax
 
-    from . import diagnose, load_measurement
+    from gift_theory.lab import diagnose, load_measurement
 
     files = sorted(f for f in os.listdir(folder) if f.endswith(".npz"))[:limit]
     rows = []
@@ -208,7 +145,7 @@ def score(folder, limit=None, out=sys.stdout):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m gift_theory.lab.blind", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m studies.blind", description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("write", "score"))
     p.add_argument("folder")
     p.add_argument("--files-per-effect", type=int, default=3)

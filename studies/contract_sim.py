@@ -66,6 +66,13 @@ import numpy as np
 CATALOGUE = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "drift", "crosstalk", "weight_error",
              "shot", "saturation", "quantization")
 
+#: the mechanism class (CONTRACTS §6) of every catalogue effect
+CLASS_OF = {"awgn": "noise_level", "laplace": "noise_law", "uniform": "noise_law",
+            "shot": "input_dependent_noise", "multiplicative": "input_dependent_noise",
+            "common_mode": "gain_fluctuation", "drift": "gain_fluctuation",
+            "crosstalk": "weight_error", "weight_error": "weight_error",
+            "saturation": "readout_nonlinearity", "quantization": "readout_nonlinearity"}
+
 #: the mechanism classes of CONTRACTS §6
 MECHANISMS = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "weight_error",
               "bias_offset", "activation_mismatch", "readout_nonlinearity")
@@ -124,31 +131,44 @@ def dense_coupling_device(rng, widths):
     return out
 
 
+def _draw_bias_offset(rng, widths, n, r):
+    sigma = loguniform(rng, 0.04, 0.12)
+    return {"sigma": sigma, "delta": bias_offset_device(rng, widths, sigma)}
+
+
+def _draw_dense_crosstalk(rng, widths, n, r):
+    return {"k": _signed(rng, 0.15, 0.35), "C": dense_coupling_device(rng, widths)}
+
+
+def _draw_ar1_gain(rng, widths, n, r):
+    return {"c": loguniform(rng, 0.06, 0.15), "tau": float(rng.uniform(0.01, 0.05) * n * r)}
+
+
+# strengths: at 8-16-8-4, 160 x 48 shots, s = 0.1 the layer-wise mean shifts (for the
+# variance effects the variance ratios) are of the size the built-in study's ranges give
 OPEN_PHYSICS = {p.name: p for p in (
     OpenPhysics("activation_gain", "activation_mismatch", "hidden", ("activation_gain",), (),
                 "hidden layers: act(z) = tanh(kappa z)",
                 lambda rng, widths, n, r: {"kappa": 1.0 + _signed(rng, 0.12, 0.25)}),
     OpenPhysics("bias_offset", "bias_offset", "all", ("bias_offset",), (),
                 "every layer: b_eff = b + delta, delta[i] ~ N(0, sigma^2) per neuron, fixed per device",
-                lambda rng, widths, n, r: (lambda sg: {"sigma": sg, "delta": bias_offset_device(rng, widths, sg)})(
-                    loguniform(rng, 0.04, 0.12))),
+                _draw_bias_offset),
     OpenPhysics("square_law", "readout_nonlinearity", "output", (), (),
                 "the output detector measures intensity: y = z_L^2 (z_L with its noise n_wL)",
                 lambda rng, widths, n, r: {}),
     OpenPhysics("signal_noise", "input_dependent_noise", "hidden", (), (),
                 "hidden layers: n_w = s (1 + beta |u|) n (weighted-sum noise grows with the signal)",
-                lambda rng, widths, n, r: {"beta": loguniform(rng, 0.5, 2.0)}),
+                lambda rng, widths, n, r: {"beta": loguniform(rng, 1.0, 3.0)}),
     OpenPhysics("dense_crosstalk", "weight_error", "all", (), ("weight_error",),
                 "every layer: W_eff = W + k W C, C a fixed dense coupling, zero on and next to the diagonal",
-                lambda rng, widths, n, r: {"k": _signed(rng, 0.15, 0.35), "C": dense_coupling_device(rng, widths)}),
+                _draw_dense_crosstalk),
     OpenPhysics("activation_shape", "activation_mismatch", "hidden", (), (),
                 "hidden layers: act(z) = tanh(z) + a2 tanh(z)^2 (asymmetric saturation)",
-                lambda rng, widths, n, r: {"a2": _signed(rng, 0.08, 0.2)}),
+                lambda rng, widths, n, r: {"a2": _signed(rng, 0.05, 0.15)}),
     OpenPhysics("ar1_gain", "gain_fluctuation", "all", (), (),
                 "every layer: g *= 1 + c xi(k), xi one AR(1) process (correlation time tau shots) in "
                 "acquisition order, shared by all neurons and layers",
-                lambda rng, widths, n, r: {"c": loguniform(rng, 0.04, 0.12),
-                                           "tau": float(rng.uniform(0.01, 0.05) * n * r)}),
+                _draw_ar1_gain),
 )}
 
 

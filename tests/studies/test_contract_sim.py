@@ -185,3 +185,104 @@ def test_weight_error_is_a_fixed_iid_gaussian_offset_per_device(x64):
     tests["independent rows (worst pair)"] = min(1.0, len(corr) * 2 * stats.norm.sf(np.abs(corr).max() * np.sqrt(flat.shape[1])))
     bad = {k: p for k, p in tests.items() if p < ALPHA / len(tests)}
     assert not bad, f"gift's weight_error offsets break CONTRACTS §2: {bad}"
+
+
+# ------------------------------------------------- the open physics do what their definitions say
+
+def _open_net(rng, widths=(5, 7, 6, 3)):
+    Ws = [rng.normal(0.0, 1.2 / np.sqrt(widths[l]), (widths[l + 1], widths[l])) for l in range(len(widths) - 1)]
+    bs = [rng.normal(0.0, 0.3, widths[l + 1]) for l in range(len(widths) - 1)]
+    return list(widths), Ws, bs, rng.normal(0.0, 1.0, (6, widths[0]))
+
+
+def _noiseless(widths, Ws, bs, x, act=np.tanh, kappa=1.0, a2=0.0, Weff=None, delta=None, square=False):
+    """The stated formulas, one layer at a time, without noise: [a_1 .. a_L]."""
+    outs, a = [], x
+    for l, (W, b) in enumerate(zip(Ws, bs)):
+        z = a @ (W if Weff is None else Weff[l]).T + b + (0.0 if delta is None else delta[l])
+        if l < len(Ws) - 1:
+            h = act(kappa * z)
+            a = h + a2 * h ** 2
+        else:
+            a = z ** 2 if square else z
+        outs.append(a)
+    return outs
+
+
+def test_open_physics_at_zero_strength_draw_nothing_and_change_nothing():
+    """An effect draws from the generator only when present: at zero strength the output is the
+    plain model's, draw for draw (what keeps the built-in study's files byte-identical)."""
+    rng = np.random.default_rng(np.random.randint(2 ** 31))
+    widths, Ws, bs, x = _open_net(rng)
+    zero = {"activation_gain": {"kappa": 1.0}, "activation_shape": {"a2": 0.0}, "signal_noise": {"beta": 0.0},
+            "dense_crosstalk": {"k": 0.0, "C": [np.ones((d, d)) for d in widths[:-1]]},
+            "bias_offset": {"delta": [np.zeros(d) for d in widths[1:]]}}
+    plain = simulate_contract(np.random.default_rng(7), widths, Ws, bs, x, 5, 0.1, {})
+    for name, params in zero.items():
+        got = simulate_contract(np.random.default_rng(7), widths, Ws, bs, x, 5, 0.1, {name: params})
+        np.testing.assert_array_equal(got[0], plain[0], err_msg=name)
+
+
+def test_open_physics_follow_their_formulas_without_noise():
+    from studies.contract_sim import OPEN_PHYSICS
+
+    rng = np.random.default_rng(np.random.randint(2 ** 31))
+    widths, Ws, bs, x = _open_net(rng)
+    L = len(Ws)
+    for name, spec in OPEN_PHYSICS.items():
+        if name in ("signal_noise", "ar1_gain"):
+            continue  # noise effects: statistical checks below
+        p = spec.draw(rng, widths, 6, 1)
+        y, taps, _ = simulate_contract(np.random.default_rng(0), widths, Ws, bs, x, 1, 0.0, {name: p})
+        kw = {"activation_gain": lambda: {"kappa": p["kappa"]}, "activation_shape": lambda: {"a2": p["a2"]},
+              "bias_offset": lambda: {"delta": p["delta"]}, "square_law": lambda: {"square": True},
+              "dense_crosstalk": lambda: {"Weff": [W + p["k"] * W @ C for W, C in zip(Ws, p["C"])]}}[name]()
+        want = _noiseless(widths, Ws, bs, x, **kw)
+        for got, w in zip(taps + [y], want):
+            np.testing.assert_allclose(got[:, 0], w, rtol=1e-12, atol=1e-12, err_msg=name)
+        # where it acts: the layers whose one-step map (fed the true previous output) differs from the model's
+        plain = _noiseless(widths, Ws, bs, x)
+        fed = [np.tanh(a @ W.T + b) if l < L - 1 else a @ W.T + b
+               for l, (a, W, b) in enumerate(zip([x] + want[:-1], Ws, bs))]
+        acts = [l + 1 for l in range(L) if not np.allclose(fed[l], want[l], atol=1e-9)]
+        assert acts == spec.layers(L), (name, acts)
+        assert plain is not None
+    C = OPEN_PHYSICS["dense_crosstalk"].draw(rng, widths, 6, 1)["C"]
+    for c in C:
+        j, m = np.indices(c.shape)
+        assert np.all(c[np.abs(j - m) < 2] == 0) and np.all(c[np.abs(j - m) >= 2] != 0)
+
+
+def test_signal_noise_sd_grows_with_the_signal_on_hidden_layers_only():
+    """Identity activation, zero output weights: a_1 = u + s (1 + beta |u|) n_w + s n_a with
+    u = W_1 (x + s n_a0), and y = n_wL alone (variance s^2: the output layer keeps s). The
+    simulator's per-cell variances against a 10^6-draw transcription of that formula, with
+    the standard error of each variance from its per-shot values (5 sigma, Bonferroni-safe for 8 cells)."""
+    s, beta, R = 0.1, 2.0, 40000
+    W1 = np.array([[1.0, 0.0], [-2.0, 0.5], [0.0, 0.0]])
+    x = np.array([[0.5, -1.0], [1.0, 0.3]])
+    Ws, bs = [W1, np.zeros((1, 3))], [np.zeros(3), np.zeros(1)]
+    rng = np.random.default_rng(np.random.randint(2 ** 31))
+    y, taps, _ = simulate_contract(rng, [2, 3, 1], Ws, bs, x, R, s, {"signal_noise": {"beta": beta}},
+                                   activation=lambda z: z)
+    ref = np.random.default_rng(rng.integers(2 ** 31))
+    u = (x[:, None, :] + s * ref.standard_normal((2, 10 ** 6, 2))) @ W1.T
+    a1 = u + s * (1 + beta * np.abs(u)) * ref.standard_normal(u.shape) + s * ref.standard_normal(u.shape)
+    got = np.concatenate([taps[0], y], axis=-1)
+    want = np.concatenate([a1.var(axis=1), np.full((2, 1), s ** 2)], axis=-1)
+    c2 = (got - got.mean(axis=1, keepdims=True)) ** 2
+    z = (c2.mean(axis=1) - want) / (c2.std(axis=1) / np.sqrt(R))
+    assert np.all(np.abs(z) < 5), z
+    assert np.all(want[:, :2] > 2 * (W1[:2, 0] ** 2 + W1[:2, 1] ** 2 + 2) * s ** 2)  # beta visibly adds variance
+
+
+def test_ar1_path_has_unit_variance_and_its_lag_correlation():
+    from studies.contract_sim import ar1_path
+
+    tau, N = 20.0, 200000
+    xi = ar1_path(np.random.default_rng(np.random.randint(2 ** 31)), N, tau)
+    rho = np.exp(-1 / tau)
+    n_eff = N * (1 - rho ** 2) / (1 + rho ** 2)  # for the variance of an AR(1)'s sample variance
+    assert abs(xi.var() - 1) < 5 * np.sqrt(2 / n_eff)
+    lag = np.corrcoef(xi[:-1], xi[1:])[0, 1]
+    assert abs(lag - rho) < 5 * np.sqrt((1 - rho ** 2) / N)  # Bartlett's standard error of the lag-1 estimate

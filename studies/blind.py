@@ -200,10 +200,10 @@ def run_diagnose(path, seed: int, runner: str = "inprocess"):
         from importlib.metadata import entry_points
 
         (entry,) = [e for e in entry_points(group="console_scripts") if e.name == "gift"]
-        buf = io.StringIO()
-        with contextlib.redirect_stdout(buf):
+        buf, ebuf = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(ebuf):
             rc = entry.load()(argv)
-        stdout, err = buf.getvalue(), f"exit status {rc}"
+        stdout, err = buf.getvalue(), (ebuf.getvalue().strip().splitlines() or [""])[-1]
     if rc != 0:
         return None, f"gift diagnose exit {rc}: {err}"
     try:

@@ -141,7 +141,7 @@ def _draw_dense_crosstalk(rng, widths, n, r):
 
 
 def _draw_ar1_gain(rng, widths, n, r):
-    return {"c": loguniform(rng, 0.06, 0.15), "tau": float(rng.uniform(0.01, 0.05) * n * r)}
+    return {"c": loguniform(rng, 0.12, 0.25), "tau": float(rng.uniform(0.01, 0.05) * n * r)}
 
 
 # strengths: at 8-16-8-4, 160 x 48 shots, s = 0.1 the layer-wise mean shifts (for the

@@ -1,19 +1,31 @@
-"""A blind identification study: measurement files from an independent simulator.
+"""Blind identification studies: measurement files from an independent simulator, scored from labels.
 
-    python -m studies.blind write DIR [--files-per-effect 3] [--seed 0] [--no-taps]
-    python -m studies.blind score DIR [--limit N]
+    python -m studies.blind write DIR [--files-per-effect 3] [--seed 0] [--no-taps]            built-in catalogue
+    python -m studies.blind write DIR --physics open [--files-per-physics 3] [--nulls N]
+                                      [--seed 0] [--no-taps] [--setting random|reference]   physics outside it
+    python -m studies.blind score DIR [--limit N] [--match TEXT] [--runner inprocess|subprocess]
 
 ``write`` draws, per file, a random architecture (2-4 layers, widths 3-28, tanh), random
-weights, inputs, noise level and effect strength, and simulates the chip with a plain-numpy
-transcription of CONTRACTS §2 -- written from the contract's text, not from gift's forward
-pass -- so the study sees what a user's own simulator (or the independent judge's) would
-produce. Each file holds the CONTRACTS §3 keys plus ``hidden`` (the effects) and
-``hidden_params`` for scoring; the loop never reads them. ``score`` runs
-:func:`gift_theory.lab.diagnose` on every file and prints one JSON line per file and a
-summary: detection rate (missing effect flagged), identification rate (hidden effect
-ranked first; for two effects both among the top three names, or the top entry is the
-pair), false alarms on files without a hidden effect, and the p-value after fitting the
-winner.
+weights, inputs, noise level and effect strength, and simulates the chip with
+:mod:`studies.contract_sim`, a plain-numpy transcription of CONTRACTS §2 written from the
+contract's text, not from gift's forward pass, so the study sees what a user's own
+simulator (or the independent judge's) would produce.
+
+Built-in study: each file holds the CONTRACTS §3 keys plus ``hidden`` (the effects) and
+``hidden_params``; gift never reads them (the byte content of these files is unchanged since
+the study lived in gift_theory/lab). Open study (``--physics open``): the files hold the
+CONTRACTS §3 keys only, and the labels -- physics, CONTRACTS §6 mechanism class, the layers
+where a one-step check must fail, ``expressible_by``, parameters -- go to ``DIR/labels.json``;
+``--setting reference`` pins the network to 8-16-8-4, 160 inputs x 48 shots, s = 0.1.
+
+``score`` runs ``gift diagnose FILE --json --seed i --quiet`` on the i-th file (sorted) --
+through the ``gift`` console entry point in this process (default), or one ``gift`` process
+per file (``--runner subprocess``) -- and prints one JSON line per file and a summary. It
+reads only the CONTRACTS §4/§6 JSON: detection (missing_effect_detected), identification
+(built-in study: the hidden effect ranked first; for two effects both among the top three
+names, or the top entry is the pair), false alarms on null files, the p-value after fitting
+the winner, and (:func:`score_row`) ``explained`` correct, wrong explanations, failing
+layers exact, mechanism class first; a field the JSON lacks is scored as missing (null).
 """
 
 from __future__ import annotations
@@ -307,12 +319,13 @@ def summarize(rows, builtin: bool) -> dict:
     return summary
 
 
-def score(folder, limit=None, out=sys.stdout, runner="inprocess"):
+def score(folder, limit=None, out=sys.stdout, runner="inprocess", match=None):
     """Run ``gift diagnose`` on every file of ``folder`` and score it from the labels.
 
     Labels come from ``folder/labels.json`` (open study) or, for the built-in study, from each
     file's ``hidden`` keys, which gift never reads. File i (in sorted order) is diagnosed with
-    ``--seed i``, so the built-in study's numbers are those of ``diagnose(PRNGKey(i), ...)``.
+    ``--seed i``, so the built-in study's numbers are those of ``diagnose(PRNGKey(i), ...)``;
+    ``match`` scores only the files whose name contains it, with the same seeds as a full run.
     """
     if not os.path.isdir(folder):
         raise ValueError(f"{folder}: no such folder")
@@ -324,8 +337,9 @@ def score(folder, limit=None, out=sys.stdout, runner="inprocess"):
     files = sorted(f for f in os.listdir(folder) if f.endswith(".npz"))[:limit]
     if not files:
         raise ValueError(f"{folder}: no .npz files")
+    chosen = [(i, f) for i, f in enumerate(files) if match is None or match in f]
     rows = []
-    for i, f in enumerate(files):
+    for k, (i, f) in enumerate(chosen):
         path = os.path.join(folder, f)
         if labels is not None and f not in labels:
             raise ValueError(f"{labels_path}: no label for {f}")
@@ -349,7 +363,7 @@ def score(folder, limit=None, out=sys.stdout, runner="inprocess"):
         rows.append(row)
         out.write(json.dumps(row) + "\n")
         out.flush()
-        sys.stderr.write(f"[{i + 1}/{len(files)}] {f}: " + (err if err else
+        sys.stderr.write(f"[{k + 1}/{len(chosen)}] {f}: " + (err if err else
                          f"detected {row['detected']} (p {row['baseline_p']:.2g}) first {row['ranking'][0]} "
                          f"p_after {row['p_after'] if row['p_after'] is None else round(row['p_after'], 3)} "
                          f"explained {row['explained']} failing {row['failing_layers']} "
@@ -374,12 +388,13 @@ def main(argv=None):
     p.add_argument("--setting", choices=("random", "reference"), default="random",
                    help="open study: random networks like the built-in study's, or 8-16-8-4, 160 x 48, s = 0.1")
     p.add_argument("--limit", type=int, default=None)
+    p.add_argument("--match", default=None, help="score: only files whose name contains this (same seeds as a full run)")
     p.add_argument("--runner", choices=("inprocess", "subprocess"), default="inprocess",
                    help="score: the gift entry point in this process, or one gift process per file")
     a = p.parse_args(argv)
     try:
         if a.what == "score":
-            score(a.folder, a.limit, runner=a.runner)
+            score(a.folder, a.limit, runner=a.runner, match=a.match)
         elif a.physics == "open":
             write_open(a.folder, a.files, a.seed, a.taps, tuple(a.only.split(",")), a.nulls, a.setting)
         else:

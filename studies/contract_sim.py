@@ -158,7 +158,7 @@ OPEN_PHYSICS = {p.name: p for p in (
                 lambda rng, widths, n, r: {}),
     OpenPhysics("signal_noise", "input_dependent_noise", "hidden", (), (),
                 "hidden layers: n_w = s (1 + beta |u|) n (weighted-sum noise grows with the signal)",
-                lambda rng, widths, n, r: {"beta": loguniform(rng, 1.0, 3.0)}),
+                lambda rng, widths, n, r: {"beta": loguniform(rng, 2.0, 5.0)}),
     OpenPhysics("dense_crosstalk", "weight_error", "all", (), ("weight_error",),
                 "every layer: W_eff = W + k W C, C a fixed dense coupling, zero on and next to the diagonal",
                 _draw_dense_crosstalk),

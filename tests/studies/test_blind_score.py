@@ -167,3 +167,32 @@ def test_builtin_labels_come_from_the_file(tmp_path):
     assert label["physics"] == "shot+crosstalk" and label["expressible_by"] == ["crosstalk+shot"]
     assert label["classes"] == ["input_dependent_noise", "weight_error"] and label["layers"] == list(range(1, L + 1))
     assert set(label["truth"]) == {"s", "shot", "crosstalk"}
+
+
+def test_score_loop_seeds_labels_match_and_errors(tmp_path, monkeypatch):
+    """The loop with a stand-in for gift: file i (sorted) gets --seed i, also under --match; a
+    failed diagnose is a row with its error line; the summary is the last line."""
+    import io
+
+    blind.write_open(str(tmp_path), 1, seed=4, taps=False, physics=("square_law", "activation_gain"), nulls=1,
+                     setting="reference")
+    seen = []
+
+    def fake(path, seed, runner):
+        seen.append((path.rsplit("/", 1)[-1], seed))
+        if "none" in path:
+            return None, "gift diagnose exit 1: boom"
+        return _out(ranking=[("activation_gain", 0.5)], explained=True, failing=None,
+                    mechanisms=["activation_mismatch"]), None
+
+    monkeypatch.setattr(blind, "run_diagnose", fake)
+    buf = io.StringIO()
+    s = blind.score(str(tmp_path), out=buf)
+    lines = [json.loads(x) for x in buf.getvalue().splitlines()]
+    assert seen == [("activation_gain_0.npz", 0), ("none_0.npz", 1), ("square_law_0.npz", 2)]
+    assert lines[-1] == s and s["errors"] == 1 and lines[1]["error"].endswith("boom")
+    assert lines[0]["explained_correct"] and lines[0]["mechanism_first"] and lines[0]["failing_layers_exact"] is None
+    assert lines[2]["wrong_explanation"] and s["wrong_explanations"] == 1
+    seen.clear()
+    blind.score(str(tmp_path), out=io.StringIO(), match="square")
+    assert seen == [("square_law_0.npz", 2)]

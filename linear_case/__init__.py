@@ -9,6 +9,7 @@ from ._closed import MODES as MODES
 from ._closed import Bounds as Bounds
 from ._closed import LinearTask as LinearTask
 from ._closed import J as J
+from ._closed import J_with_biases as J_with_biases
 from ._closed import balanced_chain as balanced_chain
 from ._closed import chain_printed_rhs as chain_printed_rhs
 from ._closed import derivatives as derivatives

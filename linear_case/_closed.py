@@ -83,6 +83,16 @@ def J(ws, s, task: LinearTask, mode: str = "input"):
     return jnp.trace(D @ jnp.asarray(task.Sigma) @ D.T) + s ** 2 * noise_term(ws, mode)
 
 
+def J_with_biases(params, s, task: LinearTask, mode: str = "all"):
+    """J_s of the linear network *with biases* (the paper's M_s with identity activation):
+    params = ((W_1, b_1), ..., (W_L, b_L)); the output adds c = sum_l W_L..W_{l+1} b_l, which is
+    independent of the zero-mean input and of the noise, so J_s = J_s(no biases) + ||c||^2."""
+    ws = tuple(p[0] for p in params)
+    P = _tails(ws)
+    c = sum(P[l] @ params[l - 1][1] for l in range(1, len(ws) + 1))
+    return J(ws, s, task, mode) + jnp.sum(c ** 2)
+
+
 @partial(jax.jit, static_argnames=("mode",))
 def _derivs(ws, s, V, Sigma, mode):
     task = LinearTask(V, Sigma)

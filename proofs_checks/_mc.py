@@ -150,3 +150,19 @@ def train_critical(key, problem: Problem, s: float, *, K2: int = 32, steps: int 
         return p
 
     return run(params)
+
+
+def paired_difference_on_mu(key, params_a, params_b, x, y, physics, arch, K2: int) -> gt.Estimate:
+    """J_s(w_a) - J_s(w_b) when mu is the empirical measure of the given points (all used):
+    only the noise is random, so the standard error comes from the noise alone. The K2 draws per
+    input are split into two independent halves (common random numbers between w_a and w_b within
+    each); with per-input half differences d_i^A, d_i^B, Var(mean) = sum_i E(d_i^A - d_i^B)^2 / (4 n^2).
+    """
+    kA, kB = jax.random.split(key)
+    h = max(K2 // 2, 1)
+    dA = gt.paired_difference(kA, params_a, params_b, x, y, physics, arch, K2=h).samples
+    dB = gt.paired_difference(kB, params_a, params_b, x, y, physics, arch, K2=h).samples
+    n = dA.shape[0]
+    mean = float(0.5 * (dA.mean() + dB.mean()))
+    se = float(np.sqrt(np.sum((dA - dB) ** 2)) / (2 * n))
+    return gt.Estimate(mean, se, n, 0.5 * (dA + dB))

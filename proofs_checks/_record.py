@@ -7,15 +7,59 @@ difference that is or is not zero, or a statistic against a stated critical valu
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 from scipy import stats
 
 #: the three verdicts of CONTRACTS §4
 VERDICTS = ("holds", "fails", "inconclusive")
 
-#: default two-sided confidence of every numerical test (z about 4.42)
+#: family-wise error of one `gift check` run: the probability that any numerical test of any
+#: check decides wrongly is at most FAMILY_ALPHA (Bonferroni)
+FAMILY_ALPHA = 1e-3
+#: the family-wise error is split into SHARES equal shares, one per registered check (the
+#: registry holds at most SHARES checks); a check splits its share over its own tests
+SHARES = 20
+ALPHA_CHECK = FAMILY_ALPHA / SHARES
+
+#: default two-sided confidence of a single numerical test outside a check (z about 4.42)
 CONFIDENCE = 1.0 - 1e-5
+
+
+class Level(NamedTuple):
+    """The error level of each of ``tests`` numerical tests of one check (its share of the
+    family-wise level, split by Bonferroni)."""
+
+    tests: int
+
+    @property
+    def alpha(self) -> float:
+        """Two-sided error of each test."""
+        return ALPHA_CHECK / self.tests
+
+    @property
+    def confidence(self) -> float:
+        return 1.0 - self.alpha
+
+    @property
+    def z2(self) -> float:
+        """Two-sided critical value."""
+        return float(stats.norm.isf(self.alpha / 2))
+
+    @property
+    def z1(self) -> float:
+        """One-sided critical value."""
+        return float(stats.norm.isf(self.alpha))
+
+    def text(self) -> str:
+        return (f"level: family-wise error {FAMILY_ALPHA:g} over the whole run (Bonferroni, {ALPHA_CHECK:g} per "
+                f"check), split over {self.tests} test(s) here: alpha = {self.alpha:.3g} each (two-sided |z| > "
+                f"{self.z2:.2f}, one-sided z > {self.z1:.2f})")
+
+
+def level(tests: int = 1) -> Level:
+    """This check's per-test level when it runs ``tests`` numerical tests."""
+    return Level(max(int(tests), 1))
 
 
 def z_crit(confidence: float = CONFIDENCE) -> float:
@@ -24,18 +68,43 @@ def z_crit(confidence: float = CONFIDENCE) -> float:
 
 
 def record(id: str, claim: str, verdict: str, evidence: str, correction: str | None = None,
-           counterexample: Any = None) -> dict:
-    """One CONTRACTS §4 record ``{id, claim, verdict, evidence, correction, counterexample}``.
+           counterexample: Any = None, hypotheses: list | None = None) -> dict:
+    """One CONTRACTS §4 record ``{id, claim, verdict, evidence, correction, counterexample}``
+    plus ``hypotheses``: the statement's hypotheses, each ``{"name", "statement", "verified",
+    "detail"}`` on the check's instance(s) (``verified`` True/False, or None when not
+    decidable), and the finding an out-of-hypothesis instance supports.
 
     A "fails" verdict must carry a counterexample or a computed difference (in
-    ``counterexample``) and a correction that the same check verified.
+    ``counterexample``) and a correction that the same check verified; a refutation needs
+    every hypothesis verified on its instance.
     """
     if verdict not in VERDICTS:
         raise ValueError(f"verdict must be one of {VERDICTS}, got {verdict!r}")
     if verdict == "fails" and counterexample is None:
         raise ValueError(f"{id}: a 'fails' verdict needs a counterexample or a computed difference")
+    hypotheses = list(hypotheses or [])
+    if verdict == "fails" and any(h.get("verified") is False and h.get("needed_for_refutation", True)
+                                  for h in hypotheses):
+        raise ValueError(f"{id}: a refutation on an instance outside the statement's hypotheses")
     return {"id": id, "claim": claim, "verdict": verdict, "evidence": evidence,
-            "correction": correction, "counterexample": counterexample}
+            "correction": correction, "counterexample": counterexample, "hypotheses": hypotheses}
+
+
+def hypothesis(name: str, statement: str, verified, detail: str = "", *, needed_for_refutation: bool = True) -> dict:
+    """One hypothesis of a statement and whether it was verified on the check's instance.
+
+    ``needed_for_refutation=False`` marks an instance reported only as a finding outside the
+    statement (it does not block a refutation made on another instance)."""
+    return {"name": name, "statement": statement, "verified": None if verified is None else bool(verified),
+            "detail": detail, "needed_for_refutation": needed_for_refutation}
+
+
+def decide(*, fails: bool = False, holds: bool = False) -> str:
+    """The verdict from computed conditions: "fails" when the refutation condition is met (it
+    wins), else "holds" when the confirmation condition is met, else "inconclusive"."""
+    if bool(fails):
+        return VERDICTS[1]
+    return VERDICTS[0] if bool(holds) else VERDICTS[2]
 
 
 def symbolic_verdict(is_zero: bool) -> str:
@@ -56,6 +125,8 @@ def equality_verdict(diff: float, se: float, scale: float, *, confidence: float 
     (verdict, z) with z = diff / se
     """
     zc = z_crit(confidence)
+    if not (math.isfinite(float(diff)) and math.isfinite(float(se))):
+        return VERDICTS[2], math.nan
     z = float(diff) / float(se) if se > 0 else (math.inf if diff != 0 else 0.0)
     if abs(z) > zc:
         return VERDICTS[1], z
@@ -71,6 +142,8 @@ def sign_verdict(value: float, se: float, want: str, *, confidence: float = CONF
     direction, "fails" when it is significantly on the other side, else "inconclusive".
     """
     zc = float(stats.norm.isf(1.0 - confidence))
+    if not (math.isfinite(float(value)) and math.isfinite(float(se))):
+        return VERDICTS[2], math.nan
     z = float(value) / float(se) if se > 0 else math.copysign(math.inf, value) if value != 0 else 0.0
     good = -z if want == "negative" else z
     if good > zc:

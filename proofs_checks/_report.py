@@ -12,26 +12,50 @@ def one_line(text: str, width: int = 110) -> str:
     return text if len(text) <= width else text[: width - 3] + "..."
 
 
+def hypotheses_status(rec) -> str:
+    """'k/n' hypotheses verified on the instances the verdict rests on, plus the count of
+    out-of-hypothesis instances reported as findings."""
+    hs = rec.get("hypotheses") or []
+    need = [h for h in hs if h.get("needed_for_refutation", True)]
+    ok = sum(1 for h in need if h.get("verified"))
+    out = sum(1 for h in hs if not h.get("needed_for_refutation", True) and h.get("verified") is False)
+    if not hs:
+        return "-"
+    return f"{ok}/{len(need)}" + (f" +{out} outside" if out else "")
+
+
 def render_table(records) -> str:
-    """Plain-text table: id, verdict, one-line evidence."""
+    """Plain-text table: id, verdict, hypotheses verified, one-line evidence."""
     w = max(len(r["id"]) for r in records)
-    lines = [f"{'id':<{w}}  {'verdict':<12}  evidence", "-" * (w + 80)]
-    lines += [f"{r['id']:<{w}}  {r['verdict']:<12}  {one_line(r['evidence'])}" for r in records]
+    lines = [f"{'id':<{w}}  {'verdict':<12}  {'hypotheses':<12}  evidence", "-" * (w + 100)]
+    lines += [f"{r['id']:<{w}}  {r['verdict']:<12}  {hypotheses_status(r):<12}  {one_line(r['evidence'], 90)}"
+              for r in records]
     return "\n".join(lines)
 
 
 def render_markdown(records, *, seconds: float | None = None, precise: bool = False) -> str:
+    from ._record import ALPHA_CHECK, FAMILY_ALPHA
+
     lines = ["# gift check report", "",
              f"{len(records)} checks of the paper's printed statements "
              f"({'precise' if precise else 'default'} precision"
              + (f", {seconds:.0f} s" if seconds is not None else "") + "). "
-             "Numerical tests use two-sided confidence 1 - 1e-5 unless stated.", "",
-             "| id | verdict | evidence |", "|---|---|---|"]
+             f"All numerical tests of one run together err with probability at most {FAMILY_ALPHA:g} (family-wise, "
+             f"Bonferroni: {ALPHA_CHECK:g} per check, split over the check's tests as its evidence states).", "",
+             "| id | verdict | hypotheses | evidence |", "|---|---|---|---|"]
     for r in records:
-        lines.append(f"| `{r['id']}` | **{r['verdict']}** | {one_line(r['evidence'], 160).replace('|', '/')} |")
+        lines.append(f"| `{r['id']}` | **{r['verdict']}** | {hypotheses_status(r)} | "
+                     f"{one_line(r['evidence'], 160).replace('|', '/')} |")
     for r in records:
         lines += ["", f"## {r['id']}: {r['verdict']}", "", f"**Claim.** {r['claim']}", "",
                   f"**Evidence.** {r['evidence']}", ""]
+        if r.get("hypotheses"):
+            lines += ["**Hypotheses.**", ""]
+            lines += [f"- {h['name']}: {h['statement']} -- "
+                      f"{'verified' if h['verified'] else ('not verified' if h['verified'] is None else 'FALSE')}"
+                      f"{'' if h.get('needed_for_refutation', True) else ' (an instance reported as a finding)'}"
+                      f"{': ' + h['detail'] if h.get('detail') else ''}".replace("\n", " ") for h in r["hypotheses"]]
+            lines.append("")
         if r.get("correction"):
             lines += [f"**Correction (verified by this check).** {r['correction']}", ""]
         if r.get("counterexample") is not None:

@@ -7,11 +7,10 @@ simplification computed on this run.
 
 from __future__ import annotations
 
-import itertools
 
 import sympy as sp
 
-from ._record import combine, record, symbolic_verdict
+from ._record import hypothesis, record, symbolic_verdict
 
 
 # --------------------------------------------------------------------------------------
@@ -47,6 +46,7 @@ def lemma_gaussian_product_derivative(max_L: int = 3) -> dict:
     # a concrete point: L = 1, d = 1, n = 0, s = 2
     s, d, r2 = lemma_difference(1)[1]
     diff1 = diffs[0]
+    factored = sp.factor(diff1)
     point = {s: 2, d[0]: 1, r2[0]: 0}
     rel = float(diff1.subs(point))
     counter = None if verdict == "holds" else {
@@ -58,12 +58,15 @@ def lemma_gaussian_product_derivative(max_L: int = 3) -> dict:
         "lem:chain-derivative, eq. partial-derivative-of-product-of-gaussian-densities: "
         "d/ds prod_i phi_s(n_i) = sum_i (s^-2 |n_i|^2 - d_i) prod_j phi_s(n_j)",
         verdict,
-        f"sympy, L=1..{max_L}, symbolic d_i and |n_i|^2: (lhs - printed rhs)/prod = {diff1} for L=1 "
-        f"(nonzero unless s=1); with the factor 1/s the difference simplifies to "
-        f"{'0' if corrected_ok else 'a nonzero expression'} for every L",
+        f"sympy, L=1..{max_L}, symbolic d_i and |n_i|^2: (lhs - printed rhs)/prod = {factored} for L=1, i.e. "
+        f"(1 - 1/s)(d - |n|^2/s^2): zero only where s = 1 or |n|^2 = d s^2 (sympy: |n|^2 = {sp.solve(diff1, r2[0])}, or s = 1), so the printed identity "
+        f"fails as an identity in s and n; with the factor 1/s the difference simplifies to "
+        f"{'0' if corrected_ok else 'a nonzero expression'} for every L. Exact",
         correction=("d/ds prod_i phi_s(n_i) = s^-1 sum_i (s^-2 |n_i|^2 - d_i) prod_j phi_s(n_j) "
                     "(verified symbolically for L=1..%d)" % max_L) if corrected_ok else None,
-        counterexample=counter)
+        counterexample=counter,
+        hypotheses=[hypothesis("gaussian", "phi_s^(d) the N(0, s^2 I_d) density, s > 0, d_i >= 1", True,
+                               "symbols s > 0, d_i positive integers, |n_i|^2 >= 0: every case at once")])
 
 
 # --------------------------------------------------------------------------------------
@@ -131,7 +134,8 @@ def backprop_formulas(widths=(2, 2, 2, 1)) -> dict:
         f"undefined activation sigma: {len(nonzero)} of the gradient entries differ from the formulas "
         f"(reading the printed A^(i-1) as A^(l-1), an index typo)",
         correction=None,
-        counterexample=None if verdict == "holds" else {"differing_entries": [str(e) for e in nonzero[:3]]})
+        counterexample=None if verdict == "holds" else {"differing_entries": [str(e) for e in nonzero[:3]]},
+        hypotheses=[hypothesis("sigma", "sigma differentiable (A1)", True, "an undefined sympy Function: any sigma")])
 
 
 # --------------------------------------------------------------------------------------
@@ -214,4 +218,7 @@ def score_function_identity(widths=(1, 1, 1), activation: str = "quadratic") -> 
         correction=("d/ds grad_W(l) J_s = int E_N[ s^-1 (sum_alpha (s^-2 |N^alpha|^2 - d_alpha)) "
                     "(-2 R^(l) (A^(l-1))^T) ] dmu; hence the printed D^[0] estimates -(s0/2) d/ds grad J_s0 "
                     "(verified symbolically here)") if corrected_ok else None,
-        counterexample=counter)
+        counterexample=counter,
+        hypotheses=[hypothesis("A1", "sigma in C^2_PB", True, "sigma(z) = z + z^2/2: polynomial (the identity is "
+                               "then exact in Gaussian moments)"),
+                    hypothesis("noise", "independent N(0, s^2) noise at the sites of S, s > 0", True, "symbol s > 0")])

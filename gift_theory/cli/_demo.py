@@ -4,7 +4,7 @@
    against a simulated chip with GIFT and its rivals under one chip budget, print one table
    and draw a figure (the predicted vs observed loss change along GIFT's line, and every
    method's loss).
-2. Theory: two of the paper's claims as computed verdicts (``gift check`` runs all twelve).
+2. Theory: two of the paper's claims as computed verdicts (``gift check`` runs them all).
 3. The measurement loop: a simulated chip with a hidden physical effect, measured with
    taps; ``diagnose`` says whether the awgn model fails, which effect is missing, and the
    fitted model's error against the noise floor (``gift diagnose`` / ``gift fit``).

@@ -4,7 +4,7 @@ import json
 
 from gift_theory.cli._main import main
 
-KEYS = {"id", "claim", "verdict", "evidence", "correction", "counterexample"}
+KEYS = {"id", "claim", "verdict", "evidence", "correction", "counterexample", "hypotheses"}
 
 
 def test_json_and_report(tmp_path, capsys):
@@ -28,3 +28,28 @@ def test_bad_input_exit_2(tmp_path, capsys):
     assert err.count("\n") == 1 and "no_such_check" in err and "Traceback" not in err
     assert main(["check", "--report", str(tmp_path)]) == 2      # a folder, not a file
     assert main(["check", "--bogus"]) == 2
+
+
+def test_theorem1_subcommand_quartic_json(capsys):
+    from proofs_checks.families import path
+
+    rc = main(["check", "theorem1", "--family", path("quartic"), "--s0", "1", "--st", "1.1", "--json"])
+    obj = json.loads(capsys.readouterr().out)
+    assert rc == 0 and set(obj) == {"printed_condition", "corrected_condition", "C1", "conclusion", "evidence"}
+    assert obj["printed_condition"] is True and obj["corrected_condition"] is False
+    assert obj["C1"] == 0.0 and obj["conclusion"] == "fails" and "counterexample to Theorem 1" in obj["evidence"]
+
+
+def test_theorem1_subcommand_bad_input(tmp_path, capsys):
+    from proofs_checks.families import path
+
+    bad = tmp_path / "fam.py"
+    bad.write_text("import sympy as sp\ns = sp.Symbol('s')\nw = sp.Symbol('w')\nq = sp.Symbol('q')\nJ = q * w + s\nw0 = 0\n")
+    for argv in (["check", "theorem1", "--family", str(bad), "--s0", "1", "--st", "2"],          # extra symbol
+                 ["check", "theorem1", "--family", str(tmp_path / "none.py"), "--s0", "1", "--st", "2"],
+                 ["check", "theorem1", "--family", path("quartic"), "--s0", "0", "--st", "2"],   # s0 not > 0
+                 ["check", "theorem1", "--s0", "1", "--st", "2"],
+                 ["check", "--family", path("quartic")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err

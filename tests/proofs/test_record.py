@@ -24,4 +24,23 @@ def test_record_requires_evidence_for_fails():
     with pytest.raises(ValueError):
         record("x", "c", "maybe", "e")
     r = record("x", "c", "fails", "e", "fix", {"diff": 1.0})
-    assert set(r) == {"id", "claim", "verdict", "evidence", "correction", "counterexample"}
+    assert set(r) == {"id", "claim", "verdict", "evidence", "correction", "counterexample", "hypotheses"}
+
+
+def test_no_refutation_outside_the_hypotheses():
+    from proofs_checks._record import hypothesis
+
+    outside = hypothesis("B2", "...", False, "the box binds")
+    with pytest.raises(ValueError):
+        record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [outside])
+    finding = hypothesis("B2 (other instance)", "...", False, "reported", needed_for_refutation=False)
+    assert record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [finding])["verdict"] == "fails"
+
+
+def test_levels_split_the_family_wise_error():
+    from proofs_checks import FAMILY_ALPHA, level
+    from proofs_checks._record import SHARES
+
+    lv = level(4)
+    assert lv.alpha * 4 * SHARES == pytest.approx(FAMILY_ALPHA)
+    assert lv.z2 > lv.z1 > 0 and "family-wise" in lv.text()

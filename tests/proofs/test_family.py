@@ -1,0 +1,90 @@
+"""The Theorem-1 checker on families whose answers are known: the quartic family, the linear
+closed forms (sympy against linear_case, and a numeric JAX copy against the sympy result), and
+a small tanh ONN."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import sympy as sp
+
+import linear_case as lc
+from proofs_checks import contract_json, family, load_family, theorem1
+from proofs_checks.families import path
+
+
+def test_quartic_exact():
+    r = theorem1(load_family(path("quartic")), 1, "1.1")
+    assert contract_json(r) == {"printed_condition": True, "corrected_condition": False, "C1": 0.0,
+                                "conclusion": "fails", "evidence": r["evidence"]}
+    assert math.isclose(r["printed_rhs"]["value"], 2 / 10.1) and math.isclose(r["corrected_rhs"]["value"], 0.84 / 10.1)
+    assert r["critical_points_st"] == [["0"]] and r["J_st_wt_minus_J_st_w0"] == [0.0]
+    assert all(h["verified"] for h in r["hypotheses"])
+    # a step away from 1.1: C1 != 0 and a descent step exists
+    r2 = theorem1(load_family(path("quartic")), 1, "1.05")
+    assert r2["C1"]["value"] != 0 and r2["descent"]["exists"] is True
+
+
+def test_linear_chains_against_closed_forms():
+    for L in (1, 2):
+        e = lc.symbolic_example(L)
+        num = {e["V"]: sp.Rational(1, 2), e["m2"]: 1}
+        c = sp.Rational(1, 2) / (1 + sp.Rational(1, 4))
+        fam = family(e["J"].subs(num), [c ** sp.Rational(1, L)] * L, s=e["s"], w=list(e["w"]))
+        r = theorem1(fam, "0.5", "0.8")
+        ws = lc.balanced_chain(lc.product_minimiser(0.5, lc.isotropic_task([[0.5]], 1.0)), L)
+        b = lc.theorem1_bounds(ws, 0.5, lc.isotropic_task([[0.5]], 1.0))
+        assert math.isclose(r["corrected_rhs"]["value"], 1.0) and math.isclose(r["printed_rhs"]["value"], b.printed_rhs)
+        assert math.isclose(r["C1"]["value"], b.C1(0.5, 0.8), rel_tol=1e-12)
+        assert r["conclusion"] == ("holds" if L == 1 else "fails")      # L = 2: the saddle w = 0
+
+
+def test_numeric_copy_matches_sympy(x64):
+    """The depth-2 chain as a JAX function: the same C1 and ||v||^2, a rigorous sup bracket around
+    the exact sup, and exact (K = 1) intervals of width 0."""
+    sym = theorem1(load_family(path("linear_chain")), "0.5", "0.8")
+    c = 0.5 / 1.25
+
+    def J(w, s):
+        W = w[0] * w[1]
+        return (0.5 - W) ** 2 + s ** 2 * W ** 2
+
+    num = theorem1(family(J, np.full(2, math.sqrt(c))), 0.5, 0.8)
+    for k in ("C1", "v_norm2"):
+        assert math.isclose(num[k]["value"], sym[k]["value"], rel_tol=1e-9)
+    s = num["sup_abs_d2_dot_v"]
+    assert s["lo"] <= sym["sup_abs_d2_dot_v"]["value"] * (1 + 1e-12) and sym["sup_abs_d2_dot_v"]["value"] <= s["hi"]
+    assert num["printed_condition"] == sym["printed_condition"] and num["corrected_condition"] == sym["corrected_condition"]
+
+
+def test_small_onn_numeric_family(x64):
+    """A 2-3-1 tanh ONN with fixed draws: intervals contain their estimates, the sup bracket holds
+    every point value on a grid, the trivial critical point refutes only inside the hypotheses."""
+    import gift_theory as gt
+    from jax.flatten_util import ravel_pytree
+    from proofs_checks import _mc
+    from proofs_checks._theorem1 import trivial_critical_point
+
+    arch = gt.Architecture((2, 3, 1))
+    prob = _mc.teacher_problem(jax.random.PRNGKey(1), arch, n=128, s=0.2)
+    w0 = _mc.train_critical(jax.random.PRNGKey(2), prob, 0.2, K2=8, steps=400)
+    draws = _mc.draws(jax.random.PRNGKey(3), arch, prob.physics, 128, 4)
+    flat, unravel = ravel_pytree(w0)
+    x, y = jnp.asarray(prob.x)[:, None, :], jnp.asarray(prob.y)[:, None, :]
+
+    def J(w, s):
+        out = gt.forward(unravel(w), x, draws, prob.physics.replace(s=s), arch).y
+        return jnp.mean(jnp.sum((y - out) ** 2, axis=-1), axis=1)
+
+    wt = np.asarray(ravel_pytree(trivial_critical_point(arch, prob.y))[0])
+    r = theorem1(family(J, np.asarray(flat), wt=wt), 0.2, 0.25)
+    for k in ("v_norm2", "C1", "printed_rhs", "corrected_rhs"):
+        assert r[k]["lo"] <= r[k]["value"] <= r[k]["hi"], k
+    sup = r["sup_abs_d2_dot_v"]
+    assert sup["lo"] <= sup["value"] <= sup["hi"]
+    assert r["wt"] and r["wt"][0]["consistent_with_critical"]
+    j = contract_json(r)
+    assert set(j) == {"printed_condition", "corrected_condition", "C1", "conclusion", "evidence"}
+    if r["conclusion"] == "fails" and r["printed_condition"] != "holds":
+        assert "no counterexample" in r["evidence"]

@@ -244,6 +244,9 @@ def score_row(out, label, taps: bool) -> dict:
                         baseline passed (nothing detected, so "explained" by awgn alone)
     expressible_top     the top-ranked entry is in ``expressible_by`` (None if that is empty)
     failing_layers_exact  with taps: the set ``failing_layers`` equals the label's layers
+    one_step_layers_exact with taps: the layers whose ``where`` p-value is below 0.01 / L
+                        (Bonferroni) equal the label's layers (the scorer's reading, for a
+                        diagnose that has ``where`` but no ``failing_layers``)
     mechanism_first     ``mechanisms[0].mechanism`` is the label's class (for a pair of built-in
                         effects: one of their classes); None on a null file
     """
@@ -275,7 +278,12 @@ def score_row(out, label, taps: bool) -> dict:
     classes = label.get("classes") or ([label["mechanism"]] if label.get("mechanism") else [])
     row["mechanism_first"] = (None if mechs is None or null
                               else bool(mechs) and mechs[0].get("mechanism") in classes)
-    row["one_step_p"] = {int(w["layer"]): w.get("p_value") for w in out.get("where") or [] if "layer" in w} or None
+    steps = {int(w["layer"]): w.get("p_value") for w in out.get("where") or [] if "layer" in w}
+    row["one_step_p"] = steps or None
+    # the scorer's own reading of the per-layer one-step p-values: fail at 0.01, Bonferroni over the layers
+    row["one_step_layers_exact"] = (None if not taps or not steps or any(p is None for p in steps.values())
+                                    else sorted(l for l, p in steps.items() if p < 0.01 / len(steps))
+                                    == sorted(set(label["layers"])))
     return row
 
 
@@ -288,7 +296,7 @@ def _identified(row, label) -> bool:
 
 
 _COUNTED = ("detected", "explained_correct", "expressible_top", "wrong_explanation", "wrong_by_baseline",
-            "failing_layers_exact", "mechanism_first")
+            "failing_layers_exact", "one_step_layers_exact", "mechanism_first")
 
 
 def summarize(rows, builtin: bool) -> dict:

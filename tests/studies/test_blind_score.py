@@ -92,11 +92,15 @@ def test_null_files():
 def test_fields_the_json_lacks_are_missing_not_a_crash():
     old = _out(ranking=[("weight_error", 0.42)], where={1: 1e-9, 2: 0.3}, omit=("explained", "failing_layers",
                                                                                "mechanisms"))
-    row = blind.score_row(old, _label("activation_gain"), taps=True)
+    row = blind.score_row(old, _label("activation_gain", L=2), taps=True)
     for key in ("explained", "explained_correct", "wrong_explanation", "wrong_by_baseline", "failing_layers",
                 "failing_layers_exact", "mechanisms", "mechanism_first"):
         assert row[key] is None, key
     assert row["expressible_top"] is False and row["one_step_p"] == {1: 1e-9, 2: 0.3}
+    assert row["one_step_layers_exact"] is True           # layer 1 below 0.01 / 2, layer 2 above: the hidden layer
+    near = blind.score_row(_out(where={1: 0.007, 2: 0.3}), _label("activation_gain", L=2), taps=True)
+    assert near["one_step_layers_exact"] is False         # 0.007 > 0.01 / 2 is not a failure after Bonferroni
+    assert blind.score_row(_out(where={1: 1e-9}), _label("activation_gain", L=2), taps=False)["one_step_layers_exact"] is None
     summary = blind.summarize([dict(row, physics="activation_gain", file="a.npz")], builtin=False)
     counts = summary["per_physics"]["activation_gain"]
     assert counts["explained_correct"] is None and counts["detected"] == 1 and summary["wrong_explanations"] is None

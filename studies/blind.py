@@ -1,0 +1,417 @@
+"""Blind identification studies: measurement files from an independent simulator, scored from labels.
+
+    python -m studies.blind write DIR [--files-per-effect 3] [--seed 0] [--no-taps]            built-in catalogue
+    python -m studies.blind write DIR --physics open [--files-per-physics 3] [--nulls N]
+                                      [--seed 0] [--no-taps] [--setting random|reference]   physics outside it
+    python -m studies.blind score DIR [--limit N] [--match TEXT] [--runner inprocess|subprocess]
+
+``write`` draws, per file, a random architecture (2-4 layers, widths 3-28, tanh), random
+weights, inputs, noise level and effect strength, and simulates the chip with
+:mod:`studies.contract_sim`, a plain-numpy transcription of CONTRACTS §2 written from the
+contract's text, not from gift's forward pass, so the study sees what a user's own
+simulator (or the independent judge's) would produce.
+
+Built-in study: each file holds the CONTRACTS §3 keys plus ``hidden`` (the effects) and
+``hidden_params``; gift never reads them (the byte content of these files is unchanged since
+the study lived in gift_theory/lab). Open study (``--physics open``): the files hold the
+CONTRACTS §3 keys only, and the labels -- physics, CONTRACTS §6 mechanism class, the layers
+where a one-step check must fail, ``expressible_by``, parameters -- go to ``DIR/labels.json``;
+``--setting reference`` pins the network to 8-16-8-4, 160 inputs x 48 shots, s = 0.1.
+
+``score`` runs ``gift diagnose FILE --json --seed i --quiet`` on the i-th file (sorted) --
+through the ``gift`` console entry point in this process (default), or one ``gift`` process
+per file (``--runner subprocess``) -- and prints one JSON line per file and a summary. It
+reads only the CONTRACTS §4/§6 JSON: detection (missing_effect_detected), identification
+(built-in study: the hidden effect ranked first; for two effects both among the top three
+names, or the top entry is the pair), false alarms on null files, the p-value after fitting
+the winner, and (:func:`score_row`) ``explained`` correct, wrong explanations, failing
+layers exact, mechanism class first; a field the JSON lacks is scored as missing (null).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+import zlib
+
+import numpy as np
+
+from .contract_sim import CLASS_OF, OPEN_PHYSICS, loguniform, simulate_contract
+
+#: effects of the study and the range each parameter is drawn from (log-uniform for scales)
+EFFECTS = ("none", "laplace", "uniform", "multiplicative", "common_mode", "drift", "crosstalk", "weight_error",
+           "shot", "saturation", "quantization", "shot+crosstalk", "multiplicative+common_mode")
+
+
+#: the reference setting of the open study's strengths (issue 14): 8-16-8-4, 160 inputs x 48 shots, s = 0.1
+REFERENCE = {"widths": (8, 16, 8, 4), "n": 160, "r": 48, "s": 0.1}
+
+
+def _draw_setting(rng, taps: bool, fixed=None):
+    """A random network, inputs and noise level; ``fixed`` (like ``REFERENCE``) pins widths, n, r and s."""
+    if fixed is None:
+        L = int(rng.integers(2, 5))
+        widths = [int(rng.integers(3, 21))] + [int(rng.integers(6, 29)) for _ in range(L - 1)] + [int(rng.integers(2, 11))]
+    else:
+        widths = list(fixed["widths"])
+        L = len(widths) - 1
+    gain = rng.uniform(0.8, 2.0)
+    Ws = [rng.normal(0.0, gain / np.sqrt(widths[l]), (widths[l + 1], widths[l])) for l in range(L)]
+    bs = [rng.normal(0.0, rng.uniform(0.0, 0.5), widths[l + 1]) for l in range(L)]
+    n = int(rng.choice([120, 240])) if fixed is None else int(fixed["n"])
+    r = int(rng.choice([32, 64])) if fixed is None else int(fixed["r"])
+    kind = rng.integers(3)
+    x = (rng.uniform(0, 1, (n, widths[0])) if kind == 0 else rng.uniform(-1, 1, (n, widths[0])) if kind == 1
+         else rng.normal(0, 1, (n, widths[0])))
+    s = loguniform(rng, 0.03, 0.15) if fixed is None else float(fixed["s"])
+    return widths, Ws, bs, x, n, r, s
+
+
+def _effect_params(rng, name, typical):
+    """A visible but not overwhelming strength of ``name``; ``typical`` = rms of layer outputs."""
+    if name == "multiplicative":
+        return {"m": loguniform(rng, 0.1, 0.3)}
+    if name == "common_mode":
+        return {"c": loguniform(rng, 0.05, 0.2)}
+    if name == "drift":
+        return {"r": float(rng.choice([-1, 1]) * rng.uniform(0.15, 0.5))}
+    if name == "crosstalk":
+        return {"k": float(rng.choice([-1, 1]) * rng.uniform(0.1, 0.3))}
+    if name == "weight_error":
+        return {"e": loguniform(rng, 0.05, 0.2)}
+    if name == "shot":
+        return {"q": loguniform(rng, 0.01, 0.05)}
+    if name == "saturation":
+        return {"v_max": float(typical * rng.uniform(0.8, 2.0))}
+    if name == "quantization":
+        return {"bits": float(rng.integers(4, 8)), "v_range": float(typical * rng.uniform(2.5, 5.0))}
+    return {}
+
+
+def write(folder, files_per_effect: int, seed: int, taps: bool, effects=EFFECTS):
+    os.makedirs(folder, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    written = []
+    for name in effects:
+        for i in range(files_per_effect):
+            widths, Ws, bs, x, n, r, s = _draw_setting(rng, taps)
+            # the rms of the noiseless layer outputs sets saturation's and quantization's scale
+            y0, tp0, _ = simulate_contract(np.random.default_rng(0), widths, Ws, bs, x, 2, 0.0, {})
+            typical = float(np.sqrt(np.mean(np.concatenate([np.ravel(v) for v in tp0 + [y0]]) ** 2)))
+            hidden = {} if name == "none" else {e: _effect_params(rng, e, typical) for e in name.split("+")}
+            y, tp, t = simulate_contract(rng, widths, Ws, bs, x, r, s, hidden)
+            arrays = {"x": x, "y": y, "t": t, "activation": np.array("tanh"),
+                      "hidden": np.array(name), "hidden_params": np.array(json.dumps({"s": s, **hidden}))}
+            for l, (W, b) in enumerate(zip(Ws, bs), start=1):
+                arrays[f"W{l}"], arrays[f"b{l}"] = W, b
+            if taps:
+                for l, a in enumerate(tp, start=1):
+                    arrays[f"a{l}"] = a
+            path = os.path.join(folder, f"{name}_{i}.npz")
+            np.savez(path, **arrays)
+            written.append(path)
+            sys.stderr.write(f"wrote {path}: arch {'-'.join(map(str, widths))}, n={n}, r={r}, s={s:.3g}, "
+                             f"{json.dumps(hidden)}\n")
+    return written
+
+
+def _open_settings(physics, files_per_physics: int, nulls: int):
+    return [(name, i) for name in physics for i in range(files_per_physics)] + [("none", i) for i in range(nulls)]
+
+
+def write_open(folder, files_per_physics: int, seed: int, taps: bool, physics=tuple(OPEN_PHYSICS), nulls=None,
+               setting="random"):
+    """Files for physics outside the catalogue (and null files); labels go to ``folder/labels.json``.
+
+    The ``.npz`` files hold only CONTRACTS §3 keys, so what gift reads carries no label. Each
+    file's draws come from its own stream, named by the seed, the physics and the file's index.
+    """
+    for name in physics:
+        if name not in OPEN_PHYSICS:
+            raise ValueError(f"--only: unknown physics {name!r}; known: {', '.join(OPEN_PHYSICS)}")
+    os.makedirs(folder, exist_ok=True)
+    fixed = REFERENCE if setting == "reference" else None
+    labels = {}
+    for name, i in _open_settings(physics, files_per_physics, files_per_physics if nulls is None else nulls):
+        rng = np.random.default_rng([seed, zlib.crc32(name.encode()), i])
+        widths, Ws, bs, x, n, r, s = _draw_setting(rng, taps, fixed)
+        L = len(Ws)
+        spec = OPEN_PHYSICS.get(name)
+        params = spec.draw(rng, widths, n, r) if spec else {}
+        y, tp, t = simulate_contract(rng, widths, Ws, bs, x, r, s, {name: params} if spec else {})
+        arrays = {"x": x, "y": y, "t": t, "activation": np.array("tanh")}
+        for l, (W, b) in enumerate(zip(Ws, bs), start=1):
+            arrays[f"W{l}"], arrays[f"b{l}"] = W, b
+        if taps:
+            for l, a in enumerate(tp, start=1):
+                arrays[f"a{l}"] = a
+        fname = f"{name}_{i}.npz"
+        np.savez(os.path.join(folder, fname), **arrays)
+        shown = {k: v for k, v in params.items() if k != "C"}  # the dense coupling is re-made from the seed
+        if "delta" in shown:
+            shown["delta"] = [np.round(d, 6).tolist() for d in shown["delta"]]
+        labels[fname] = {"physics": name, "mechanism": spec.mechanism if spec else None,
+                         "layers": spec.layers(L) if spec else [], "expressible_by": list(spec.expressible_by) if spec else [],
+                         "contained_in": list(spec.contained_in) if spec else [],
+                         "definition": spec.definition if spec else "no effect beyond awgn",
+                         "params": {"s": s, **shown}, "arch": widths, "n": n, "r": r, "taps": taps,
+                         "seed": seed, "setting": setting}
+        sys.stderr.write(f"wrote {fname}: arch {'-'.join(map(str, widths))}, n={n}, r={r}, s={s:.3g}, {name} "
+                         f"{json.dumps({k: v for k, v in shown.items() if k != 'delta'})}\n")
+    with open(os.path.join(folder, "labels.json"), "w") as f:
+        json.dump(labels, f, indent=1)
+    return sorted(labels)
+
+
+# ---------------------------------------------------------------------------------- scoring
+
+def builtin_label(path):
+    """The label of a built-in-catalogue file, read from the file's ``hidden`` keys (never given to gift)."""
+    with np.load(path) as z:
+        hidden = str(z["hidden"])
+        truth = json.loads(str(z["hidden_params"]))
+        L = sum(1 for k in z.files if k.startswith("W"))
+    effects = [] if hidden == "none" else hidden.split("+")
+    return {"physics": hidden, "truth": truth,
+            "mechanism": "+".join(CLASS_OF[e] for e in effects) or None,
+            "classes": sorted({CLASS_OF[e] for e in effects}),
+            "layers": list(range(1, L + 1)) if effects else [],  # every built-in effect acts on every layer
+            "expressible_by": ["+".join(sorted(effects))] if effects else []}
+
+
+def _shape(path):
+    with np.load(path) as z:
+        Ls = sorted(int(k[1:]) for k in z.files if k[0] == "W" and k[1:].isdigit())
+        widths = [int(z["W1"].shape[1])] + [int(z[f"W{l}"].shape[0]) for l in Ls]
+        return {"arch": widths, "n": int(z["y"].shape[0]), "r": int(z["y"].shape[1]), "taps": "a1" in z.files}
+
+
+def run_diagnose(path, seed: int, runner: str = "inprocess"):
+    """``gift diagnose PATH --json --seed SEED --quiet``; returns (JSON object or None, error line or None).
+
+    ``inprocess``: the ``gift`` console entry point called in this process (the command's own
+    code path; JAX's compilations are reused across files). ``subprocess``: the ``gift``
+    program on PATH, one fresh process per file, exactly as a user types it.
+    """
+    argv = ["diagnose", path, "--json", "--seed", str(seed), "--quiet"]
+    if runner == "subprocess":
+        exe = shutil.which("gift")
+        if exe is None:
+            return None, "no gift program on PATH"
+        proc = subprocess.run([exe] + argv, capture_output=True, text=True)
+        rc, stdout, err = proc.returncode, proc.stdout, proc.stderr.strip().splitlines()[-1:] or [""]
+        err = err[0]
+    else:
+        from importlib.metadata import entry_points
+
+        (entry,) = [e for e in entry_points(group="console_scripts") if e.name == "gift"]
+        buf, ebuf = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(ebuf):
+            rc = entry.load()(argv)
+        stdout, err = buf.getvalue(), (ebuf.getvalue().strip().splitlines() or [""])[-1]
+    if rc != 0:
+        return None, f"gift diagnose exit {rc}: {err}"
+    try:
+        return json.loads(stdout.strip().splitlines()[-1]), None
+    except (ValueError, IndexError) as exc:
+        return None, f"gift diagnose printed no JSON object ({exc})"
+
+
+def _entry_name(entry) -> str:
+    return "+".join(sorted(list(entry.get("with", [])) + [entry["effect"]]))
+
+
+def score_row(out, label, taps: bool) -> dict:
+    """Score one ``gift diagnose --json`` object against its label (a pure function of the two).
+
+    Columns (None where the JSON lacks the field, or where the question does not apply):
+
+    detected            missing_effect_detected
+    explained           the JSON's ``explained``
+    explained_correct   ``explained`` equals its right value: true iff the label's
+                        ``expressible_by`` is non-empty and the top-ranked entry (its effects,
+                        sorted, joined by "+") is in it; on a null file: explained and nothing
+                        detected (a false alarm is wrong whatever ``explained`` says)
+    wrong_explanation   ``explained`` true where its right value is false (on a null file: true
+                        and a missing effect claimed); ``wrong_by_baseline``: of these, the
+                        baseline passed (nothing detected, so "explained" by awgn alone)
+    expressible_top     the top-ranked entry is in ``expressible_by`` (None if that is empty)
+    failing_layers_exact  with taps: the set ``failing_layers`` equals the label's layers
+    one_step_layers_exact with taps: the layers whose ``where`` p-value is below 0.01 / L
+                        (Bonferroni) equal the label's layers (the scorer's reading, for a
+                        diagnose that has ``where`` but no ``failing_layers``)
+    mechanism_first     ``mechanisms[0].mechanism`` is the label's class (for a pair of built-in
+                        effects: one of their classes); None on a null file
+    """
+    ranking = out.get("ranking") or []
+    top = _entry_name(ranking[0]) if ranking else None
+    detected = bool(out.get("missing_effect_detected"))
+    null = label["physics"] == "none"
+    expressible = list(label.get("expressible_by", []))
+    explained = out.get("explained")
+    right = bool(expressible) and top in expressible
+    row = {"detected": detected, "baseline_p": (out.get("baseline") or {}).get("p_value"),
+           "ranking": [r["effect"] for r in ranking[:4]],
+           "first_entry": sorted(list(ranking[0].get("with", [])) + [ranking[0]["effect"]]) if ranking else [],
+           "p_after": ranking[0].get("p_value_after") if ranking else None,
+           "params_first": ranking[0].get("params") if ranking else None,
+           "explained": explained,
+           "explained_correct": (None if explained is None
+                                 else bool(explained) and not detected if null else bool(explained) == right),
+           "expressible_top": (top in expressible) if expressible else None}
+    wrong = None if explained is None else bool(explained) and (detected if null else not right)
+    row["wrong_explanation"] = wrong
+    row["wrong_by_baseline"] = None if wrong is None else bool(wrong and not detected)
+    failing = out.get("failing_layers")
+    row["failing_layers"] = failing
+    row["failing_layers_exact"] = (None if not taps or failing is None
+                                   else sorted(set(failing)) == sorted(set(label["layers"])))
+    mechs = out.get("mechanisms")
+    row["mechanisms"] = None if mechs is None else [m.get("mechanism") for m in mechs[:3]]
+    classes = label.get("classes") or ([label["mechanism"]] if label.get("mechanism") else [])
+    row["mechanism_first"] = (None if mechs is None or null
+                              else bool(mechs) and mechs[0].get("mechanism") in classes)
+    steps = {int(w["layer"]): w.get("p_value") for w in out.get("where") or [] if "layer" in w}
+    row["one_step_p"] = steps or None
+    # the scorer's own reading of the per-layer one-step p-values: fail at 0.01, Bonferroni over the layers
+    row["one_step_layers_exact"] = (None if not taps or not steps or any(p is None for p in steps.values())
+                                    else sorted(l for l, p in steps.items() if p < 0.01 / len(steps))
+                                    == sorted(set(label["layers"])))
+    return row
+
+
+def _identified(row, label) -> bool:
+    """The built-in study's rule: the hidden effect ranked first; for two, both among the top three
+    names or the top entry exactly the pair."""
+    want = [] if label["physics"] == "none" else label["physics"].split("+")
+    top = row["ranking"][:1] if len(want) < 2 else row["ranking"][:3]
+    return bool(want) and (all(h in top for h in want) or (len(want) > 1 and row["first_entry"] == sorted(want)))
+
+
+_COUNTED = ("detected", "explained_correct", "expressible_top", "wrong_explanation", "wrong_by_baseline",
+            "failing_layers_exact", "one_step_layers_exact", "mechanism_first")
+
+
+def summarize(rows, builtin: bool) -> dict:
+    """Per-physics counts (a count of None -- the JSON lacked the field -- is reported as None)."""
+    def count(rs, key):
+        vals = [r.get(key) for r in rs]
+        return None if all(v is None for v in vals) else int(sum(bool(v) for v in vals if v is not None))
+
+    ok = [r for r in rows if not r.get("error")]
+    per = {}
+    for name in sorted({r["physics"] for r in rows}):
+        rs = [r for r in ok if r["physics"] == name]
+        per[name] = {"files": len(rs), "errors": sum(1 for r in rows if r["physics"] == name and r.get("error")),
+                     **{k: count(rs, k) for k in _COUNTED},
+                     "p_after_ok": int(sum((r["p_after"] or 0.0) >= 0.01 for r in rs))}
+        if builtin:
+            per[name]["identified"] = int(sum(r["identified"] for r in rs))
+    eff = [r for r in ok if r["physics"] != "none"]
+    null = [r for r in ok if r["physics"] == "none"]
+    summary = {"summary": True, "files": len(rows), "errors": len(rows) - len(ok),
+               ("per_effect" if builtin else "per_physics"): per,
+               "detection_rate": float(np.mean([r["detected"] for r in eff])) if eff else None,
+               "false_alarm_rate": float(np.mean([r["detected"] for r in null])) if null else None,
+               "wrong_explanations": count(ok, "wrong_explanation"),
+               "wrong_explanations_by_baseline": count(ok, "wrong_by_baseline")}
+    if builtin:
+        summary["identification_rate"] = float(np.mean([r["identified"] for r in eff])) if eff else None
+    return summary
+
+
+def score(folder, limit=None, out=sys.stdout, runner="inprocess", match=None):
+    """Run ``gift diagnose`` on every file of ``folder`` and score it from the labels.
+
+    Labels come from ``folder/labels.json`` (open study) or, for the built-in study, from each
+    file's ``hidden`` keys, which gift never reads. File i (in sorted order) is diagnosed with
+    ``--seed i``, so the built-in study's numbers are those of ``diagnose(PRNGKey(i), ...)``;
+    ``match`` scores only the files whose name contains it, with the same seeds as a full run.
+    """
+    if not os.path.isdir(folder):
+        raise ValueError(f"{folder}: no such folder")
+    labels_path = os.path.join(folder, "labels.json")
+    labels = None
+    if os.path.exists(labels_path):
+        with open(labels_path) as f:
+            labels = json.load(f)
+    files = sorted(f for f in os.listdir(folder) if f.endswith(".npz"))[:limit]
+    if not files:
+        raise ValueError(f"{folder}: no .npz files")
+    chosen = [(i, f) for i, f in enumerate(files) if match is None or match in f]
+    rows = []
+    for k, (i, f) in enumerate(chosen):
+        path = os.path.join(folder, f)
+        if labels is not None and f not in labels:
+            raise ValueError(f"{labels_path}: no label for {f}")
+        label = labels[f] if labels is not None else builtin_label(path)
+        shape = _shape(path)
+        t0 = time.time()
+        res, err = run_diagnose(path, i, runner)
+        row = {"file": f, "physics": label["physics"], "mechanism_label": label["mechanism"],
+               "layers_label": label["layers"], "expressible_by": label["expressible_by"], **shape}
+        if labels is None:
+            row.update(hidden=label["physics"], truth=label["truth"])
+        else:
+            row.update(params=label["params"], contained_in=label.get("contained_in", []))
+        if err:
+            row["error"] = err
+        else:
+            row.update(score_row(res, label, shape["taps"]))
+            if labels is None:
+                row["identified"] = _identified(row, label)
+        row["seconds"] = time.time() - t0
+        rows.append(row)
+        out.write(json.dumps(row) + "\n")
+        out.flush()
+        sys.stderr.write(f"[{k + 1}/{len(chosen)}] {f}: " + (err if err else
+                         f"detected {row['detected']} (p {row['baseline_p']:.2g}) first {row['ranking'][0]} "
+                         f"p_after {row['p_after'] if row['p_after'] is None else round(row['p_after'], 3)} "
+                         f"explained {row['explained']} failing {row['failing_layers']} "
+                         f"mechanism {(row['mechanisms'] or [None])[0]}") + f" ({row['seconds']:.0f} s)\n")
+    summary = summarize(rows, builtin=labels is None)
+    out.write(json.dumps(summary) + "\n")
+    return summary
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m studies.blind", description=__doc__.split("\n\n")[0])
+    p.add_argument("what", choices=("write", "score"))
+    p.add_argument("folder")
+    p.add_argument("--physics", choices=("builtin", "open"), default="builtin",
+                   help="write: the built-in catalogue's effects, or physics outside it (labels in labels.json)")
+    p.add_argument("--files-per-effect", "--files-per-physics", dest="files", type=int, default=3)
+    p.add_argument("--nulls", type=int, default=None, help="open study: null files (default: --files-per-physics)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--taps", action=argparse.BooleanOptionalAction, default=True)
+    p.add_argument("--effects", default=",".join(EFFECTS), help="built-in study: the effects (pairs with +)")
+    p.add_argument("--only", default=",".join(OPEN_PHYSICS), help="open study: the physics")
+    p.add_argument("--setting", choices=("random", "reference"), default="random",
+                   help="open study: random networks like the built-in study's, or 8-16-8-4, 160 x 48, s = 0.1")
+    p.add_argument("--limit", type=int, default=None)
+    p.add_argument("--match", default=None, help="score: only files whose name contains this (same seeds as a full run)")
+    p.add_argument("--runner", choices=("inprocess", "subprocess"), default="inprocess",
+                   help="score: the gift entry point in this process, or one gift process per file")
+    a = p.parse_args(argv)
+    try:
+        if a.what == "score":
+            score(a.folder, a.limit, runner=a.runner, match=a.match)
+        elif a.physics == "open":
+            write_open(a.folder, a.files, a.seed, a.taps, tuple(a.only.split(",")), a.nulls, a.setting)
+        else:
+            write(a.folder, a.files, a.seed, a.taps, tuple(a.effects.split(",")))
+    except (ValueError, OSError) as exc:
+        sys.stderr.write(f"python -m studies.blind {a.what}: {exc}\n")
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -3,18 +3,16 @@ curves of J_s0, J_st around their minimisers (paper fig:example-fine-tuning)."""
 
 from __future__ import annotations
 
-import os
 
 import numpy as np
+
+from gift_theory._io import save_figure
 
 from ._closed import chain_printed_rhs, example_rhs
 
 
 def _save(fig, path):
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    tmp = path + ".tmp.png"
-    fig.savefig(tmp, dpi=120)
-    os.replace(tmp, path)
+    save_figure(fig, path, bbox_inches=None)
 
 
 def plot_bound_regions(path: str, depths=(1, 2, 3), V_norms=(0.5, 1.0, 2.0), m2: float = 1.0, n: int = 241):

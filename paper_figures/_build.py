@@ -13,14 +13,15 @@ import importlib
 import json
 import os
 import sys
-import tempfile
 import time
 
 import numpy as np
 
 from ._jobs import unavailable
 from ._scales import SCALES, get_scale, sweeps
-from ._sweep import load_points, open_client, open_dataset, publish, run_sweep
+from gift_theory._io import save_figure
+
+from ._sweep import load_points, open_client, open_dataset, run_sweep
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -43,19 +44,7 @@ FIGURES = (
 
 def _save_png(fig, path: str) -> None:
     """Save atomically: a temp file in the same folder, then ``os.replace``."""
-    import matplotlib.pyplot as plt
-
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".png", dir=folder)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=120)
-        publish(tmp, path)
-    finally:
-        plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    save_figure(fig, path)
 
 
 def _sweep_summary(name, ds) -> dict:

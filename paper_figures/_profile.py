@@ -184,7 +184,7 @@ def main(argv=None) -> int:
         return 0
     r = profile(args.net, args.epochs, args.s0, args.seed, args.compile_cache)
     if args.out:
-        from ._sweep import atomic_write_bytes
+        from gift_theory._io import atomic_write_bytes
 
         atomic_write_bytes(args.out, (json.dumps(r, indent=1, default=float) + "\n").encode())
     sys.stdout.write((json.dumps(r, default=float) if args.json else render(r)) + "\n")

@@ -23,11 +23,12 @@ import json
 import os
 import socket
 import sys
-import tempfile
 import time
 from typing import Callable, Mapping
 
 import numpy as np
+
+from gift_theory._io import atomic_path, atomic_write_bytes
 
 __all__ = ["Sweep", "run_sweep", "assemble", "load_points", "point_id", "atomic_write_bytes", "toy_job"]
 
@@ -101,28 +102,6 @@ def point_id(sweep: Sweep, point: Mapping) -> str:
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:20]
 
 
-def publish(tmp: str, path: str) -> None:
-    """Give a finished temp file the usual permissions (mkstemp makes 0600), then rename it."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, path)
-
-
-def atomic_write_bytes(path: str, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temp file in the same folder and ``os.replace``."""
-    folder = os.path.dirname(os.path.abspath(path)) or "."
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        publish(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def _points_dir(folder: str, sweep: Sweep) -> str:
@@ -217,16 +196,8 @@ def netcdf_engine() -> str:
 
 def save_dataset(ds, path: str) -> None:
     """Save an xarray Dataset to netCDF atomically (temp file in the same folder, then rename)."""
-    folder = os.path.dirname(os.path.abspath(path)) or "."
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".nc", dir=folder)
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         ds.to_netcdf(tmp, engine=netcdf_engine())
-        publish(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def open_dataset(path: str):
@@ -264,8 +235,9 @@ def _client(scheduler, n_workers: int):
     from dask.distributed import Client, LocalCluster
 
     if scheduler in (None, "local", "processes"):
-        # one thread per worker process: JAX jobs are CPU-bound and the GIL would serialise threads
-        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        # one thread per worker process: JAX jobs are CPU-bound and the GIL would serialise threads;
+        # the scheduler's HTTP server on a free port (its default 8787 clashes with any other cluster)
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0")
         return Client(cluster), cluster
     return Client(scheduler), None
 

@@ -72,7 +72,7 @@ def run(args) -> dict:
 
     import gift_theory as gt
     from .._errors import GiftInputError
-    from ..estimators import d_ds_grad, paper_constant
+    from ..estimators import d_ds_grad
 
     if args.repeats < 1 or args.eff_K1 < 2 or args.ref_K2 < 1:
         raise GiftInputError("gift bench: --repeats must be >= 1, --eff-K1 >= 2, --ref-K2 >= 1")

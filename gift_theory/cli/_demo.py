@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
 import time
 
 import numpy as np
 
 from .._errors import GiftInputError
+from .._io import atomic_write, save_figure
 
 
 def add_arguments(parser):
@@ -209,11 +209,9 @@ def _figure(args, rows, curve) -> str:
     os.makedirs(args.out, exist_ok=True)
     stem = f"demo_{args.dataset}_s0{args.s0:g}_st{args.st:g}"
     data = os.path.join(args.out, stem + ".npz")
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=args.out)
-    os.close(fd)
-    np.savez(tmp, **curve, methods=np.asarray([r["method"] for r in rows]),
-             loss_after=np.asarray([r["loss_after"] for r in rows]), loss_before=rows[0]["loss_before"])
-    os.replace(tmp, data)
+    atomic_write(data, lambda fh: np.savez(fh, **curve, methods=np.asarray([r["method"] for r in rows]),
+                                           loss_after=np.asarray([r["loss_after"] for r in rows]),
+                                           loss_before=rows[0]["loss_before"]))
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
     a = curve["alpha"]
     ax1.plot(a, curve["predicted"], "C0-", label="predicted  a C1 - a² C2/2 (fit)")
@@ -240,12 +238,7 @@ def _figure(args, rows, curve) -> str:
     ax2.set_xlim(max(0.0, lo - 0.1 * (hi - lo)), hi + 0.1 * (hi - lo))
     fig.tight_layout()
     path = os.path.join(args.out, stem + ".png")
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".png", dir=args.out)
-    os.close(fd)
-    fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    return save_figure(fig, path, bbox_inches=None)
 
 
 def render(result) -> str:

@@ -6,7 +6,6 @@ other half (CONTRACTS §4 JSON with ``--json``; a text report and a figure folde
 
 from __future__ import annotations
 
-import sys
 
 from ._fit import NO_TAPS_CAVEAT
 from ._labargs import add_common, figure_dir, key, load

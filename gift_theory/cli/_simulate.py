@@ -11,7 +11,7 @@ import os
 import jax
 import numpy as np
 
-from .._errors import GiftInputError, require
+from .._errors import require
 
 
 def add_arguments(parser):

@@ -6,7 +6,6 @@ across methods); it is how results are scored and is never charged to the chip b
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import jax

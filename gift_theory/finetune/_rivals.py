@@ -13,7 +13,7 @@ import optax
 
 from .._model import forward, sample_noise, squared_error
 from .._params import Layer, flatten
-from ..effects import Physics, awgn
+from ..effects import Physics
 from ..training import TrainConfig, train
 
 #: warm-start retraining from w0 (oracle and identify-retrain use the same recipe)

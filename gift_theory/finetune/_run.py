@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import sys
 import time
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .._arch import Architecture
-from .._errors import GiftInputError, require
+from .._errors import require
 from .._params import cast
 from .._phases import phase
 from ..effects import Physics

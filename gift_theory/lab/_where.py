@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import warnings
 
-import jax
 import numpy as np
 from scipy import stats
 

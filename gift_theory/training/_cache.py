@@ -12,7 +12,6 @@ import hashlib
 import json
 import os
 import sys
-import tempfile
 import time
 
 import jax
@@ -20,6 +19,7 @@ import numpy as np
 
 from .._arch import Architecture
 from .._errors import GiftInputError, require
+from .._io import atomic_write
 from .._objective import estimate_from_samples, per_input_scores
 from .._params import params_from_arrays, params_to_arrays
 from .._phases import phase
@@ -50,18 +50,9 @@ def cache_key(dataset: str, arch: Architecture, s0: float, seed: int, config: Tr
 
 def save_weights(path: str, params, meta: dict) -> None:
     """Write weights and metadata atomically (temp file in the same folder, then rename)."""
-    folder = os.path.dirname(os.path.abspath(path)) or "."
-    os.makedirs(folder, exist_ok=True)
     arrays = params_to_arrays(params)
     arrays["meta_json"] = np.asarray(json.dumps(meta))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=folder)
-    os.close(fd)
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    atomic_write(path, lambda fh: np.savez(fh, **arrays))
 
 
 def load_weights(path: str):

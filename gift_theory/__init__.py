@@ -9,6 +9,7 @@ larger parts: :mod:`gift_theory.effects`, :mod:`gift_theory.data`,
 from ._arch import ACTIVATIONS as ACTIVATIONS
 from ._arch import Architecture as Architecture
 from ._errors import GiftInputError as GiftInputError
+from ._measurement import Measurement as Measurement
 from ._model import Forward as Forward
 from ._model import forward as forward
 from ._model import sample_noise as sample_noise

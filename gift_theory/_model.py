@@ -102,7 +102,7 @@ def forward(params, x, noise: dict, physics: Physics, arch: Architecture, *, t=N
     -------
     Forward
     """
-    a = x + physics.s * noise["a0"] if "a0" in noise else x
+    a = noisy_input(x, noise, physics)
     outs, pres = [], []
     for l, (W, b) in enumerate(params, start=1):
         a, z = layer_step(W, b, a, noise, physics, arch, l, t=t)
@@ -110,6 +110,11 @@ def forward(params, x, noise: dict, physics: Physics, arch: Architecture, *, t=N
             outs.append(a)
             pres.append(z)
     return Forward(a, tuple(outs), tuple(pres))
+
+
+def noisy_input(x, noise: dict, physics: Physics):
+    """a_0 = x + n_a0: the input with the physics' input noise (x itself without one)."""
+    return x + physics.s * noise["a0"] if "a0" in noise else x
 
 
 def layer_step(W, b, a, noise: dict, physics: Physics, arch: Architecture, layer: int, *, t=None):

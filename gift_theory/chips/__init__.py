@@ -6,6 +6,7 @@ See ``docs/hardware.md`` for wrapping real hardware in the same protocol.
 from ._base import BudgetExceeded as BudgetExceeded
 from ._base import Chip as Chip
 from ._base import Ledger as Ledger
-from ._base import Measurement as Measurement
+from .._measurement import Measurement as Measurement
 from ._base import chip_eval as chip_eval
 from ._simulated import SimulatedChip as SimulatedChip
+from ._simulated import simulate_measurement as simulate_measurement

@@ -9,30 +9,16 @@ units of one Eval_w(K1, K2) (eq. def:Eval), i.e. ``ceil(shots / (K1 K2))``.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from .._errors import GiftInputError
+from .._measurement import Measurement
 
 
 class BudgetExceeded(RuntimeError):
     """A chip call would use more shots than the budget allows (the call is not made)."""
-
-
-class Measurement(NamedTuple):
-    """What one chip call returns (CONTRACTS §3 layout).
-
-    x : (n, d_0) the inputs sent
-    y : (n, r, d_L) r shots of the output per input
-    taps : tuple of arrays (n, r, d_l) for l = 1..L-1, empty when the chip has no taps
-    t : (n, r) normalised acquisition times in [0, 1], or None
-    """
-
-    x: np.ndarray
-    y: np.ndarray
-    taps: tuple = ()
-    t: np.ndarray | None = None
 
 
 @runtime_checkable
@@ -49,7 +35,9 @@ class Chip(Protocol):
     ledger: "Ledger"
 
     def measure(self, params, x, shots: int, *, taps: bool = False, key=None) -> Measurement:
-        """Program ``params``, send each row of ``x`` (n, d_0) ``shots`` times, return the outputs."""
+        """Program ``params``, send each row of ``x`` (n, d_0) ``shots`` times, return the
+        :class:`~gift_theory.Measurement` (CONTRACTS §3: the inputs, the shots, the programmed
+        weights, the hidden layers' taps when asked and the chip has them, else None)."""
         ...
 
 

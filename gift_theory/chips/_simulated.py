@@ -13,9 +13,10 @@ import numpy as np
 from .._arch import Architecture
 from .._errors import require
 from .._model import forward, sample_noise
-from .._params import check_params
+from .._params import Layer, check_params
 from ..effects import Physics
-from ._base import Ledger, Measurement
+from .._measurement import Measurement
+from ._base import Ledger
 
 
 @partial(jax.jit, static_argnames=("arch", "shots", "taps", "with_t"))
@@ -48,11 +49,14 @@ class SimulatedChip:
         self.ledger = Ledger(budget_shots)
         self._calls = 0
 
-    def measure(self, params, x, shots: int, *, taps: bool = False, key=None) -> Measurement:
+    def measure(self, params, x, shots: int, *, taps: bool = False, key=None, times: bool | None = None) -> Measurement:
         """Send each row of ``x`` (n, d_0) ``shots`` times through the device with ``params``.
 
-        Returns a :class:`Measurement` with ``y`` of shape (n, shots, d_L). Charges
-        ``n * shots`` shots to the ledger first (raises BudgetExceeded without measuring).
+        Returns a :class:`~gift_theory.Measurement` with ``y`` of shape (n, shots, d_L), the
+        programmed weights (float64) and, with ``taps``, the hidden layers. The shots are
+        acquired input by input, shot by shot: t = (i shots + j) / (n shots - 1), recorded when
+        ``times`` is true (default: when the device drifts). Charges ``n * shots`` shots to the
+        ledger first (raises BudgetExceeded without measuring).
         """
         params = check_params(params, self.arch, "chip weights")
         x = np.asarray(x)
@@ -63,9 +67,38 @@ class SimulatedChip:
         self.ledger.charge(x.shape[0] * shots)
         k = jax.random.fold_in(self.key, self._calls) if key is None else key
         self._calls += 1
-        y, tp, t = _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots, taps=bool(taps),
-                            with_t="drift" in self.physics)
-        return Measurement(x, np.asarray(y), tuple(np.asarray(a) for a in tp), None if t is None else np.asarray(t))
+        with_t = "drift" in self.physics if times is None else bool(times)
+        y, tp, t = _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots,
+                            taps=bool(taps) and self.arch.depth > 1, with_t=with_t)
+        programmed = tuple(Layer(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in params)
+        return Measurement(np.asarray(x, np.float64), np.asarray(y, np.float64), programmed,
+                           tuple(np.asarray(a, np.float64) for a in tp) if taps and self.arch.depth > 1 else None,
+                           None if t is None else np.asarray(t, np.float64), self.arch.activation)
 
     def __repr__(self):
         return f"SimulatedChip({self.arch}, hidden physics, {self.ledger.shots} shots used)"
+
+
+def simulate_measurement(key, params, x, physics: Physics, *, shots: int, activation: str = "tanh",
+                         taps: bool = False, times: bool = False) -> Measurement:
+    """A measurement campaign on a :class:`SimulatedChip` (the hidden-effect data generator).
+
+    Parameters
+    ----------
+    key : PRNG key of the device's noise for this campaign
+    params : tuple of Layer, the programmed weights
+    x : (n, d_0)
+    physics : Physics of the simulated device (its hidden effects)
+    shots : r, repeated shots per input
+    taps : record the hidden layers a_1..a_{L-1}
+    times : record acquisition times t (the campaign runs input by input, shot by shot;
+        drift is silent without times)
+
+    Returns
+    -------
+    Measurement
+    """
+    widths = (int(params[0][0].shape[1]),) + tuple(int(W.shape[0]) for W, _ in params)
+    chip = SimulatedChip(Architecture(widths, activation), physics, key)
+    p32 = tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+    return chip.measure(p32, np.asarray(x, np.float64), int(shots), taps=taps, key=key, times=True if times else None)

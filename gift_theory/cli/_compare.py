@@ -17,39 +17,31 @@ def add_arguments(parser):
 
 
 def run(args):
-    import jax
-
     import gift_theory as gt
-    from ..lab import Model, compare, one_step_check, reference, where_it_fails
+    from ..lab import compare_measurement, where_it_fails
     from ..lab._figures import heatmaps
-    from ..lab._fit import fit_model, split_inputs
 
-    meas = load(args)
-    k = key(args)
-    k_split, k_fit, k_cmp, k_ref, k_step = jax.random.split(k, 5)
+    physics = None
     if args.effect:
         specs = list(args.effect)
         if not any(s.strip().split("=")[0].strip() == "awgn" for s in specs):
             raise gt.GiftInputError("--effect: the model needs awgn=S among its effects (the baseline noise level)")
-        if any(s.strip().startswith("weight_error") for s in specs):
-            raise gt.GiftInputError("--effect weight_error: a model cannot know the device's E; "
-                                    "use gift fit --add weight_error (fitted offsets)")
-        model = Model(gt.Physics.parse(specs, where="--effect"))
-        scored, fitted = meas, False
-    else:
-        train, test = split_inputs(k_split, meas.n)
-        model = fit_model(k_fit, meas.subset(train), (), K=args.shots)
-        scored, fitted = meas.subset(test), True
-    c = compare(k_cmp, model, scored, shots=args.shots, ref=reference(k_ref, scored))  # same keys as diagnose
-    out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": fitted},
+        physics = gt.Physics.parse(specs, where="--effect")
+        offsets = [n for n in physics.names if gt.effects.REGISTRY[n].offsets_of]
+        if offsets:
+            raise gt.GiftInputError(f"--effect {offsets[0]}: a model cannot know the device's fixed draws; "
+                                    f"use gift fit --add {offsets[0]} (fitted offsets)")
+    meas = load(args)
+    res = compare_measurement(key(args), meas, physics, shots=args.shots)
+    model, c = res["model"], res["comparison"]
+    out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": res["fitted"]},
            "discrepancy": c.discrepancy, "se": c.se, "noise_floor": c.noise_floor, "floor_se": c.floor_se,
-           "p_value": c.p_value, "inputs_scored": scored.n,
+           "p_value": c.p_value, "inputs_scored": res["scored"].n,
            "per_layer": {f"layer{l}": float(v) for l, v in zip(c.layer_ids, c.per_layer)},
-           "channel_z": c.as_dict()["channel_z"],
-           "where": one_step_check(k_step, model, meas) if meas.has_taps else []}
-    folder = figure_dir(args)
-    where = where_it_fails(k, model, scored)
+           "channel_z": c.as_dict()["channel_z"], "where": res["where"]}
+    where = where_it_fails(key(args), model, res["scored"])
     out["worst_cells"] = where["worst"][:10]
+    folder = figure_dir(args)
     if folder:
         out["figures"] = [heatmaps(where, f"{folder}/where.png")]
     return out

@@ -14,42 +14,21 @@ from ._labargs import add_common, figure_dir, key, load
 def add_arguments(parser):
     add_common(parser)
     parser.add_argument("--candidates", default=None,
-                        help="comma-separated effects to try (default: all of CONTRACTS §2 but awgn)")
+                        help="comma-separated effects to try (default: every registered effect but awgn)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
 def run(args):
-    from .._errors import GiftInputError
-    from ..effects import EFFECT_NAMES
-    from ..lab import diagnose, signatures, where_it_fails
-    from ..lab._figures import error_ladder, heatmaps
+    from ..lab import diagnose
+    from ..lab._figures import diagnosis_figures
 
     meas = load(args)
-    cands = None
-    if args.candidates:
-        cands = [c.strip() for c in args.candidates.split(",") if c.strip()]
-        for c in cands:
-            for e in c.split("+"):
-                if e not in EFFECT_NAMES or e == "awgn":
-                    raise GiftInputError(f"--candidates: unknown effect {e!r}; known: {', '.join(EFFECT_NAMES[1:])}")
-    k = key(args)
-    res = diagnose(k, meas, candidates=cands, shots=args.shots, verbose=not args.quiet)
+    cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
+    res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
-    if any("net_discrepancy_after" in r for r in out["ranking"]):
-        out["refit_null_calibrated"] = meas.has_taps
-    sig = signatures(k, res.baseline, meas)
-    out["signatures"] = sig
     folder = figure_dir(args)
     if folder:
-        where = where_it_fails(k, res.baseline, meas)
-        out["worst_cells"] = where["worst"][:10]
-        c = res.baseline_comparison
-        rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
-            ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
-            for cand in res.ranking[:3]]
-        out["figures"] = [error_ladder(rungs, c.noise_floor, c.floor_se, f"{folder}/ladder.png",
-                                       title="baseline and best candidates"),
-                          heatmaps(where, f"{folder}/where.png", title="baseline: where it fails")]
+        out["figures"] = diagnosis_figures(res, folder)
     return out
 
 

@@ -15,31 +15,20 @@ NO_TAPS_CAVEAT = ("  caution: this file has no taps; without them the refit null
 def add_arguments(parser):
     add_common(parser)
     parser.add_argument("--add", action="append", required=True, metavar="NAME",
-                        help="an effect of CONTRACTS §2 to add to the model (repeatable, in order)")
+                        help="a registered effect (CONTRACTS §2 or a plugin) to add to the model (repeatable, in order)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
 def run(args):
-    from .._errors import GiftInputError
-    from ..effects import EFFECT_NAMES
     from ..lab import fit_effects
-    from ..lab._figures import error_ladder
+    from ..lab._figures import fit_figures
 
-    for e in args.add:
-        if e not in EFFECT_NAMES:
-            raise GiftInputError(f"--add: unknown effect {e!r}; known: {', '.join(EFFECT_NAMES)}")
     meas = load(args)
-    if "drift" in args.add and meas.t is None:
-        raise GiftInputError(f"--add drift: {args.measurement} has no acquisition times t; drift is silent without them")
     res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
-    if "net_discrepancy_after" in out:
-        out["refit_null_calibrated"] = meas.has_taps
     folder = figure_dir(args)
     if folder:
-        rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in res.ladder]
-        out["figures"] = [error_ladder(rungs, res.comparison_after.noise_floor, res.comparison_after.floor_se,
-                                       f"{folder}/ladder.png")]
+        out["figures"] = fit_figures(res, folder)
     return out
 
 

@@ -33,7 +33,8 @@ def add_arguments(parser):
 
 def run(args):
     import gift_theory as gt
-    from ..lab import save_csv, save_measurement, simulate_measurement
+    from .._io import atomic_write
+    from ..lab import load_weights, save_csv, save_measurement, simulate_measurement
 
     require(args.inputs >= 1, f"--inputs {args.inputs}: needs at least 1")
     require(args.shots >= 2, f"--shots {args.shots}: needs at least 2")
@@ -47,8 +48,7 @@ def run(args):
     key = jax.random.PRNGKey(args.seed)
     activation = args.activation
     if args.weights:
-        from ..lab._measurement import _load_weights
-        w = _load_weights(args.weights)
+        w = load_weights(args.weights)
         params = gt.params_from_arrays(w, where=args.weights)
         if activation is None and "activation" in w:
             activation = str(np.asarray(w["activation"]).item())
@@ -68,9 +68,8 @@ def run(args):
     if args.csv:
         save_csv(out, meas)
         wpath = os.path.splitext(out)[0] + ".weights.npz"
-        from ..lab._measurement import _atomic_write
         arrays = {k: v for k, v in meas.arrays().items() if k[:1] in "Wb" or k == "activation"}
-        _atomic_write(wpath, lambda fh: np.savez(fh, **arrays))
+        atomic_write(wpath, lambda fh: np.savez(fh, **arrays))
     else:
         save_measurement(out, meas)
     return {"out": out, "n": meas.n, "r": meas.r, "arch": list(meas.arch.widths), "activation": activation,

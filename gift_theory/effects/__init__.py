@@ -21,6 +21,8 @@ from ._base import REGISTRY as REGISTRY
 from ._base import Effect as Effect
 from ._base import make_effect as make_effect
 from ._base import parse_effect as parse_effect
+from ._physics import Physics as Physics
+from ._physics import awgn as awgn
 from .awgn import Awgn as Awgn
 from .common_mode import CommonMode as CommonMode
 from .crosstalk import Crosstalk as Crosstalk
@@ -32,8 +34,6 @@ from .saturation import Saturation as Saturation
 from .shot import Shot as Shot
 from .uniform import Uniform as Uniform
 from .weight_error import WeightError as WeightError
-from ._physics import Physics as Physics
-from ._physics import awgn as awgn
 
 #: the CONTRACTS §2 names, in catalogue order
 EFFECT_NAMES = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "drift",

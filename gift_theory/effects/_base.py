@@ -21,6 +21,7 @@ from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._errors import GiftInputError
 
@@ -98,6 +99,49 @@ class Effect:
                 raise GiftInputError(f"{where}: {self.name} parameter {p}={v:g} is outside [{lo:g}, {hi:g}]")
         return self
 
+
+    # ---- what the measurement lab knows about it (fitting, ranking, signatures) -----
+    #: fitted as per-device fixed offsets of the programmed weights ("W") or biases ("b"),
+    #: with its (single) parameter the prior scale of those offsets (weight_error,
+    #: bias_offset); None: its parameters are fitted by moment matching
+    offsets_of: ClassVar[str | None] = None
+    #: silent without acquisition times (a diagnosis tries it only on files that have them)
+    needs_times: ClassVar[bool] = False
+
+    @classmethod
+    def search(cls, param: str, layers) -> np.ndarray:
+        """Values of ``param`` a fit scans before refining them.
+
+        Default, from the parameter's ``bounds`` and ``defaults``: a positive parameter (lower
+        bound >= 0) 16 log-spaced values over [default / 1000, 30 default], a signed one 25
+        evenly spaced values over +-15 |default|, both inside the bounds. ``layers``: the
+        measured layer outputs (each (n, r, d_l)), for an effect whose scale is the data's.
+        """
+        lo, hi = cls.bounds.get(param, (-np.inf, np.inf))
+        d = abs(float(cls.defaults.get(param, 1.0))) or 1.0
+        if lo >= 0:
+            vals = np.geomspace(d * 1e-3, d * 30.0, 16)
+        else:
+            vals = np.linspace(-15.0 * d, 15.0 * d, 25)
+        vals = vals[(vals >= lo) & (vals <= hi)]
+        return vals if vals.size else np.array([float(cls.defaults.get(param, max(lo, min(hi, 1.0))))])
+
+    @classmethod
+    def from_data(cls, layers) -> dict | None:
+        """Parameter values read off the measured layers (each (n, r, d_l)) and held fixed by a
+        fit, or None (default: nothing is read off the data)."""
+        return None
+
+    @classmethod
+    def signature(cls, res) -> dict | None:
+        """This effect's signature in the residuals of a model without it, or None.
+
+        ``res`` (:class:`gift_theory.lab.Residuals`) holds per measured layer the measured and
+        the model's per-cell means, variances and shots. Returns ``{"statistic": str,
+        "value": float, "z": float}`` with z ~ N(0, 1) under the model (a score test in the
+        direction the effect would move the data); large positive z points at the effect.
+        """
+        return None
 
 def make_effect(name: str, where: str = "effect", **values) -> Effect:
     """Build the effect ``name`` with parameter ``values`` (missing ones take defaults)."""

@@ -4,6 +4,7 @@ neurons of the layer (laser intensity noise)."""
 from __future__ import annotations
 
 import jax
+import numpy as np
 
 from ._base import Effect, register
 
@@ -25,3 +26,16 @@ class CommonMode(Effect):
 
     def gain(self, noise, layer, t, shape):
         return 1.0 + self.c * noise[f"cm{layer}"][..., None]
+
+    @classmethod
+    def signature(cls, res):
+        # a common gain adds c^2 u_j u_k to every covariance: the variance of the shots projected
+        # on the mean direction beyond the sum of the per-neuron variances
+        T = 0.0
+        for Y, MA, mB, vB in zip(res.Y, res.MA, res.mB, res.vB):
+            w = mB / np.sqrt(np.sum(mB ** 2, axis=1, keepdims=True) + 1e-300)
+            def excess(S):
+                return np.var(np.einsum("nkd,nd->nk", S, w), axis=1, ddof=1) - np.sum(w ** 2 * S.var(1, ddof=1), 1)
+            T = T + (excess(Y) - excess(MA)) / (np.sum(w ** 2 * vB, 1) + 1e-300)
+        return {"statistic": "excess covariance along the mean direction (the rank-one part a common gain adds)",
+                "z": res.over_inputs(T), "value": float(np.mean(T))}

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._base import Effect, register
 
@@ -27,3 +28,10 @@ class Crosstalk(Effect):
 
     def weights(self, W, layer):
         return W + self.k * neighbour_sum(W)
+
+    @classmethod
+    def signature(cls, res):
+        d = res.mean_derivative("crosstalk", "k", 0.0, 1e-3)
+        w = [dk / np.sqrt(vB + 1e-300) for dk, vB in zip(d, res.vB)]
+        z = res.score(res.mean_resid, w)
+        return {"statistic": "mean residual along the neighbour-weight direction d(mean)/dk", "z": abs(z), "value": z}

@@ -4,6 +4,7 @@ or modulator noise scaling the optical weighted sum)."""
 from __future__ import annotations
 
 import jax
+import numpy as np
 
 from ._base import Effect, register
 
@@ -24,3 +25,9 @@ class Multiplicative(Effect):
 
     def gain(self, noise, layer, t, shape):
         return 1.0 + self.m * noise[f"mult{layer}"]
+
+    @classmethod
+    def signature(cls, res):
+        w = [m ** 2 for m in res.mB]
+        return {"statistic": "excess variance along mean^2 (multiplicative: variance m^2 u^2)",
+                "z": res.score(res.var_resid, w), "value": float(np.mean([np.mean(v) for v in res.var_resid]))}

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._base import Effect, register
 
@@ -29,3 +30,48 @@ class Quantization(Effect):
     def readout(self, v, noise, layer):
         step = self.step
         return jnp.clip(jnp.round(v / step) * step, -self.v_range, self.v_range)
+
+    @classmethod
+    def from_data(cls, layers):
+        """``bits`` and ``v_range`` read off the lattice the measured values sit on (None when they
+        do not): ``bits`` is the smallest integer with ``step 2^(bits-1)`` at least the largest
+        measured magnitude, ``v_range = step 2^(bits-1)``; without a lattice, 16 bits over the
+        measured range."""
+        step = lattice_step(layers)
+        vmax = max(float(np.max(np.abs(a))) for a in layers)
+        if step is None:
+            return {"bits": 16.0, "v_range": vmax}
+        bits = min(max(1, int(np.ceil(np.log2(max(vmax / step, 1.0) - 1e-6))) + 1), 32)
+        return {"bits": float(bits), "v_range": float(step * 2.0 ** (bits - 1))}
+
+    @classmethod
+    def signature(cls, res):
+        step = lattice_step(res.Y)
+        return {"statistic": (f"measured values sit on a lattice of step {step:.4g}" if step else
+                              "measured values are not on a lattice"),
+                "value": float(step) if step else float("nan"), "z": float("nan"), "stands_out": step is not None}
+
+
+def lattice_step(layers):
+    """The spacing of the lattice the measured values (a list of arrays) sit on, or None.
+
+    The candidate step is the smallest clear gap between distinct measured values; the
+    values are on the lattice when every one is within 1e-3 step of a multiple of it.
+    """
+    vals = np.concatenate([np.ravel(a) for a in layers])
+    u = np.unique(np.round(vals, 9))
+    if len(u) > 0.5 * len(vals) or len(u) < 2:
+        return None
+    gaps = np.diff(u)
+    scale = max(np.max(np.abs(u)), 1e-12)
+    gaps = gaps[gaps > 1e-7 * scale]
+    if len(gaps) == 0:
+        return None
+    step = float(np.min(gaps))
+    # refine with the median of gaps that are one step wide
+    one = gaps[np.abs(gaps / step - 1.0) < 0.01]
+    step = float(np.median(one)) if len(one) else step
+    resid = np.abs(u / step - np.round(u / step))
+    if np.max(resid) > 1e-3:
+        return None
+    return step

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._base import Effect, register
 
@@ -22,3 +23,14 @@ class Saturation(Effect):
 
     def readout(self, v, noise, layer):
         return self.v_max * jnp.tanh(v / self.v_max)
+
+    @classmethod
+    def search(cls, param, layers):
+        vmax = max(float(np.max(np.abs(a))) for a in layers)
+        return np.geomspace(0.3 * vmax, 30 * vmax, 17)
+
+    @classmethod
+    def signature(cls, res):
+        w = [-(m ** 3) for m in res.mB]
+        return {"statistic": "mean residual along -mean^3 (compression of large values)",
+                "z": res.score(res.mean_resid, w), "value": float("nan")}

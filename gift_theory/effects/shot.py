@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._base import Effect, register
 
@@ -32,3 +33,9 @@ class Shot(Effect):
 
     def readout(self, v, noise, layer):
         return v + safe_sqrt(self.q * jnp.abs(v)) * noise[f"shot{layer}"]
+
+    @classmethod
+    def signature(cls, res):
+        w = [np.abs(m) for m in res.mB]
+        return {"statistic": "excess variance along |mean| (shot: variance q |v|)", "z": res.score(res.var_resid, w),
+                "value": float(np.mean([np.mean(v) for v in res.var_resid]))}

@@ -5,6 +5,7 @@ is the same device, another seed another device."""
 from __future__ import annotations
 
 import jax
+import numpy as np
 
 from ._base import Effect, register
 
@@ -27,7 +28,21 @@ class WeightError(Effect):
     stage = "weights"
     order = 1
     static_fields = ("seed",)
+    offsets_of = "W"
     description = "a fixed per-device error E ~ N(0, e^2) added to every weight"
 
     def weights(self, W, layer):
         return W + self.e * device_draw(self.seed, layer, W.shape, W.dtype)
+
+    @classmethod
+    def signature(cls, res):
+        # offsets fixed per device repeat in both halves of the shots; noise does not
+        T = 0.0
+        for Y, MA, MB, vB in zip(res.Y, res.MA, res.MB, res.vB):
+            h = Y.shape[1] // 2
+            se = np.sqrt(vB * (1.0 / max(h, 1) + 1.0 / MA.shape[1]) + 1e-300)
+            ra = (Y[:, :h].mean(1) - MA.mean(1)) / se
+            rb = (Y[:, h:2 * h].mean(1) - MB.mean(1)) / se
+            T = T + np.sum(ra * rb, axis=1)
+        return {"statistic": "split-half reproducibility of the mean residuals (products of two halves' residuals)",
+                "z": res.over_inputs(T), "value": float(np.mean(T))}

@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._model import forward, sample_noise, squared_error
-from .._params import Layer, flatten
+from .._model import forward, named_subkey, sample_noise, squared_error
+from .._params import flatten
 from ..effects import Physics
 from ..training import TrainConfig, train
 
@@ -88,20 +88,16 @@ def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps
     -------
     physics, info (the inputs and shots used, the baseline p-value, the ranking's top three)
     """
-    from ..lab import Measurement as LabMeasurement
-    from ..lab import diagnose
-    from ..lab._fit import CANDIDATES
+    from ..lab import default_candidates, diagnose
+    from ..lab._fit_offsets import fitted_as_offsets
 
     n = int(min(problem.K1, max(8, math.floor(evaluations * problem.unit_shots / shots))))
-    m = problem.chip.measure(problem.w0, problem.x_ft[:n], shots, taps=taps)
-    meas = LabMeasurement(np.asarray(m.x, np.float64), np.asarray(m.y, np.float64),
-                          tuple(Layer(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in problem.w0),
-                          taps=tuple(np.asarray(a, np.float64) for a in m.taps) if m.taps else None,
-                          t=None if m.t is None else np.asarray(m.t, np.float64), activation=problem.arch.activation)
-    d = diagnose(jax.random.fold_in(problem.key, 810 + seed), meas,
-                 candidates=[c for c in CANDIDATES if c != "weight_error" and (c != "drift" or m.t is not None)])
+    meas = problem.chip.measure(problem.w0, problem.x_ft[:n], shots, taps=taps)
+    # per-device offsets are a property of this chip's fixed draws, not of its noise: retraining cannot use them
+    d = diagnose(named_subkey(problem.key, f"identify{seed}"), meas,
+                 candidates=[c for c in default_candidates(meas) if not fitted_as_offsets(c)])
     physics = d.ranking[0].model.physics if d.missing_effect_detected else d.baseline.physics
-    return physics, {"physics": physics.describe(), "inputs": n, "shots": shots, "taps": bool(m.taps),
+    return physics, {"physics": physics.describe(), "inputs": n, "shots": shots, "taps": meas.has_taps,
                      "baseline_p": d.baseline_comparison.p_value,
                      "missing_effect_detected": d.missing_effect_detected,
                      "ranking": [c.as_json()["effect"] for c in d.ranking[:3]]}

@@ -1,8 +1,19 @@
 """The measurement loop: compare a model with measurements, see where it fails, find the
-missing physical effect, add it, fit it, watch the error fall (issue 5).
+missing physical effect -- or say plainly that none it knows explains the data -- add it,
+fit it, watch the error fall.
 
-Public API (a notebook can do everything the ``gift simulate/compare/diagnose/fit``
-commands do)::
+The stages, one module each, in the order one :func:`diagnose` runs them::
+
+    _io          measurement files (CONTRACTS §3)
+    _shots       a model of the device and its shots (the core's sampler and forward pass)
+    _channels    the channels of a cell and the measurement's noise floor
+    _qtest       the discrepancy test
+    _compare     one model against one measurement; the one-step check per layer
+    _fit*        fitting a model: moments, per-device offsets, values read off the data
+    _localise    where a model fails; each effect's signature
+    _diagnose    the pipeline: split, fit, score, rank
+
+Public API (a notebook can do everything ``gift simulate/compare/diagnose/fit`` do)::
 
     meas = load_measurement("chip.npz")                 # CONTRACTS §3, validated
     res = diagnose(key, meas)                           # baseline, p-value, ranking of effects
@@ -10,32 +21,35 @@ commands do)::
     cmp = compare(key, Model(physics), meas)            # discrepancy, floor, p-value
 """
 
+from .._measurement import Measurement as Measurement
+from ..chips import simulate_measurement as simulate_measurement
+from ._channels import Reference as Reference
+from ._channels import cell_statistic as cell_statistic
+from ._channels import energy_cells as energy_cells
+from ._channels import noise_floor as noise_floor
+from ._channels import reference as reference
 from ._compare import Comparison as Comparison
-from ._compare import Model as Model
 from ._compare import compare as compare
-from ._compare import cell_statistic as cell_statistic
-from ._compare import energy_cells as energy_cells
-from ._compare import model_shots as model_shots
-from ._compare import Reference as Reference
-from ._compare import noise_floor as noise_floor
-from ._compare import reference as reference
 from ._compare import one_step_check as one_step_check
-from ._measurement import Measurement as Measurement
-from ._measurement import load_csv as load_csv
-from ._measurement import load_measurement as load_measurement
-from ._measurement import save_csv as save_csv
-from ._measurement import save_measurement as save_measurement
-from ._measurement import simulate_measurement as simulate_measurement
-from ._measurement import validate_arrays as validate_arrays
 from ._diagnose import Candidate as Candidate
 from ._diagnose import Diagnosis as Diagnosis
 from ._diagnose import FitResult as FitResult
+from ._diagnose import compare_measurement as compare_measurement
+from ._diagnose import default_candidates as default_candidates
 from ._diagnose import diagnose as diagnose
 from ._diagnose import fit_effects as fit_effects
 from ._diagnose import penalised_score as penalised_score
-from ._fit import CANDIDATES as CANDIDATES
 from ._fit import fit_model as fit_model
-from ._fit import lattice_step as lattice_step
 from ._fit import split_inputs as split_inputs
-from ._where import signatures as signatures
-from ._where import where_it_fails as where_it_fails
+from ._io import load_csv as load_csv
+from ._io import load_measurement as load_measurement
+from ._io import load_weights as load_weights
+from ._io import save_csv as save_csv
+from ._io import save_measurement as save_measurement
+from ._io import validate_arrays as validate_arrays
+from ._localise import Residuals as Residuals
+from ._localise import residuals as residuals
+from ._localise import signatures as signatures
+from ._localise import where_it_fails as where_it_fails
+from ._shots import Model as Model
+from ._shots import model_shots as model_shots

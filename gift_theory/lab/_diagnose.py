@@ -1,22 +1,23 @@
-"""Which effect is missing: fit every candidate extension, rank by held-out discrepancy.
+"""The lab's pipeline: which effect is missing, or -- when none it knows explains the data -- where to look.
 
-The inputs are split at random into a fitting half and a held-out half. The baseline
-(awgn, s fitted) and every candidate ``awgn + effect`` are fitted on the first half and
-scored on the second with :func:`gift_theory.lab.compare`. Candidates are ranked by
-``discrepancy_after + 2 sd * (number of parameters the effect adds)``, sd the baseline's
-standard deviation of the discrepancy under the model: an extra parameter must buy two
-standard deviations of held-out discrepancy, so a one-parameter effect that explains the
-data beats a many-parameter one that also does (CONTRACTS §4).
+One :func:`diagnose` reads top-down as the stages of the lab::
+
+    split the inputs        (fit half, held-out half)                         this module
+    model shots             (the core's sampler and forward pass)             ._shots
+    fit a model             (moments, offsets, values read off the data)      ._fit
+    score its discrepancy   (channels, the Q-test, the noise floor)           ._compare
+    localise                (one-step check per layer, residual profiles)     ._localise
+    name mechanisms         (rules from the localised evidence)               ._mechanisms
+    verdict                 (explained? what remains, where to look)          ._verdict
+
+The baseline (awgn, s fitted) and every candidate ``awgn + effect`` (every registered effect
+by default: the built-in ones and any plugin) are fitted on the fitting half and scored on
+the held-out half. Candidates are ranked by ``discrepancy_after + 2 sd * (parameters the
+effect adds)`` -- sd the baseline's standard deviation of the discrepancy under the model, a
+per-device offset family counted by its effective degrees of freedom -- so a one-parameter
+effect that explains the data beats a many-parameter one that also does (CONTRACTS §4).
 ``missing_effect_detected`` is the baseline's goodness-of-fit test, ``p_value < 0.01``.
-
-A model with fitted weight offsets has hundreds of parameters; their estimation error is
-part of its held-out discrepancy (so ranking charges it for them), but its p-value is taken
-against a refit null (:func:`gift_theory.lab._fit.offset_replicates`: B = 8 replicates of
-simulate-refit-score), so that a correct offset model passes (measured with taps: 1/100
-false alarms at 0.01; without taps most offsets are unidentified, the replicates' truths
-are drawn from the offsets' posterior, and the refit null is closer but still
-anti-conservative: 8/100, docs/lab.md section 6). The replicates are made once
-per call, for the first candidate with offsets, and reused by the others that have them.
+A model with fitted offsets is tested against a refit null (:mod:`._fit_offsets`).
 """
 
 from __future__ import annotations
@@ -29,35 +30,118 @@ import jax
 import numpy as np
 
 from .._errors import GiftInputError
-from ._compare import Comparison, Model, compare, one_step_check, reference
-from ._fit import CANDIDATES, N_PARAMS, fit_model, offset_replicates, split_inputs
-from ._measurement import Measurement
+from .._measurement import Measurement
+from ..effects import REGISTRY
+from ._channels import Reference, channel_values, reference
+from ._compare import Comparison, compare, one_step_check
+from ._fit import fit_model, split_inputs
+from ._fit_moments import MomentProblem
+from ._fit_offsets import effective_dof, fitted_as_offsets, kinds_of, offset_replicates
+from ._localise import residuals, signatures, where_it_fails
+from ._shots import Model
 
 #: the significance level of the goodness-of-fit test (CONTRACTS §4)
 ALPHA = 0.01
 
 
+def default_candidates(meas: Measurement) -> list[str]:
+    """Every registered effect a diagnosis of ``meas`` tries: all but awgn, and those silent
+    without acquisition times only when the file has them."""
+    return [n for n, cls in REGISTRY.items() if n != "awgn" and (meas.t is not None or not cls.needs_times)]
+
+
 @dataclasses.dataclass(frozen=True)
 class Candidate:
-    """One fitted extension of the model, scored on held-out inputs."""
+    """One fitted extension of the model, scored on held-out inputs.
+
+    n_free : the parameters it adds, an offset family counted by its effective degrees of freedom
+    nominal : the parameters it adds, every offset counted as one
+    """
 
     effects: tuple
     model: Model
     comparison: Comparison
     score: float
     seconds: float
+    n_free: float = 0.0
+    nominal: int = 0
+
+    def mechanism(self) -> str:
+        return "+".join(REGISTRY[e].mechanism for e in self.effects)
 
     def as_json(self) -> dict:
         # a second-stage entry is named by the effect it adds; "with" lists the ones before
-        out = {"effect": self.effects[-1], "discrepancy_after": self.comparison.discrepancy,
-                "p_value_after": self.comparison.p_value, "params": self.model.params_json(),
-                "se": self.comparison.se, "score": self.score}
+        out = {"effect": self.effects[-1], "mechanism": self.mechanism(),
+               "discrepancy_after": self.comparison.discrepancy, "p_value_after": self.comparison.p_value,
+               "params": self.model.params_json(), "se": self.comparison.se, "score": self.score,
+               "n_free": self.n_free, "nominal_params": self.nominal}
         if len(self.effects) > 1:
             out["with"] = list(self.effects[:-1])
         if self.comparison.replicates:
             out["net_discrepancy_after"] = self.comparison.net_discrepancy
             out["refit_null_replicates"] = self.comparison.replicates
         return out
+
+
+def _log(msg, verbose):
+    if verbose:
+        sys.stderr.write(msg + "\n")
+        sys.stderr.flush()
+
+
+def penalised_score(cmp: Comparison, n_params: float, base: Comparison | None = None) -> float:
+    """Held-out discrepancy plus 2 standard deviations per added parameter. The unit is the
+    baseline's standard deviation of Q under the model (one scale for every candidate; a
+    candidate's own would reward a model whose channels happen to be more correlated)."""
+    unit = base.se if base is not None and base.se > 0 else cmp.se
+    return float(cmp.discrepancy + 2.0 * unit * n_params)
+
+
+class Session:
+    """What every model scored on one measurement shares: the split of its inputs, the held-out
+    half's :class:`Reference`, the fitting half's moments, the refit null of offset models and
+    the baseline. Built once by :func:`diagnose`, :func:`fit_effects` and
+    :func:`compare_measurement` from the same named subkeys, so their numbers agree."""
+
+    def __init__(self, key, meas: Measurement, shots: int | None = None):
+        self.meas, self.shots = meas, shots
+        k_split, self.k_fit, self.k_cmp, k_ref, self.k_step = jax.random.split(key, 5)
+        self.train, self.test = split_inputs(k_split, meas.n)
+        self.fit_meas, self.test_meas = meas.subset(self.train), meas.subset(self.test)
+        self.ref: Reference = reference(k_ref, self.test_meas)
+        self.problem = MomentProblem(self.k_fit, self.fit_meas, shots)
+        self._replicates = {}
+        self.baseline = self.fit(())
+        self.baseline_comparison = self.score(self.baseline)
+
+    def fit(self, effects, start: Model | None = None) -> Model:
+        return fit_model(self.k_fit, self.fit_meas, effects, start=start, K=self.shots, problem=self.problem)
+
+    def score(self, model: Model) -> Comparison:
+        """The held-out comparison; a model with fitted offsets against its refit null (made once
+        per set of offset effects and reused)."""
+        reps = None
+        names = tuple(sorted(n for n in model.offsets if fitted_as_offsets(n)))
+        if names:
+            if names not in self._replicates:
+                self._replicates[names] = offset_replicates(
+                    jax.random.fold_in(self.k_cmp, len(self._replicates)), model, self.fit_meas, self.test_meas,
+                    self.ref, channel_values=channel_values, shots=self.shots)
+            reps = self._replicates[names]
+        return compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref, null_replicates=reps)
+
+    def candidate(self, effects, model: Model, t0: float, added) -> Candidate:
+        """Score ``model`` and count the parameters the effects ``added`` brought."""
+        cmp = self.score(model)
+        n_free, nominal = 0.0, 0
+        for name in added:
+            if fitted_as_offsets(name):
+                dof, nom = effective_dof(self.k_fit, self.fit_meas, model, kinds_of([name], self.meas.arch))
+                n_free, nominal = n_free + dof, nominal + nom
+            else:
+                n_free, nominal = n_free + len(REGISTRY[name].params), nominal + len(REGISTRY[name].params)
+        score = penalised_score(cmp, n_free, self.baseline_comparison)
+        return Candidate(tuple(effects), model, cmp, score, time.time() - t0, float(n_free), int(nominal))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,6 +154,9 @@ class Diagnosis:
     one_step: tuple
     held_out: np.ndarray
     seconds: float
+    has_taps: bool = False
+    signatures: dict = dataclasses.field(default_factory=dict)
+    where: dict | None = None
 
     @property
     def missing_effect_detected(self) -> bool:
@@ -84,22 +171,12 @@ class Diagnosis:
                 "missing_effect_detected": self.missing_effect_detected,
                 "ranking": [cand.as_json() for cand in self.ranking],
                 "where": list(self.one_step),
+                "signatures": self.signatures,
+                "worst_cells": [] if self.where is None else self.where["worst"][:10],
                 "held_out_inputs": int(len(self.held_out)),
+                **({"refit_null_calibrated": self.has_taps} if any(c.comparison.replicates for c in self.ranking)
+                   else {}),
                 "seconds": self.seconds}
-
-
-def _log(msg, verbose):
-    if verbose:
-        sys.stderr.write(msg + "\n")
-        sys.stderr.flush()
-
-
-def penalised_score(cmp: Comparison, n_params: int, base: Comparison | None = None) -> float:
-    """Held-out discrepancy plus 2 standard deviations per added parameter. The unit is the
-    baseline's standard deviation of Q under the model (one scale for every candidate; a
-    candidate's own would reward a model whose channels happen to be more correlated)."""
-    unit = base.se if base is not None and base.se > 0 else cmp.se
-    return float(cmp.discrepancy + 2.0 * unit * n_params)
 
 
 def _improves(pair: Candidate, first: Candidate) -> bool:
@@ -108,23 +185,6 @@ def _improves(pair: Candidate, first: Candidate) -> bool:
     dwarfs the parsimony penalty, and a failing pair is not an answer (measured: fitted
     weight offsets that still fail were "improved" by a 1 % drift gain)."""
     return pair.score < first.score and pair.comparison.p_value >= ALPHA
-
-
-class _Scorer:
-    """Held-out scoring shared by every candidate of one call (refit null made once)."""
-
-    def __init__(self, key, fit_meas, test_meas, ref, shots):
-        self.key, self.fit_meas, self.test_meas, self.ref, self.shots = key, fit_meas, test_meas, ref, shots
-        self.replicates = None
-
-    def __call__(self, model: Model) -> Comparison:
-        reps = None
-        if model.params is not None and "weight_error" in model.extra:
-            if self.replicates is None:
-                self.replicates = offset_replicates(jax.random.fold_in(self.key, 4321), model, self.fit_meas,
-                                                    self.test_meas, self.ref, shots=self.shots)
-            reps = self.replicates
-        return compare(self.key, model, self.test_meas, shots=self.shots, ref=self.ref, null_replicates=reps)
 
 
 def _merge_second_stage(first: Candidate, stage2: list, singles: list) -> list:
@@ -139,72 +199,75 @@ def _merge_second_stage(first: Candidate, stage2: list, singles: list) -> list:
     return better[:1] + [first] + better[1:] + rest
 
 
+def _compatible(first: Candidate, name: str) -> bool:
+    """``name`` can be added on top of ``first``: not already there, not a second noise law."""
+    if name in first.effects:
+        return False
+    laws = [e for e in first.effects if REGISTRY[e].stage == "law"]
+    return not (laws and REGISTRY[name].stage == "law")
+
+
+def _check_candidates(names, meas: Measurement) -> list:
+    for c in names:
+        for e in c.split("+"):
+            if e not in REGISTRY or e == "awgn":
+                raise GiftInputError(f"--candidates: unknown effect {e!r}; known: "
+                                     f"{', '.join(n for n in REGISTRY if n != 'awgn')}")
+            if REGISTRY[e].needs_times and meas.t is None:
+                raise GiftInputError(f"--candidates {e}: needs acquisition times t in the measurement")
+    return list(names)
+
+
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = None,
              verbose: bool = False) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
     Parameters
     ----------
-    key : PRNG key (split into ``split``, ``fit``, ``compare``, ``floor`` subkeys)
+    key : PRNG key (split into ``split``, ``fit``, ``compare``, ``floor``, ``step`` subkeys)
     meas : Measurement
-    candidates : effect names to try (default: every CONTRACTS §2 effect except awgn;
-        drift only when the file has acquisition times)
+    candidates : effect names to try (default :func:`default_candidates`: every registered effect but
+        awgn; those that need acquisition times only when the file has them)
     shots : model shots per input (default 4 r)
     second : when the best single effect still fails (p < 0.01), the best ``second``
-        runners-up (default: all; a strong first effect can push the second far down the
-        single-effect list) are each fitted on top of it (a greedy forward step, for two
-        missing effects) and ranked with the rest by penalised score; their entries carry
-        both effects' parameters
+        runners-up (default: all) are each fitted on top of it (a greedy forward step, for
+        two missing effects) and ranked with the rest by penalised score
 
     Returns
     -------
     Diagnosis
     """
     t0 = time.time()
-    k_split, k_fit, k_cmp, k_ref, k_step = jax.random.split(key, 5)
-    train, test = split_inputs(k_split, meas.n)
-    mtr, mte = meas.subset(train), meas.subset(test)
-    ref = reference(k_ref, mte)
-    score_of = _Scorer(k_cmp, mtr, mte, ref, shots)
-    base = fit_model(k_fit, mtr, (), K=shots)
-    base_cmp = score_of(base)
+    names = default_candidates(meas) if candidates is None else _check_candidates(candidates, meas)
+    session = Session(key, meas, shots)
+    base, base_cmp = session.baseline, session.baseline_comparison
     _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
-         f"(floor {ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
-    if candidates is None:
-        candidates = [c for c in CANDIDATES if c != "drift" or meas.t is not None]
+         f"(floor {session.ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
     ranking = []
-    for name in candidates:
-        if name == "drift" and meas.t is None:
-            raise GiftInputError("candidate drift needs acquisition times t in the measurement")
+    for name in names:
         t1 = time.time()
         effects = tuple(name.split("+"))
-        model = fit_model(k_fit, mtr, effects, start=base, K=shots)
-        cmp = score_of(model)
-        score = penalised_score(cmp, sum(N_PARAMS.get(e, 1) for e in effects), base_cmp)
-        ranking.append(Candidate(effects, model, cmp, score, time.time() - t1))
-        _log(f"  + {name:<15s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g} "
-             f"({time.time() - t1:.1f} s)", verbose)
+        cand = session.candidate(effects, session.fit(effects), t1, effects)
+        ranking.append(cand)
+        _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
+             f"p = {cand.comparison.p_value:.3g} ({cand.seconds:.1f} s)", verbose)
     ranking.sort(key=lambda c: c.score)
     if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
-        # the best single effect still fails: add each runner-up on top of it (greedy forward step)
         first = ranking[0]
-        laws = ("laplace", "uniform")
-        has_law = any(e in laws for e in first.effects)
-        rest = [c.effects[0] for c in ranking[1:] if c.effects[0] not in first.effects
-                and not (has_law and c.effects[0] in laws)][:second]  # None: every runner-up
+        rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
         stage2 = []
         for name in rest:
             t1 = time.time()
-            effects = first.effects + (name,)
-            model = fit_model(k_fit, mtr, (name,), start=first.model, K=shots)
-            cmp = score_of(model)
-            score = penalised_score(cmp, sum(N_PARAMS.get(e, 1) for e in effects), base_cmp)
-            stage2.append(Candidate(effects, model, cmp, score, time.time() - t1))
-            _log(f"  + {'+'.join(effects):<30s} {model.describe():<60s} discrepancy {cmp.discrepancy:.3g} "
-                 f"p = {cmp.p_value:.3g}", verbose)
+            cand = session.candidate(first.effects + (name,), session.fit((name,), start=first.model), t1,
+                                     first.effects + (name,))
+            stage2.append(cand)
+            _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
+                 f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
         ranking = _merge_second_stage(first, stage2, ranking[1:])
-    steps = tuple(one_step_check(k_step, base, meas)) if meas.has_taps else ()
-    return Diagnosis(base, base_cmp, tuple(ranking), steps, test, time.time() - t0)
+    steps = tuple(one_step_check(session.k_step, base, meas)) if meas.has_taps else ()
+    res = residuals(session.k_step, base, meas, shots)
+    return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, meas.has_taps,
+                     signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,6 +279,7 @@ class FitResult:
     comparison_before: Comparison
     comparison_after: Comparison
     ladder: tuple  # ((label, Comparison), ...) one rung per added effect
+    has_taps: bool = False
 
     def as_json(self) -> dict:
         """The CONTRACTS §4 object of ``gift fit --json`` (plus a few extra keys)."""
@@ -227,8 +291,8 @@ class FitResult:
                 "ladder": [{"model": lab, "discrepancy": c.discrepancy, "se": c.se, "p_value": c.p_value,
                             **({"net_discrepancy": c.net_discrepancy} if c.replicates else {})}
                            for lab, c in self.ladder],
-                **({"net_discrepancy_after": a.net_discrepancy, "refit_null_replicates": a.replicates}
-                   if a.replicates else {})}
+                **({"net_discrepancy_after": a.net_discrepancy, "refit_null_replicates": a.replicates,
+                    "refit_null_calibrated": self.has_taps} if a.replicates else {})}
 
 
 def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, verbose: bool = False) -> FitResult:
@@ -239,26 +303,48 @@ def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, ve
     ----------
     key : PRNG key (the same subkeys as :func:`diagnose`, so the numbers agree)
     meas : Measurement
-    effects : names of CONTRACTS §2 effects to add
+    effects : names of registered effects to add
     """
     effects = [e for e in effects if e != "awgn"]
     for e in effects:
         if effects.count(e) > 1:
             raise GiftInputError(f"--add {e} given twice")
-    k_split, k_fit, k_cmp, k_ref, _ = jax.random.split(key, 5)
-    train, test = split_inputs(k_split, meas.n)
-    mtr, mte = meas.subset(train), meas.subset(test)
-    ref = reference(k_ref, mte)
-    score_of = _Scorer(k_cmp, mtr, mte, ref, shots)
-    base = fit_model(k_fit, mtr, (), K=shots)
-    base_cmp = score_of(base)
+        if e not in REGISTRY:
+            raise GiftInputError(f"--add: unknown effect {e!r}; known: {', '.join(REGISTRY)}")
+        if REGISTRY[e].needs_times and meas.t is None:
+            raise GiftInputError(f"--add {e}: the measurement has no acquisition times t; {e} is silent without them")
+    session = Session(key, meas, shots)
+    base, base_cmp = session.baseline, session.baseline_comparison
     ladder = [("awgn", base_cmp)]
-    _log(f"awgn: {base.describe()} discrepancy {base_cmp.discrepancy:.3g} (floor {ref.noise_floor:.3g})", verbose)
+    _log(f"awgn: {base.describe()} discrepancy {base_cmp.discrepancy:.3g} (floor {session.ref.noise_floor:.3g})",
+         verbose)
     model, cmp, added = base, base_cmp, []
     for e in effects:
         added.append(e)
-        model = fit_model(k_fit, mtr, (e,), start=model, K=shots)
-        cmp = score_of(model)
+        model = session.fit((e,), start=model)
+        cmp = session.score(model)
         ladder.append(("awgn + " + " + ".join(added), cmp))
         _log(f"+{e}: {model.describe()} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g}", verbose)
-    return FitResult(base, model, base_cmp, cmp, tuple(ladder))
+    return FitResult(base, model, base_cmp, cmp, tuple(ladder), meas.has_taps)
+
+
+def compare_measurement(key, meas: Measurement, physics=None, *, shots: int | None = None) -> dict:
+    """``gift compare``: the awgn model fitted on half the inputs and scored on the other half
+    (the same subkeys as :func:`diagnose`), or -- given ``physics`` -- exactly that model scored
+    on every input; plus the one-step check per layer when the file has taps.
+
+    Returns
+    -------
+    {"model": Model, "fitted": bool, "comparison": Comparison, "scored": Measurement,
+     "where": [one-step rows]}
+    """
+    if physics is None:
+        session = Session(key, meas, shots)
+        model, cmp, scored, fitted = session.baseline, session.baseline_comparison, session.test_meas, True
+        k_step = session.k_step
+    else:
+        _, _, k_cmp, k_ref, k_step = jax.random.split(key, 5)
+        model, scored, fitted = Model(physics), meas, False
+        cmp = compare(k_cmp, model, meas, shots=shots, ref=reference(k_ref, meas))
+    where = one_step_check(k_step, model, meas) if meas.has_taps else []
+    return {"model": model, "fitted": fitted, "comparison": cmp, "scored": scored, "where": where}

@@ -11,6 +11,8 @@ import os
 
 import numpy as np
 
+from .._io import save_figure
+
 
 def _plt():
     import matplotlib
@@ -21,11 +23,7 @@ def _plt():
 
 
 def _save(fig, path):
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    tmp = os.path.join(folder, ".tmp-" + os.path.basename(path))
-    fig.savefig(tmp, dpi=120, bbox_inches="tight", format=os.path.splitext(path)[1][1:] or "png")
-    os.replace(tmp, path)
+    save_figure(fig, path, bbox_inches="tight")
 
 
 def error_ladder(rungs, noise_floor: float, floor_se: float, path: str, title: str = "error ladder"):
@@ -55,7 +53,6 @@ def error_ladder(rungs, noise_floor: float, floor_se: float, path: str, title: s
     ax.set_title(title + "  (red: p < 0.01)", fontsize=10)
     ax.legend(fontsize=8, loc="upper right")
     _save(fig, path)
-    plt.close(fig)
     return path
 
 
@@ -80,5 +77,25 @@ def heatmaps(stats: dict, path: str, title: str = "where the model fails"):
         fig.colorbar(im, ax=ax, fraction=0.05)
     fig.suptitle(title, fontsize=10)
     _save(fig, path)
-    plt.close(fig)
     return path
+
+
+def diagnosis_figures(diagnosis, folder: str) -> list[str]:
+    """The figures of a :class:`~gift_theory.lab.Diagnosis`: the error ladder of the baseline and
+    the three best candidates, and where the baseline fails."""
+    c = diagnosis.baseline_comparison
+    rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
+        ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
+        for cand in diagnosis.ranking[:3]]
+    out = [error_ladder(rungs, c.noise_floor, c.floor_se, os.path.join(folder, "ladder.png"),
+                        title="baseline and best candidates")]
+    if diagnosis.where is not None:
+        out.append(heatmaps(diagnosis.where, os.path.join(folder, "where.png"), title="baseline: where it fails"))
+    return out
+
+
+def fit_figures(result, folder: str) -> list[str]:
+    """The error ladder of a :class:`~gift_theory.lab.FitResult`."""
+    rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in result.ladder]
+    return [error_ladder(rungs, result.comparison_after.noise_floor, result.comparison_after.floor_se,
+                         os.path.join(folder, "ladder.png"))]

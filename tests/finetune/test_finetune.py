@@ -36,7 +36,7 @@ class BowlChip:
         self.ledger.charge(len(x) * shots)
         r = float(norm(axpy(-1.0, self.w_star, params)))
         v = r + self.sigma * self.rng.standard_normal((len(x), shots, 1))
-        return Measurement(np.asarray(x), np.repeat(v, 2, axis=-1) / np.sqrt(2.0))
+        return Measurement(np.asarray(x), np.repeat(v, 2, axis=-1) / np.sqrt(2.0), tuple(params))
 
 
 def _setup(w_star_shift=0.0, sigma=0.0, budget=20, seed=0):

@@ -7,7 +7,8 @@ import pytest
 
 import gift_theory as gt
 from gift_theory.lab import Model, compare, energy_cells, one_step_check, simulate_measurement
-from gift_theory.lab._compare import CHANNELS, floor_moment_channels, moment_channels, q_test
+from gift_theory.lab._channels import CHANNELS, floor_moment_channels, moment_channels
+from gift_theory.lab._qtest import q_test
 
 ARCH = gt.Architecture((4, 8, 3))
 
@@ -120,7 +121,7 @@ def test_refit_null_allows_for_a_shared_estimation_error():
     always; with the shift and variance from 8 replicates of the same process the false
     alarms at 0.01 over 400 data sets stay within 3 binomial sd of 1 %, and a real excess
     beyond the estimation error is still found."""
-    from gift_theory.lab._compare import replicate_null
+    from gift_theory.lab._qtest import replicate_null
 
     rng = np.random.default_rng(8)
     n, C, B = 60, 3, 8
@@ -174,7 +175,7 @@ def test_one_step_locates_the_layer(setup):
 def test_null_false_alarms_cheap(setup):
     """Cheap calibration: on 16 data sets from the model itself (true parameters), p < 0.01
     at most twice (P(X >= 3 | Bin(16, 0.01)) < 6e-4); the full study is
-    ``python -m gift_theory.lab.calibrate``."""
+    ``python -m studies.calibrate``."""
     params, x = setup
     phys = gt.Physics.create(s=0.1)
     ps = []
@@ -191,7 +192,7 @@ def test_empirical_bayes_scale_of_unidentified_offsets():
     is nearly unbiased over devices and scatters no more than the moment equation
     |rho|^2 = e^2 tr + n sigma^2. 300 simulated devices; tolerances from the observed spread
     (4 standard errors)."""
-    from gift_theory.lab._fit import _marginal_e2
+    from gift_theory.lab._fit_offsets import marginal_e2 as _marginal_e2
 
     rng = np.random.default_rng(0)
     n, P, e, sigma2 = 120, 300, 0.15, 1.5

@@ -3,7 +3,7 @@ model pass, the null case reports nothing missing.
 
 A small network with taps and strong hidden effects keeps this within the test budget;
 rates over many seeds and the without-taps case are measured by
-``python -m gift_theory.lab.calibrate ident`` (numbers in docs/lab.md).
+``python -m studies.calibrate ident`` (numbers in docs/lab.md).
 """
 
 import json

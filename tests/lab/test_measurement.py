@@ -47,7 +47,7 @@ def test_npz_round_trip(meas, tmp_path):
     path = tmp_path / "m.npz"
     save_measurement(path, meas)
     _same(meas, load_measurement(path))
-    assert not [f for f in os.listdir(tmp_path) if f.startswith(".gift-tmp")]
+    assert not [f for f in os.listdir(tmp_path) if f.startswith(".tmp-")]
 
 
 def test_csv_round_trip(meas, tmp_path):

@@ -1,8 +1,8 @@
 """Statistical calibration of the measurement loop (a script, not a test: it takes minutes).
 
-    python -m gift_theory.lab.calibrate null  [--sets 120] [--taps|--no-taps] [--fitted [--effect NAME]]
-    python -m gift_theory.lab.calibrate ident [--seeds 3] [--taps|--no-taps] [--effects a,b]
-    python -m gift_theory.lab.calibrate time  [--taps]
+    python -m studies.calibrate null  [--sets 120] [--taps|--no-taps] [--fitted [--effect NAME]]
+    python -m studies.calibrate ident [--seeds 3] [--taps|--no-taps] [--effects a,b]
+    python -m studies.calibrate time  [--taps]
 
 ``null``: data sets simulated from the awgn model itself; the share of p < 0.01 (and
 < 0.05) is the false-alarm rate of the goodness-of-fit test. With ``--fitted`` the model's
@@ -70,8 +70,8 @@ def _physics(spec, s, seed):
 
 def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
     import gift_theory as gt
-    from gift_theory.lab import Model, compare, fit_model, reference, simulate_measurement, split_inputs
-    from gift_theory.lab._diagnose import _Scorer
+    from gift_theory.lab import Model, compare, simulate_measurement
+    from gift_theory.lab._diagnose import Session
 
     ps = []
     t0 = time.time()
@@ -83,13 +83,9 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
                                     times=effect == "drift")
         key = jax.random.PRNGKey(4000 + i)
         if fitted:  # exactly as diagnose scores a candidate
-            k_split, k_fit, k_cmp, k_ref, _ = jax.random.split(key, 5)
-            train, test = split_inputs(k_split, n)
-            mtr, mte = meas.subset(train), meas.subset(test)
-            model = fit_model(k_fit, mtr)
-            if effect is not None:
-                model = fit_model(k_fit, mtr, tuple(HIDDEN[effect]), start=model)
-            c = _Scorer(k_cmp, mtr, mte, reference(k_ref, mte), None)(model)
+            session = Session(key, meas)
+            c = (session.baseline_comparison if effect is None
+                 else session.score(session.fit(tuple(HIDDEN[effect]), start=session.baseline)))
         else:
             c = compare(key, Model(phys), meas)
         ps.append(c.p_value)
@@ -167,7 +163,7 @@ def time_study(taps, out):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m gift_theory.lab.calibrate", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m studies.calibrate", description=__doc__.split("\n\n")[0])
     p.add_argument("study", choices=("null", "ident", "time"))
     p.add_argument("--sets", type=int, default=120)
     p.add_argument("--seeds", type=int, default=3)

@@ -1,4 +1,4 @@
-"""Measurement files (CONTRACTS §3): load, validate, save, import CSV, simulate.
+"""Measurement files (CONTRACTS §3): load, validate, save, import and export CSV.
 
 One file is one measurement campaign on one device with one set of programmed weights::
 
@@ -10,91 +10,22 @@ One file is one measurement campaign on one device with one set of programmed we
     activation ()         string, "tanh" unless told
 
 Every malformed file raises :class:`gift_theory.GiftInputError` with one line naming the
-file and what is wrong; nothing is half-written (temp file + ``os.replace``).
+file and what is wrong; nothing is half-written (:mod:`gift_theory._io`). The campaign
+itself is :class:`gift_theory.Measurement`, the type chips return.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import os
-import tempfile
 import zipfile
 
-import jax
 import numpy as np
 
-from .._arch import ACTIVATIONS, Architecture
+from .._arch import ACTIVATIONS
 from .._errors import GiftInputError, require
+from .._io import atomic_write
+from .._measurement import Measurement
 from .._params import Layer
-
-
-@dataclasses.dataclass(frozen=True)
-class Measurement:
-    """One campaign: inputs, repeated shots, optional taps and times, programmed weights.
-
-    Attributes
-    ----------
-    x : ndarray of shape (n, d_0)
-    y : ndarray of shape (n, r, d_L)
-    taps : tuple of L-1 ndarrays of shape (n, r, d_l), or None (no taps measured)
-    params : tuple of Layer (W_l (d_l, d_{l-1}), b_l (d_l,)) as numpy arrays
-    t : ndarray of shape (n, r) or None
-    activation : str
-    """
-
-    x: np.ndarray
-    y: np.ndarray
-    params: tuple
-    taps: tuple | None = None
-    t: np.ndarray | None = None
-    activation: str = "tanh"
-
-    @property
-    def n(self) -> int:
-        return int(self.x.shape[0])
-
-    @property
-    def r(self) -> int:
-        return int(self.y.shape[1])
-
-    @property
-    def arch(self) -> Architecture:
-        widths = (int(self.params[0].W.shape[1]),) + tuple(int(p.W.shape[0]) for p in self.params)
-        return Architecture(widths, self.activation)
-
-    @property
-    def has_taps(self) -> bool:
-        return self.taps is not None
-
-    def layers(self) -> tuple[np.ndarray, ...]:
-        """The measured layer outputs: taps a_1..a_{L-1} (if any) then y; each (n, r, d_l)."""
-        return (tuple(self.taps) if self.taps is not None else ()) + (self.y,)
-
-    def layer_ids(self) -> tuple[int, ...]:
-        """The 1-based layer number of each entry of :meth:`layers`."""
-        L = len(self.params)
-        return tuple(range(1, L)) + (L,) if self.taps is not None else (L,)
-
-    def subset(self, idx) -> "Measurement":
-        """The same campaign restricted to the inputs ``idx``."""
-        idx = np.asarray(idx)
-        return dataclasses.replace(
-            self, x=self.x[idx], y=self.y[idx],
-            taps=None if self.taps is None else tuple(a[idx] for a in self.taps),
-            t=None if self.t is None else self.t[idx])
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """The CONTRACTS §3 dictionary of this measurement."""
-        out = {"x": self.x, "y": self.y, "activation": np.array(self.activation)}
-        for l, (W, b) in enumerate(self.params, start=1):
-            out[f"W{l}"] = np.asarray(W)
-            out[f"b{l}"] = np.asarray(b)
-        if self.taps is not None:
-            for l, a in enumerate(self.taps, start=1):
-                out[f"a{l}"] = a
-        if self.t is not None:
-            out["t"] = self.t
-        return out
 
 
 def _float_array(arrays, key, where):
@@ -202,12 +133,13 @@ def load_measurement(path, *, weights=None) -> Measurement:
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
         raise GiftInputError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
     if weights is not None:
-        w = _load_weights(weights)
+        w = load_weights(weights)
         arrays = {**w, **arrays}
     return validate_arrays(arrays, where=path)
 
 
-def _load_weights(path) -> dict:
+def load_weights(path) -> dict:
+    """The arrays W1..WL, b1..bL (and ``activation``) of a weights ``.npz``, checked to exist."""
     path = os.fspath(path)
     require(os.path.exists(path), f"{path}: no such weights file")
     try:
@@ -229,7 +161,7 @@ def load_csv(path, *, weights=None) -> Measurement:
     """
     path = os.fspath(path)
     require(weights is not None, f"{path}: a CSV measurement needs --weights FILE.npz with W1..WL, b1..bL")
-    warrays = _load_weights(weights)
+    warrays = load_weights(weights)
     try:
         with open(path, newline="") as fh:
             header = fh.readline().strip().split(",")
@@ -302,69 +234,12 @@ def save_csv(path, meas: Measurement) -> None:
         tcol[sel] = meas.t[data[sel, 0].astype(int), data[sel, 1].astype(int)]
         data = np.concatenate([data, tcol[:, None]], 1)
         header += ",t"
-    _atomic_write(path, lambda fh: np.savetxt(fh, data, delimiter=",", header=header, comments="",
-                                              fmt=["%d", "%d", "%d", "%d", "%.9g"] + (["%.9g"] if meas.t is not None else [])))
-
-
-def _atomic_write(path, write) -> None:
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    require(os.path.isdir(folder), f"{path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".gift-tmp-", suffix=os.path.splitext(path)[1])
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write(path, lambda fh: np.savetxt(fh, data, delimiter=",", header=header, comments="",
+                                              fmt=["%d", "%d", "%d", "%d", "%.9g"] + (["%.9g"] if meas.t is not None else [])),
+                 make_folder=False)
 
 
 def save_measurement(path, meas: Measurement) -> None:
-    """Write ``meas`` as a CONTRACTS §3 ``.npz`` (temp file in the same folder, then ``os.replace``)."""
+    """Write ``meas`` as a CONTRACTS §3 ``.npz`` (atomically)."""
     arrays = meas.arrays()
-    _atomic_write(path, lambda fh: np.savez(fh, **arrays))
-
-
-def simulate_measurement(key: jax.Array, params, x, physics, *, shots: int, activation: str = "tanh",
-                         taps: bool = False, times: bool = False) -> Measurement:
-    """A measurement campaign on a simulated chip (the hidden-effect data generator).
-
-    Parameters
-    ----------
-    key : PRNG key (split into ``noise`` and ``times`` subkeys)
-    params : tuple of Layer
-    x : (n, d_0)
-    physics : Physics of the simulated device (its hidden effects)
-    shots : r, repeated shots per input
-    taps : record the hidden layers a_1..a_{L-1}
-    times : record acquisition times t: the campaign runs input by input, shot by shot,
-        so t = (i r + j) / (n r - 1) (drift is silent without times)
-
-    Returns
-    -------
-    Measurement
-    """
-    from .._model import simulate as _simulate
-
-    x = np.asarray(x, dtype=np.float64)
-    n = x.shape[0]
-    widths = (int(params[0][0].shape[1]),) + tuple(int(W.shape[0]) for W, _ in params)
-    arch = Architecture(widths, activation)
-    t = None
-    if times:
-        # shots are acquired in order; a random input order keeps time and input unconfounded
-        order = np.asarray(jax.random.permutation(jax.random.fold_in(key, 7), n))
-        slot = np.empty(n, dtype=np.int64)
-        slot[order] = np.arange(n)
-        t = (slot[:, None] * shots + np.arange(shots)[None, :]) / max(n * shots - 1, 1)
-    k_noise = jax.random.fold_in(key, 1)
-    params_j = tuple(Layer(jax.numpy.asarray(W, jax.numpy.float32), jax.numpy.asarray(b, jax.numpy.float32))
-                     for W, b in params)
-    out = _simulate(k_noise, params_j, x.astype(np.float32), physics, arch, shots=shots,
-                    t=None if t is None else t.astype(np.float32), taps=True)
-    y = np.asarray(out.y, dtype=np.float64)
-    tap_arrays = tuple(np.asarray(a, dtype=np.float64) for a in out.taps[:-1]) if taps and len(params) > 1 else None
-    p_np = tuple(Layer(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in params)
-    return Measurement(x=x, y=y, params=p_np, taps=tap_arrays, t=t, activation=activation)
+    atomic_write(path, lambda fh: np.savez(fh, **arrays), make_folder=False)

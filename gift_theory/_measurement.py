@@ -1,0 +1,83 @@
+"""One measurement campaign (CONTRACTS §3): what a chip returns and what a measurement file holds.
+
+The one type for both: :meth:`gift_theory.chips.Chip.measure` returns it (``params`` are the
+weights the chip was programmed with), :mod:`gift_theory.lab` reads it from and writes it to
+``.npz`` / ``.csv`` files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ._arch import Architecture
+
+
+@dataclasses.dataclass(frozen=True)
+class Measurement:
+    """One campaign: inputs, repeated shots, optional taps and times, programmed weights.
+
+    Attributes
+    ----------
+    x : ndarray of shape (n, d_0)
+    y : ndarray of shape (n, r, d_L)
+    taps : tuple of L-1 ndarrays of shape (n, r, d_l), or None (no taps measured)
+    params : tuple of Layer (W_l (d_l, d_{l-1}), b_l (d_l,)) as numpy arrays
+    t : ndarray of shape (n, r) or None
+    activation : str
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    params: tuple
+    taps: tuple | None = None
+    t: np.ndarray | None = None
+    activation: str = "tanh"
+
+    @property
+    def n(self) -> int:
+        return int(self.x.shape[0])
+
+    @property
+    def r(self) -> int:
+        return int(self.y.shape[1])
+
+    @property
+    def arch(self) -> Architecture:
+        widths = (int(self.params[0].W.shape[1]),) + tuple(int(p.W.shape[0]) for p in self.params)
+        return Architecture(widths, self.activation)
+
+    @property
+    def has_taps(self) -> bool:
+        return self.taps is not None
+
+    def layers(self) -> tuple[np.ndarray, ...]:
+        """The measured layer outputs: taps a_1..a_{L-1} (if any) then y; each (n, r, d_l)."""
+        return (tuple(self.taps) if self.taps is not None else ()) + (self.y,)
+
+    def layer_ids(self) -> tuple[int, ...]:
+        """The 1-based layer number of each entry of :meth:`layers`."""
+        L = len(self.params)
+        return tuple(range(1, L)) + (L,) if self.taps is not None else (L,)
+
+    def subset(self, idx) -> "Measurement":
+        """The same campaign restricted to the inputs ``idx``."""
+        idx = np.asarray(idx)
+        return dataclasses.replace(
+            self, x=self.x[idx], y=self.y[idx],
+            taps=None if self.taps is None else tuple(a[idx] for a in self.taps),
+            t=None if self.t is None else self.t[idx])
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The CONTRACTS §3 dictionary of this measurement."""
+        out = {"x": self.x, "y": self.y, "activation": np.array(self.activation)}
+        for l, (W, b) in enumerate(self.params, start=1):
+            out[f"W{l}"] = np.asarray(W)
+            out[f"b{l}"] = np.asarray(b)
+        if self.taps is not None:
+            for l, a in enumerate(self.taps, start=1):
+                out[f"a{l}"] = a
+        if self.t is not None:
+            out["t"] = self.t
+        return out

@@ -1,0 +1,294 @@
+"""Stage 2 of the lab: the channels of a cell, model shots against measured shots.
+
+A *cell* is one input i x one measured layer l (taps, then the output), seen as the vector
+of the layer's neurons over the r repeated shots. Each cell gives five *channels*, each an
+unbiased estimate of a population quantity that is >= 0 and is 0 when the model's law of
+the cell equals the device's:
+
+``energy``
+    the U-statistic energy distance between model shots M and measured shots Y of the
+    vector over neurons (correlations count)::
+
+        E_il = 2 mean_{a,b} |M_a - Y_b| - mean_{a!=a'} |M_a - M_a'| - mean_{b!=b'} |Y_b - Y_b'|
+
+    (the V-statistic of ``scipy.stats.energy_distance`` keeps the zero diagonal and is
+    biased: a correct model could beat its own floor with it), over the layer's pooled
+    within-data spread;
+``energy_marginal``
+    the same of each neuron's 1-D marginal, averaged over neurons;
+``variance``, ``correlation``, ``shape``
+    *split-half products* of a cell feature f -- per-neuron log variance, log of the top
+    eigenvalue of the shot covariance (a common gain: rank-one correlation), pooled
+    standardised fourth moment (the noise law at equal variance): the measured shots are
+    split into halves A and B of h = r/2 shots, the model's into disjoint sets of h, and
+    ``(f(Y_A) - f(M_A)) (f(Y_B) - f(M_B))`` (f(M) averaged over the model's sets) has
+    expectation ``(E f(Y_h) - E f(M_h))^2`` for samples of the same size h: zero for a
+    correct model whatever f is, positive otherwise. The energy distance alone barely sees
+    a variance pattern or a law change at equal variance; these moments do.
+
+What a measurement contributes to every comparison -- the layers' scales, the split of its
+shots, the channels' weights and the noise floor (the same channels between halves of the
+measured shots) -- is computed once, its :class:`Reference`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import GiftInputError
+from .._measurement import Measurement
+from .._model import named_subkey
+from ._qtest import q_test
+from ._shots import Model, model_shots
+
+
+def _pair_dist(A, B):
+    """(..., K, d), (..., r, d) -> (..., K, r) Euclidean distances."""
+    sq = (jnp.sum(A * A, -1)[..., :, None] + jnp.sum(B * B, -1)[..., None, :]
+          - 2.0 * jnp.einsum("...kd,...rd->...kr", A, B))
+    return jnp.sqrt(jnp.maximum(sq, 0.0))
+
+
+def _offdiag_mean(D):
+    k = D.shape[-1]
+    return (jnp.sum(D, (-2, -1)) - jnp.trace(D, axis1=-2, axis2=-1)) / (k * (k - 1))
+
+
+def _pairsum(Z):
+    """(n, N, d) -> (n, d): sum over unordered pairs of |Z_a - Z_b| per neuron, by sorting."""
+    N = Z.shape[1]
+    k = jnp.arange(1, N + 1, dtype=Z.dtype)[None, :, None]
+    return jnp.sum(jnp.sort(Z, axis=1) * (2.0 * k - N - 1.0), axis=1)
+
+
+@functools.partial(jax.jit, static_argnames=("paired",))
+def energy_cells(M, Y, paired: bool = False):
+    """Unbiased energy distances per cell: of the vector over neurons and of each neuron.
+
+    Parameters
+    ----------
+    M : (n, K, d) model shots
+    Y : (n, r, d) measured shots
+    paired : M_a and Y_a share a shot (one-step check); then the cross terms drop a == b
+
+    Returns
+    -------
+    E : (n,) U-statistic energy distance of the vectors
+    wy : (n,) mean_{b != b'} |Y_b - Y_b'|
+    E1 : (n, d) U-statistic energy distance of each neuron's marginal (1-D, sharper on shape)
+    wy1 : (n, d) its within-data spread
+    """
+    c = jnp.mean(Y, axis=1, keepdims=True)  # centring keeps float32 distances accurate
+    M = M - c
+    Y = Y - c
+    cross = _pair_dist(M, Y)
+    cross = _offdiag_mean(cross) if paired else jnp.mean(cross, (-2, -1))
+    wm = _offdiag_mean(_pair_dist(M, M))
+    wy = _offdiag_mean(_pair_dist(Y, Y))
+    K, r = M.shape[1], Y.shape[1]
+    pm, py = _pairsum(M), _pairsum(Y)
+    c1 = _pairsum(jnp.concatenate([M, Y], axis=1)) - pm - py  # all cross pairs
+    if paired:
+        c1 = (c1 - jnp.sum(jnp.abs(M - Y), axis=1)) / (K * r - K)
+    else:
+        c1 = c1 / (K * r)
+    wm1 = 2.0 * pm / (K * (K - 1))
+    wy1 = 2.0 * py / (r * (r - 1))
+    return 2.0 * cross - wm - wy, wy, 2.0 * c1 - wm1 - wy1, wy1
+
+
+def cell_statistic(M, Y, paired: bool = False, scales=None):
+    """The two normalised channels of a cell, shape (n, 2): the vector energy distance over
+    the layer's pooled spread, and the mean over neurons of each neuron's energy distance
+    over its pooled spread.
+
+    ``scales`` (from :func:`layer_scales`) fixes the normalisation; default: from ``Y``.
+    """
+    E, wy, E1, wy1 = energy_cells(M, Y, paired)
+    E, wy, E1, wy1 = (np.asarray(a, np.float64) for a in (E, wy, E1, wy1))
+    if scales is None:
+        scales = (wy.mean(), wy1.mean(0))
+    S, S1 = scales
+    return np.stack([E / max(S, 1e-30), np.mean(E1 / np.maximum(S1, 1e-30), axis=1)], axis=1)
+
+
+def layer_scales(Y):
+    """The pooled within-data spreads of a measured layer Y (n, r, d): ``(S, S1 (d,))``."""
+    Y = jnp.asarray(Y, jnp.float32)
+    _, wy, _, wy1 = energy_cells(Y[:, :2], Y)
+    return float(np.mean(np.asarray(wy, np.float64))), np.asarray(wy1, np.float64).mean(0)
+
+
+def _shot_permutations(key, n: int, r: int):
+    """(n, r): a random permutation of the r shots of each of n inputs."""
+    return jax.vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n))
+
+
+def _halves(key, Y):
+    """Random halves (per cell) of the measured shots: two (n, r//2, d) arrays."""
+    n, r, _ = Y.shape
+    perm = _shot_permutations(key, n, r)
+    Yp = jnp.take_along_axis(Y, perm[:, :, None], axis=1)
+    h = r // 2
+    return Yp[:, :h], Yp[:, h:2 * h]
+
+
+
+
+# ---- the moment channels ------------------------------------------------------------------
+
+#: every channel of a cell, in order (the moment channels need r >= 8 shots)
+CHANNELS = ("energy", "energy_marginal", "variance", "correlation", "shape")
+#: fewest shots per input for the moment channels (their noise floor splits shots in quarters)
+MIN_SHOTS_MOMENTS = 8
+
+
+def _variance_floor(Y):
+    """A variance floor of a measured layer Y (n, r, d) for the features (a data constant)."""
+    return 1e-3 * float(np.mean(np.var(Y, axis=1)) + 1e-30)
+
+
+def _features(S, eps):
+    """Cell features of samples S (n, h, d): per-neuron log variance (n, d), log top
+    eigenvalue of the shot covariance (n, 1), pooled standardised fourth moment (n, 1).
+    ``eps`` (a variance floor of the layer, a data constant) keeps quantised cells finite."""
+    c = S - S.mean(axis=1, keepdims=True)
+    h = S.shape[1]
+    v = np.sum(c * c, axis=1) / (h - 1)
+    cov = np.einsum("nkd,nke->nde", c, c) / (h - 1)
+    lmax = np.linalg.eigvalsh(cov)[:, -1] if S.shape[2] > 1 else v[:, 0]
+    z = c / np.sqrt(v + eps)[:, None, :]
+    return (np.log(v + eps), np.log(np.maximum(lmax, 0.0) + eps)[:, None], np.mean(z ** 4, axis=(1, 2))[:, None])
+
+
+def _product_channels(YA, YB, MA, MB, eps):
+    """(n, 3) split-half products of the features: mean over each feature's columns of
+    (f(YA) - f(MA)) (f(YB) - f(MB)); ``MA``/``MB`` are lists of model samples (averaged)."""
+    def avg(samples):
+        fs = [_features(m, eps) for m in samples]
+        return [sum(f[j] for f in fs) / len(fs) for j in range(3)]
+
+    fya, fyb = _features(YA, eps), _features(YB, eps)
+    fma, fmb = avg(MA), avg(MB)
+    return np.stack([np.mean((fya[j] - fma[j]) * (fyb[j] - fmb[j]), axis=1) for j in range(3)], axis=1)
+
+
+def _take(Y, idx):
+    return np.take_along_axis(Y, idx[:, :, None], axis=1)
+
+
+def moment_channels(M, Y, split, rng):
+    """The moment channels of one measured layer, (n, 3).
+
+    Parameters
+    ----------
+    M : (n, K, d) model shots, K >= r
+    Y : (n, r, d) measured shots
+    split : (n, r) a permutation of each input's shots: the first h = r // 2 are half A,
+        the next h half B (fixed per measurement, the same for every model)
+    rng : numpy Generator for the model's disjoint sets of h shots
+    """
+    M = np.asarray(M, np.float64)
+    Y = np.asarray(Y, np.float64)
+    n, r, _ = Y.shape
+    h = r // 2
+    K = M.shape[1]
+    if K < 2 * h:
+        raise GiftInputError(f"compare: {K} model shots per input; the moment channels need at least {2 * h}")
+    eps = _variance_floor(Y)
+    reps = K // (2 * h)
+    perm = rng.permuted(np.tile(np.arange(K), (n, 1)), axis=1)
+    MA = [_take(M, perm[:, 2 * q * h:(2 * q + 1) * h]) for q in range(reps)]
+    MB = [_take(M, perm[:, (2 * q + 1) * h:(2 * q + 2) * h]) for q in range(reps)]
+    return _product_channels(_take(Y, split[:, :h]), _take(Y, split[:, h:2 * h]), MA, MB, eps)
+
+
+def floor_moment_channels(Y, split):
+    """The moment channels between the halves of the measured shots (quarters of r/4 shots)."""
+    Y = np.asarray(Y, np.float64)
+    q = Y.shape[1] // 4
+    eps = _variance_floor(Y)
+    A1, A2, B1, B2 = (_take(Y, split[:, i * q:(i + 1) * q]) for i in range(4))
+    return _product_channels(B1, B2, [A1], [A2], eps)
+
+
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """What a measurement contributes to every comparison, computed once.
+
+    scales : per measured layer, the pooled within-data spreads (S_l, S1_l (d_l,))
+    split : (n, r) per input, the permutation of its shots that defines the halves A, B
+    channels : the channels in use (:data:`CHANNELS`, or the energy ones when r < 8)
+    weights : (L', C) one over each channel's standard deviation across inputs between
+        halves of the measured shots (for the per-input summaries only)
+    noise_floor, floor_se : Q between random halves of the measured shots, and Q's
+        standard deviation under the model
+    floor_per_input : (n,)
+    """
+
+    scales: tuple
+    split: np.ndarray
+    channels: tuple
+    weights: np.ndarray
+    noise_floor: float
+    floor_se: float
+    floor_per_input: np.ndarray
+
+
+def combine(C, weights):
+    """(n, L', C) channels -> per input (n,) and per cell (n, L'): means in floor units."""
+    Cw = C * weights[None]
+    return Cw.mean(axis=(1, 2)), Cw.mean(axis=2)
+
+
+def reference(key, meas: Measurement, splits: int = 2) -> Reference:
+    """Scales, the shot split, channel weights and the noise floor of ``meas``: the
+    discrepancy statistic between random halves of the measured shots (energy channels
+    averaged over ``splits`` random splits)."""
+    if meas.r < 4:
+        raise GiftInputError(f"measurement has {meas.r} shots per input; the noise floor (random halves) needs at least 4")
+    if meas.n < 3:
+        raise GiftInputError(f"measurement has {meas.n} inputs; the p-value (over inputs) needs at least 3")
+    layers = meas.layers()
+    scales = tuple(layer_scales(Y) for Y in layers)
+    k_split, k_floor = jax.random.split(key)
+    split = np.asarray(_shot_permutations(k_split, meas.n, meas.r))
+    moments = meas.r >= MIN_SHOTS_MOMENTS
+    channels = CHANNELS if moments else CHANNELS[:2]
+    F = np.zeros((meas.n, len(layers), len(channels)))
+    for li, Y in enumerate(layers):
+        for s_ in range(splits):
+            A, B = _halves(jax.random.fold_in(jax.random.fold_in(k_floor, li), s_), jnp.asarray(Y, jnp.float32))
+            F[:, li, :2] += cell_statistic(A, B, scales=scales[li]) / splits
+        if moments:
+            F[:, li, 2:] = floor_moment_channels(Y, split)
+    sd = F.std(axis=0, ddof=1)
+    weights = 1.0 / np.maximum(sd, 1e-12 * max(float(sd.max()), 1e-300))
+    Q, _, _, null_sd, _ = q_test(F.reshape(meas.n, -1))
+    Fi, _ = combine(F, weights)
+    return Reference(scales, split, channels, weights, Q, null_sd, Fi)
+
+
+def noise_floor(key, meas: Measurement, splits: int = 2):
+    """``(floor, floor_se)``: see :func:`reference`."""
+    ref = reference(key, meas, splits)
+    return ref.noise_floor, ref.floor_se
+
+
+def channel_values(key, model: Model, meas: Measurement, ref: Reference, shots: int | None = None) -> np.ndarray:
+    """The channels of every cell, (n, L', C): input x measured layer x channel of ``ref``."""
+    if shots is not None and int(shots) < meas.r:
+        raise GiftInputError(f"compare: --shots {shots} model shots per input; at least the measured {meas.r} needed")
+    Ms = model_shots(named_subkey(key, "shots"), model, meas, shots)
+    rng = np.random.default_rng(np.asarray(jax.random.key_data(named_subkey(key, "model_sets"))).ravel())
+    C = np.zeros((meas.n, len(Ms), len(ref.channels)))
+    for li, (M, Y, sc) in enumerate(zip(Ms, meas.layers(), ref.scales)):
+        C[:, li, :2] = cell_statistic(M, jnp.asarray(Y, jnp.float32), scales=sc)
+        if len(ref.channels) > 2:
+            C[:, li, 2:] = moment_channels(M, Y, ref.split, rng)
+    return C

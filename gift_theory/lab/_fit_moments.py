@@ -1,0 +1,184 @@
+"""Stage 5a of the lab: scalar physical parameters by simulated moment matching.
+
+The model's shots for the fitting inputs are a deterministic function of the physics
+parameters once the standard draws are fixed (the core's explicit-noise forward pass), so
+the per-cell moments of the model -- mean and log variance per neuron, log variance of the
+layer sum (cross-neuron correlation: common mode), slope against acquisition time (drift)
+-- are smooth in the parameters except through rounding (quantization). The loss is the sum
+of the standardised squared moment differences over every measured cell (taps and output).
+It is minimised by a one-dimensional scan over each new parameter -- the values come from
+the effect itself (:meth:`gift_theory.effects.Effect.search`: its bounds and defaults, or a
+scale read off the data) -- followed by Nelder-Mead on all of them (no gradient needed).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy import optimize
+
+from .._measurement import Measurement
+from .._model import named_subkey
+from ._shots import draws, layer_outputs, params32, tiled_times
+
+
+def _moments(A, t):
+    """Per-cell moments of shots A (n, K, d) with times t (n, K) or None."""
+    K = A.shape[1]
+    m = jnp.mean(A, 1)
+    v = jnp.var(A, 1) * K / (K - 1)
+    sv = jnp.var(jnp.sum(A, -1), 1) * K / (K - 1)
+    out = {"m": m, "v": v, "sv": sv}
+    if t is not None:
+        tc = t - jnp.mean(t, 1, keepdims=True)
+        vt = jnp.mean(tc ** 2, 1)
+        out["beta"] = jnp.einsum("nk,nkd->nd", tc, A - m[:, None, :]) / K / jnp.maximum(vt, 1e-12)[:, None]
+        out["vt"] = vt
+    return out
+
+
+def _moment_loss(mod, dat, r, K):
+    """Mean standardised squared difference of the moments (one layer)."""
+    vfloor = 1e-6 * jnp.mean(dat["v"]) + 1e-20
+    lv = jnp.log(mod["v"] + vfloor) - jnp.log(dat["v"] + vfloor)
+    lsv = jnp.log(mod["sv"] + vfloor) - jnp.log(dat["sv"] + vfloor)
+    var_lv = 2.0 / (r - 1) + 2.0 / (K - 1)
+    terms = [jnp.mean((mod["m"] - dat["m"]) ** 2 / (dat["v"] / r + mod["v"] / K + vfloor)),
+             jnp.mean(lv ** 2) / var_lv, jnp.mean(lsv ** 2) / var_lv]
+    if "beta" in dat:
+        vt = jnp.maximum(dat["vt"], 1e-12)[:, None]
+        se2 = (dat["v"] / r + mod["v"] / K) / vt + vfloor
+        # cells whose shots span no time carry no slope information
+        w = (dat["vt"] > 1e-10)[:, None]
+        terms.append(jnp.sum(w * (mod["beta"] - dat["beta"]) ** 2 / se2) / jnp.maximum(jnp.sum(w) * dat["m"].shape[1], 1))
+    return sum(terms)
+
+
+@functools.partial(jax.jit, static_argnames=("rK",))
+def _loss_of_outputs(outs, dat, t, rK):
+    r, K = rK
+    total = 0.0
+    for A, d in zip(outs, dat):
+        if d is not None:
+            total = total + _moment_loss(_moments(A, t), d, r, K)
+    return total
+
+
+class MomentProblem:
+    """The fitting data of one measurement (its per-cell moments), shared by every candidate."""
+
+    def __init__(self, key, meas: Measurement, K: int | None = None):
+        self.meas = meas
+        self.key = named_subkey(key, "moments")
+        self.K = 2 * meas.r if K is None else int(K)
+        self.x = jnp.asarray(meas.x, jnp.float32)
+        self.t = tiled_times(meas, self.K)
+        t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
+        dat = tuple(_moments(jnp.asarray(Y, jnp.float32), t) for Y in meas.layers())
+        ids = meas.layer_ids()
+        # forward returns every layer; only measured ones enter the loss
+        self.dat = tuple(dat[ids.index(l)] if l in ids else None for l in range(1, meas.arch.depth + 1))
+
+    def loss(self, physics, params, free):
+        """``theta -> moment loss`` for the free parameters (common random numbers: one set of
+        draws for every theta)."""
+        noise = draws(self.key, physics, self.meas, self.K)
+        p32 = params32(params)
+        r, K, t, arch = self.meas.r, self.K, self.t, self.meas.arch
+        positive = tuple(_positive(physics, p) for p in free)
+
+        def f(theta):
+            theta = jnp.asarray(theta, jnp.float32)
+            vals = {p: (jnp.exp(theta[i]) if positive[i] else theta[i]) for i, p in enumerate(free)}
+            outs = layer_outputs(p32, self.x, noise, physics.replace(**vals), arch, t)
+            return _loss_of_outputs(outs, self.dat, t, (r, K))
+        return f
+
+
+def _scalar(v) -> bool:
+    """A scalar parameter (per-neuron values are fitted as offsets, not by moments)."""
+    return not isinstance(v, (tuple, list)) and np.ndim(v) == 0
+
+
+def _owner(physics, p):
+    return next(e for e in physics.effects if p in e.params)
+
+
+def _positive(physics, p) -> bool:
+    """A parameter with a lower bound >= 0 is fitted on the log scale."""
+    return type(_owner(physics, p)).bounds.get(p, (-np.inf, np.inf))[0] >= 0
+
+
+def theta_of(physics, free):
+    return np.array([np.log(max(float(_owner(physics, p).param_dict()[p]), 1e-12)) if _positive(physics, p)
+                     else float(_owner(physics, p).param_dict()[p]) for p in free])
+
+
+def values_of(physics, free, theta) -> dict:
+    return {p: float(np.exp(th) if _positive(physics, p) else th) for p, th in zip(free, theta)}
+
+
+def _simplex(theta, step=0.25):
+    pts = [theta.copy()]
+    for i in range(len(theta)):
+        p = theta.copy()
+        p[i] += step if abs(theta[i]) < 1 else step * abs(theta[i])
+        pts.append(p)
+    return np.array(pts)
+
+
+def optimise(f, theta0, grids):
+    """Scan each coordinate listed in ``grids`` (index -> theta values), then Nelder-Mead on all."""
+    theta = np.array(theta0, dtype=np.float64)
+    for i, values in grids.items():
+        best, bv = None, np.inf
+        for v in values:
+            th = theta.copy()
+            th[i] = v
+            val = float(f(th))
+            if np.isfinite(val) and val < bv:
+                best, bv = v, val
+        if best is not None:
+            theta[i] = best
+    res = optimize.minimize(lambda th: float(f(th)), theta, method="Nelder-Mead",
+                            options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 80 * len(theta),
+                                     "initial_simplex": _simplex(theta)})
+    th = res.x if res.fun <= float(f(theta)) else theta
+    return th, float(f(th))
+
+
+def fit_moments(problem: MomentProblem, physics, params, scan, rescan_s: bool = False):
+    """Fit every free scalar parameter of ``physics`` (those no effect reads off the data).
+
+    scan : names of the parameters to scan first (the new ones), each over its effect's
+        :meth:`~gift_theory.effects.Effect.search` values
+    rescan_s : scan awgn's s down from its value once more after the new parameters: an added
+        effect usually takes over part of the variance s had absorbed
+
+    Returns
+    -------
+    physics with fitted values
+    """
+    fixed = set()
+    for e in physics.effects:
+        fixed |= set((type(e).from_data(problem.meas.layers()) or {}).keys())
+    free = tuple(p for p, v in physics.params().items() if p not in fixed and _scalar(v))
+    if not free:
+        return physics
+    f = problem.loss(physics, params, free)
+    theta0 = theta_of(physics, free)
+    layers = problem.meas.layers()
+    grids = {}
+    for p in scan:
+        if p in free:
+            vals = np.asarray(type(_owner(physics, p)).search(p, layers), np.float64)
+            grids[free.index(p)] = np.log(vals) if _positive(physics, p) else vals
+    if rescan_s and "s" in free:
+        i = free.index("s")
+        grids.pop(i, None)
+        grids[i] = np.log(max(float(physics.s), 1e-12)) + np.log([0.4, 0.55, 0.7, 0.85, 1.0, 1.1])
+    theta, _ = optimise(f, theta0, grids)
+    return physics.replace(**values_of(physics, free, theta))

@@ -1,0 +1,576 @@
+"""Stage 5b of the lab: per-device values fitted as fixed offsets, and the null that allows for them.
+
+A model cannot know a device's fixed draws -- the weight errors E of ``weight_error``, the bias
+offsets delta of ``bias_offset``, the values of a per-neuron parameter of a plugin effect
+(``shape = {"p": "neurons"}``). They are estimated as fixed offsets with a Gaussian prior
+(ridge; the scale re-estimated once from the first pass), by L-BFGS through the core's
+differentiable layer map:
+
+* with taps, layer by layer: each layer's measured output shot by shot against the model's
+  mean response to the *measured* output of the layer before (layer 1: means over shots
+  against the mean response to x);
+* without taps, every layer at once from the output means.
+
+What this many-parameter model costs, and whether the data identify it, is measured by its
+**effective degrees of freedom**, the trace of the ridge's hat matrix
+``sum_k lam_k / (lam_k + sigma^2 / e^2)`` over the eigenvalues ``lam_k`` of ``J^T J``, J the
+Jacobian of the fitted means in the offsets: an offset the data pin down counts 1, one the
+prior alone sets counts 0. With taps the Jacobian of each layer is block diagonal over its
+output neurons (a neuron's offsets move that neuron only), so it costs a few passes of the
+layer; without taps it is the full Jacobian of the output means.
+
+Its p-value is taken against a **refit null** (:func:`offset_replicates`): B times, data
+simulated from the fitted model as the truth, the offsets refitted, the refitted model
+scored on simulated held-out data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy import optimize
+
+from .._measurement import Measurement
+from .._model import (
+    forward,
+    layer_step,
+    named_subkey,
+    noisy_input,
+    sample_noise,
+    simulate,
+)
+from .._params import Layer
+from ..effects import REGISTRY
+from ._shots import Model, params32, tiled_times
+
+#: replicates of the refit null (see :func:`offset_replicates`)
+OFFSET_REPLICATES = 8
+
+
+@dataclasses.dataclass(frozen=True)
+class Kind:
+    """One family of fitted offsets: of effect ``effect``, added to ``target`` -- ``"W"`` (the
+    weights), ``"b"`` (the biases) or the name of a per-neuron parameter of the effect -- on
+    ``layers`` (1-based)."""
+
+    effect: str
+    target: str
+    layers: tuple
+
+    def shape(self, arch, layer: int) -> tuple:
+        return (arch.widths[layer], arch.widths[layer - 1]) if self.target == "W" else (arch.widths[layer],)
+
+
+def _in_scope(cls, layer: int, depth: int) -> bool:
+    scope = getattr(cls, "layers", "all")
+    if scope == "all":
+        return True
+    if scope == "hidden":
+        return layer < depth
+    if scope == "output":
+        return layer == depth
+    return layer in tuple(scope)
+
+
+def kinds_of(names, arch) -> tuple:
+    """The offset families of the effects ``names`` (built-in offsets and per-neuron parameters)."""
+    out = []
+    for name in names:
+        cls = REGISTRY[name]
+        layers = tuple(l for l in range(1, arch.depth + 1) if _in_scope(cls, l, arch.depth))
+        if getattr(cls, "offsets_of", None):
+            out.append(Kind(name, cls.offsets_of, layers))
+        for p, kind in getattr(cls, "shape", {}).items():
+            if kind == "neurons":
+                out.append(Kind(name, p, layers))
+    return tuple(out)
+
+
+def fitted_as_offsets(name: str) -> bool:
+    cls = REGISTRY[name]
+    return bool(getattr(cls, "offsets_of", None)) or any(v == "neurons" for v in getattr(cls, "shape", {}).values())
+
+
+# ---- applying offsets ------------------------------------------------------------------------
+
+def _neuron_values(physics, kind: Kind, layer: int, d, arch):
+    """``physics`` with the per-neuron parameter of ``kind`` at ``layer`` set to its base value + d."""
+    eff = physics.get(kind.effect)
+    base = getattr(eff, kind.target)
+    vals = []
+    for l in range(1, arch.depth + 1):
+        b_l = base[l - 1] if isinstance(base, (tuple, list)) else base
+        v = jnp.broadcast_to(jnp.asarray(b_l, jnp.float32), (arch.widths[l],))
+        vals.append(v + d if l == layer else v)
+    return physics.replace(**{kind.target: tuple(vals)})
+
+
+def apply_layer(kinds, ds, W, b, physics, layer: int, arch):
+    """Layer ``layer``'s (W, b, physics) with the offsets ``ds`` (one array per kind in scope)."""
+    for kind, d in zip(kinds, ds):
+        if d is None:
+            continue
+        if kind.target == "W":
+            W = W + d
+        elif kind.target == "b":
+            b = b + d
+        else:
+            physics = _neuron_values(physics, kind, layer, d, arch)
+    return W, b, physics
+
+
+def apply_all(kinds, deltas, params, physics, arch):
+    """Every layer's weights and the physics with the offsets ``deltas`` ({kind: [array per layer
+    in scope]}) -- float64 weights, per-neuron parameters as tuples of per-layer arrays."""
+    new = []
+    for l, (W, b) in enumerate(params, start=1):
+        W, b = np.asarray(W, np.float64), np.asarray(b, np.float64)
+        for kind in kinds:
+            if l in kind.layers and kind.target in ("W", "b"):
+                d = np.asarray(deltas[kind][kind.layers.index(l)], np.float64)
+                W, b = (W + d, b) if kind.target == "W" else (W, b + d)
+        new.append(Layer(W, b))
+    for kind in kinds:
+        if kind.target in ("W", "b"):
+            continue
+        eff = physics.get(kind.effect)
+        base = getattr(eff, kind.target)
+        vals = []
+        for l in range(1, arch.depth + 1):
+            b_l = base[l - 1] if isinstance(base, (tuple, list)) else base
+            v = np.broadcast_to(np.asarray(b_l, np.float64), (arch.widths[l],)).copy()
+            if l in kind.layers:
+                v = v + np.asarray(deltas[kind][kind.layers.index(l)], np.float64)
+            vals.append(jnp.asarray(v, jnp.float32))
+        physics = physics.replace(**{kind.target: tuple(vals)})
+    return tuple(new), physics
+
+
+# ---- the fit -----------------------------------------------------------------------------------
+
+def _lbfgs(value_and_grad, shapes, iters: int = 300, start=None):
+    """Minimise a function of a list of arrays of ``shapes`` by L-BFGS, given
+    ``value_and_grad(list of float32 arrays) -> (value, list of gradients)``, from ``start``
+    (default zero); returns the minimising arrays (float64)."""
+    def unflat(v):
+        return [jnp.asarray(a, jnp.float32) for a in unflat_vector(v, shapes)]
+
+    def f(v):
+        val, g = value_and_grad(unflat(v))
+        return float(val), np.concatenate([np.asarray(gi, np.float64).ravel() for gi in g])
+
+    v0 = (np.zeros(sum(int(np.prod(sh)) for sh in shapes)) if start is None
+          else np.concatenate([np.ravel(a) for a in start]).astype(np.float64))
+    res = optimize.minimize(f, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters})
+    return [np.asarray(a, np.float64) for a in unflat(res.x)]
+
+
+def unflat_vector(v, shapes):
+    """A flat vector (numpy or traced) cut into arrays of ``shapes``, in order."""
+    out, i = [], 0
+    for sh in shapes:
+        k = int(np.prod(sh))
+        out.append(v[i:i + k].reshape(sh))
+        i += k
+    return out
+
+
+@functools.partial(jax.jit, static_argnames=("arch", "layer", "axis", "kinds"))
+def _layer_vg(ds, W, b, a, noise, physics, t, target, inv_v, inv_e2, arch, layer, axis, kinds):
+    def loss(ds):
+        Wd, bd, ph = apply_layer(kinds, ds, W, b, physics, layer, arch)
+        a_in = noisy_input(a, noise, ph) if layer == 1 else a
+        pred = jnp.mean(layer_step(Wd, bd, a_in, noise, ph, arch, layer, t=t)[0], axis=axis)
+        prior = sum(ie * jnp.sum(d ** 2) for ie, d in zip(inv_e2, ds))
+        return 0.5 * jnp.sum((target - pred) ** 2) * inv_v + 0.5 * prior
+    return jax.value_and_grad(loss)(ds)
+
+
+def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: int = 8):
+    """Inputs, draws, times and targets of layer ``layer``'s offset fit (taps)."""
+    arch, n, r = meas.arch, meas.n, meas.r
+    if layer == 1:
+        K = 256  # the model's mean response must be much sharper than the measured mean (r shots)
+        noise = sample_noise(key, arch, physics, (n, K), jnp.float32)
+        a = jnp.asarray(meas.x, jnp.float32)[:, None, :]
+        t = tiled_times(meas, K)
+        Y = meas.layers()[0]
+        target = jnp.asarray(np.mean(Y, axis=1), jnp.float32)  # (n, d1)
+        resid_var = float(np.mean(np.var(Y, axis=1))) / r
+        axis = 1
+    else:
+        noise = sample_noise(key, arch, physics, (n, r, draws_per_shot), jnp.float32)
+        a = jnp.asarray(meas.taps[layer - 2], jnp.float32)[:, :, None, :]
+        t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)[:, :, None] * jnp.ones((1, 1, draws_per_shot))
+        Y = meas.layers()[layer - 1]
+        target = jnp.asarray(Y, jnp.float32)  # (n, r, d_l)
+        resid_var = float(np.mean(np.var(Y, axis=1)))
+        axis = 2
+    return noise, a, t, target, resid_var, axis
+
+
+def _layer_offsets(key, meas: Measurement, physics, p32, kinds, layer: int, scales, start=None):
+    """The offsets of every kind at ``layer`` from the measured layer before (taps)."""
+    arch = meas.arch
+    here = tuple(k for k in kinds if layer in k.layers)
+    if not here:
+        return []
+    W, b = p32[layer - 1]
+    noise, a, t, target, resid_var, axis = _layer_setup(jax.random.fold_in(key, layer), meas, physics, layer)
+    inv_v = jnp.float32(1.0 / max(resid_var, 1e-12))
+    inv_e2 = tuple(jnp.float32(1.0 / max(scales[k], 1e-6) ** 2) for k in here)
+
+    def vg(ds):
+        return _layer_vg(tuple(ds), W, b, a, noise, physics, t, target, inv_v, inv_e2, arch, layer, axis, here)
+
+    return _lbfgs(vg, [k.shape(arch, layer) for k in here], start=start)
+
+
+@functools.partial(jax.jit, static_argnames=("arch", "ids", "kinds"))
+def _joint_vg(ds, p32, x, noise, physics, t, targets, inv_v, inv_e2, arch, ids, kinds):
+    def loss(ds):
+        deltas = _split_by_kind(ds, kinds)
+        out = _forward_with(deltas, kinds, p32, x, noise, physics, t, arch)
+        chi2 = sum(jnp.sum((tg - jnp.mean(out[l - 1], axis=1)) ** 2) * iv for tg, iv, l in zip(targets, inv_v, ids))
+        prior = sum(ie * sum(jnp.sum(d ** 2) for d in deltas[k]) for ie, k in zip(inv_e2, kinds))
+        return 0.5 * chi2 + 0.5 * prior
+    return jax.value_and_grad(loss)(ds)
+
+
+def _split_by_kind(ds, kinds):
+    out, i = {}, 0
+    for k in kinds:
+        out[k] = list(ds[i:i + len(k.layers)])
+        i += len(k.layers)
+    return out
+
+
+def _forward_with(deltas, kinds, p32, x, noise, physics, t, arch):
+    """Every layer's output with the offsets ``deltas`` ({kind: per-layer arrays})."""
+    a = noisy_input(x[:, None, :], noise, physics)
+    outs = []
+    for l, (W, b) in enumerate(p32, start=1):
+        ds = [deltas[k][k.layers.index(l)] if l in k.layers else None for k in kinds]
+        Wd, bd, ph = apply_layer(kinds, ds, W, b, physics, l, arch)
+        a = layer_step(Wd, bd, a, noise, ph, arch, l, t=t)[0]
+        outs.append(a)
+    return outs
+
+
+def _joint_setup(key, meas: Measurement, physics):
+    K = max(meas.r, 32)
+    noise = sample_noise(key, meas.arch, physics, (meas.n, K), jnp.float32)
+    t = tiled_times(meas, K)
+    targets = tuple(jnp.asarray(np.mean(Y, axis=1), jnp.float32) for Y in meas.layers())
+    inv_v = tuple(jnp.float32(1.0 / max(float(np.mean(np.var(Y, axis=1))) / meas.r, 1e-12)) for Y in meas.layers())
+    return K, noise, t, targets, inv_v
+
+
+def _joint_offsets(key, meas: Measurement, physics, p32, kinds, scales, start=None):
+    """Every offset at once from the measured means (no taps: the outputs only)."""
+    arch = meas.arch
+    _, noise, t, targets, inv_v = _joint_setup(key, meas, physics)
+    inv_e2 = tuple(jnp.float32(1.0 / max(scales[k], 1e-6) ** 2) for k in kinds)
+    x = jnp.asarray(meas.x, jnp.float32)
+
+    def vg(ds):
+        return _joint_vg(tuple(ds), p32, x, noise, physics, t, targets, inv_v, inv_e2, arch, tuple(meas.layer_ids()),
+                         kinds)
+
+    shapes = [k.shape(arch, l) for k in kinds for l in k.layers]
+    flat_start = None if start is None else [a for k in kinds for a in start[k]]
+    return _split_by_kind(_lbfgs(vg, shapes, start=flat_start), kinds)
+
+
+def estimate_offsets(key, meas: Measurement, physics, params, kinds, scales, start=None) -> dict:
+    """``{kind: [offset array per layer in scope]}``: per layer from the taps when the file has
+    them, else jointly from the output means (``start``: arrays to start L-BFGS from)."""
+    p32 = params32(params)
+    if meas.has_taps:
+        out = {k: [] for k in kinds}
+        for l in range(1, meas.arch.depth + 1):
+            here = tuple(k for k in kinds if l in k.layers)
+            st = None if start is None else [start[k][k.layers.index(l)] for k in here]
+            for k, d in zip(here, _layer_offsets(key, meas, physics, p32, kinds, l, scales, start=st)):
+                out[k].append(d)
+        return out
+    return _joint_offsets(key, meas, physics, p32, kinds, scales, start=start)
+
+
+def _initial_scale(kind: Kind, params, physics) -> float:
+    if kind.target == "W":
+        return 0.2 * float(np.sqrt(np.mean(np.concatenate([np.ravel(W) ** 2 for W, _ in params]))))
+    if kind.target == "b":
+        return 0.05 + 0.2 * float(np.sqrt(np.mean(np.concatenate([np.ravel(b) ** 2 for _, b in params]))))
+    base = np.asarray(getattr(REGISTRY[kind.effect], "defaults", {}).get(kind.target, 1.0), np.float64)
+    return 0.1 * max(float(np.sqrt(np.mean(base ** 2))), 0.1)
+
+
+def reset(physics, kinds):
+    """``physics`` with the per-neuron parameters of ``kinds`` at their defaults (the effect added
+    where missing): the point every offset of those kinds is measured from."""
+    for k in kinds:
+        if k.target in ("W", "b"):
+            continue
+        default = float(REGISTRY[k.effect].defaults.get(k.target, 0.0))
+        physics = (physics.replace(**{k.target: default}) if k.effect in physics
+                   else physics.with_effect(k.effect, **{k.target: default}))
+    return physics
+
+
+def base_model(model: Model, meas: Measurement) -> Model:
+    """What a model's offsets are measured from: the programmed weights, per-neuron parameters at
+    their defaults, everything else of ``model``'s physics."""
+    kinds = kinds_of(list(model.offsets), meas.arch)
+    return Model(reset(model.physics, kinds))
+
+
+def fit_offsets(key, meas: Measurement, model: Model, names) -> Model:
+    """``model`` with the effects ``names`` fitted as offsets: a prior N(0, e^2) per kind, e set
+    from the first pass's rms and the offsets refitted once (two passes)."""
+    arch = meas.arch
+    kinds = kinds_of(names, arch)
+    physics = reset(model.physics, kinds)
+    params = model.weights(meas)
+    scales = {k: _initial_scale(k, params, physics) for k in kinds}
+    for _ in range(2):
+        deltas = estimate_offsets(named_subkey(key, "offsets"), meas, physics, params, kinds, scales)
+        scales = {k: max(float(np.sqrt(np.mean(np.concatenate([np.ravel(d) ** 2 for d in deltas[k]])))),
+                         1e-4 * _initial_scale(k, params, physics)) for k in kinds}
+    new_params, new_physics = apply_all(kinds, deltas, params, physics, arch)
+    offsets = dict(model.offsets)
+    for k in kinds:
+        offsets[k.effect] = scales[k] if k.effect not in offsets else max(offsets[k.effect], scales[k])
+    return Model(new_physics, new_params, offsets)
+
+
+def offset_deltas(model: Model, base: Model, meas: Measurement, kinds) -> dict:
+    """The fitted offsets of ``model`` relative to ``base`` (:func:`base_model`)."""
+    p1, p0 = model.weights(meas), base.weights(meas)
+    out = {}
+    for k in kinds:
+        arrs = []
+        for l in k.layers:
+            if k.target == "W":
+                arrs.append(np.asarray(p1[l - 1].W, np.float64) - np.asarray(p0[l - 1].W, np.float64))
+            elif k.target == "b":
+                arrs.append(np.asarray(p1[l - 1].b, np.float64) - np.asarray(p0[l - 1].b, np.float64))
+            else:
+                v1 = getattr(model.physics.get(k.effect), k.target)
+                v0 = getattr(base.physics.get(k.effect), k.target)
+                g = lambda v: np.broadcast_to(np.asarray(v[l - 1] if isinstance(v, (tuple, list)) else v, np.float64),
+                                              (meas.arch.widths[l],))
+                arrs.append(g(v1) - g(v0))
+        out[k] = arrs
+    return out
+
+
+# ---- effective degrees of freedom -------------------------------------------------------------
+
+@functools.partial(jax.jit, static_argnames=("arch", "layer", "kinds", "axis"))
+def _layer_jvp_columns(W, b, a, noise, physics, t, basis, arch, layer, kinds, axis):
+    """Per direction of ``basis`` (one offset per output neuron), the change of the layer's mean
+    prediction: (B, n..., d_l)."""
+    def pred(ds):
+        Wd, bd, ph = apply_layer(kinds, ds, W, b, physics, layer, arch)
+        a_in = noisy_input(a, noise, ph) if layer == 1 else a
+        return jnp.mean(layer_step(Wd, bd, a_in, noise, ph, arch, layer, t=t)[0], axis=axis)
+
+    zero = tuple(jnp.zeros_like(b[0]) for b in basis)
+    return jax.vmap(lambda v: jax.jvp(pred, (zero,), (v,))[1])(basis)
+
+
+def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, int]:
+    """``(effective, nominal)`` degrees of freedom of the offsets of ``model`` (module docstring).
+
+    With taps, per layer and output neuron i: the columns of J_i are the changes of neuron i's
+    mean prediction per offset of row i (a direction that moves entry j of every row at once
+    gives column j of every J_i in one pass). Without taps: the full Jacobian of the output
+    means, column by column.
+    """
+    arch = meas.arch
+    e = {k: float(model.offsets.get(k.effect, 0.0)) or _initial_scale(k, model.weights(meas), model.physics)
+         for k in kinds}
+    p32 = params32(model.weights(meas))
+    nominal = sum(int(np.prod(k.shape(arch, l))) for k in kinds for l in k.layers)
+    if not meas.has_taps:
+        J, inv_v = _output_jacobian(key, meas, model, kinds)
+        sig2 = 1.0 / inv_v
+        scale = np.concatenate([np.full(int(np.prod(k.shape(arch, l))), e[k] ** 2) for k in kinds for l in k.layers])
+        # hat-matrix trace of the ridge with prior covariance diag(scale): eig of S^1/2 J^T J S^1/2 / sig2
+        Js = J * np.sqrt(scale)[None, :] / np.sqrt(sig2)
+        lam = np.linalg.svd(Js, compute_uv=False) ** 2
+        return float(np.sum(lam / (lam + 1.0))), nominal
+    total = 0.0
+    for l in range(1, arch.depth + 1):
+        here = tuple(k for k in kinds if l in k.layers)
+        if not here:
+            continue
+        W, b = p32[l - 1]
+        noise, a, t, _, resid_var, axis = _layer_setup(jax.random.fold_in(named_subkey(key, "offsets"), l), meas,
+                                                       model.physics, l)
+        d_l, d_in = arch.widths[l], arch.widths[l - 1]
+        # columns per neuron: each W kind contributes d_in (entry j of every row), b / per-neuron 1
+        dirs = []
+        for ki, k in enumerate(here):
+            cols = d_in if k.target == "W" else 1
+            for j in range(cols):
+                v = [jnp.zeros(kk.shape(arch, l), jnp.float32) for kk in here]
+                v[ki] = (jnp.zeros((d_l, d_in), jnp.float32).at[:, j].set(1.0) if k.target == "W"
+                         else jnp.ones((d_l,), jnp.float32))
+                dirs.append((tuple(v), e[k]))
+        basis = tuple(jnp.stack([d[0][i] for d in dirs]) for i in range(len(here)))
+        cols = np.asarray(_layer_jvp_columns(W, b, a, noise, model.physics, t, basis, arch, l, here, axis), np.float64)
+        cols = cols.reshape(len(dirs), -1, d_l)  # (P_i, samples, neurons)
+        prior = np.array([d[1] ** 2 for d in dirs])
+        for i in range(d_l):
+            Ji = cols[:, :, i].T * np.sqrt(prior)[None, :] / np.sqrt(resid_var)
+            lam = np.linalg.svd(Ji, compute_uv=False) ** 2
+            total += float(np.sum(lam / (lam + 1.0)))
+    return total, nominal
+
+
+def _output_jacobian(key, meas: Measurement, model: Model, kinds, chunk: int = 64):
+    """J (n d_L, P) of the model's mean outputs in every offset, and the inverse variance of a
+    measured mean (no taps)."""
+    arch = meas.arch
+    K, noise, t, _, _ = _joint_setup(named_subkey(key, "jacobian"), meas, model.physics)
+    x = jnp.asarray(meas.x, jnp.float32)
+    p32 = params32(model.weights(meas))
+    shapes = tuple(k.shape(arch, l) for k in kinds for l in k.layers)
+    P = sum(int(np.prod(s)) for s in shapes)
+    cols = []
+    for i in range(0, P, chunk):
+        basis = np.zeros((min(chunk, P - i), P), np.float32)
+        basis[np.arange(basis.shape[0]), i + np.arange(basis.shape[0])] = 1.0
+        cols.append(np.asarray(_mean_output_jvp(p32, x, noise, model.physics, t, jnp.asarray(basis), arch, shapes,
+                                                kinds), np.float64))
+    J = np.concatenate(cols, axis=0).T
+    Y = meas.layers()[-1]
+    inv_v = meas.r / max(float(np.mean(np.var(Y, axis=1))), 1e-12)
+    return J, inv_v
+
+
+@functools.partial(jax.jit, static_argnames=("arch", "shapes", "kinds"))
+def _mean_output_jvp(p32, x, noise, physics, t, basis, arch, shapes, kinds):
+    def f(flat):
+        deltas = _split_by_kind(unflat_vector(flat, shapes), kinds)
+        return jnp.mean(_forward_with(deltas, kinds, p32, x, noise, physics, t, arch)[-1], axis=1).ravel()
+
+    zero = jnp.zeros(basis.shape[1], jnp.float32)
+    return jax.vmap(lambda v: jax.jvp(f, (zero,), (v,))[1])(basis)
+
+
+# ---- the refit null -------------------------------------------------------------------------
+
+def resimulate(key, model: Model, meas: Measurement) -> Measurement:
+    """``meas`` with its shots (and taps) replaced by shots of ``model`` taken as the truth:
+    same inputs, shots per input, times and programmed weights."""
+    t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
+    out = simulate(key, params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), model.physics, meas.arch,
+                   shots=meas.r, t=t, taps=True)
+    taps = tuple(np.asarray(a, np.float64) for a in out.taps[:-1]) if meas.has_taps else None
+    return dataclasses.replace(meas, y=np.asarray(out.y, np.float64), taps=taps)
+
+
+def marginal_e2(d2, c2, sigma2: float) -> float:
+    """Empirical-Bayes e^2: the maximiser of the Gaussian marginal likelihood of a whitened
+    residual ``rho ~ N(0, e^2 Jw Jw^T + sigma2 I)``, given the squared singular values ``d2``
+    of Jw and the squared coordinates ``c2`` of rho in its left singular basis: they have
+    variances e^2 d_k^2 + sigma2, so every direction weighs in by its own precision (the
+    plain moment equation |rho|^2 = e^2 tr(Jw^T Jw) + n sigma2 is ruled by the largest d_k:
+    on a 6-10-4 file without taps, true e = 0.15, it gives 0.08 where this gives 0.13)."""
+    def nll(log_e2):
+        v = np.exp(log_e2) * d2 + sigma2
+        return 0.5 * float(np.sum(np.log(v) + c2 / v))
+
+    if not np.any(d2 > 0):
+        return 0.0
+    top = np.log(float(np.sum(c2)) + sigma2) - np.log(float(np.min(d2[d2 > 0])))
+    res = optimize.minimize_scalar(nll, bounds=(top - 60.0, top), method="bounded")
+    return float(np.exp(res.x))
+
+
+def _posterior_spread(key, model: Model, base: Model, meas: Measurement, kinds, K: int = 32):
+    # base: :func:`base_model` of ``model``
+    """A square root S of the offsets' posterior covariance from the output means (no taps),
+    linearised at the fit: with J the Jacobian of the model's mean outputs in the offsets and
+    v the inverse variance of a measured mean, ``S S^T = (v J^T J + diag(1 / e^2))^-1``.
+
+    e is the empirical-Bayes scale (:func:`marginal_e2` on r0, the residual of the base
+    model's mean outputs; the model's K-draw mean adds r/K to the measured means' variance),
+    not the fitted one: the ridge sets the unidentified directions to zero, so the rms of
+    the offsets underestimates e (0.09 for a true 0.15 on 8-16-8-4). Never below the fitted e.
+    A single kind shares one e; several kinds scale theirs by the same factor."""
+    arch, r = meas.arch, meas.r
+    J, v = _output_jacobian(key, meas, model, kinds)
+    _, noise, t, _, _ = _joint_setup(named_subkey(key, "jacobian"), meas, model.physics)
+    Y = meas.layers()[-1]
+    target = np.mean(Y, axis=1).ravel()
+    base_out = _mean_output(params32(base.weights(meas)), jnp.asarray(meas.x, jnp.float32), noise, base.physics, t, arch)
+    r0 = target - np.asarray(base_out, np.float64).ravel()
+    e_fit = np.concatenate([np.full(int(np.prod(k.shape(arch, l))), float(model.offsets.get(k.effect, 1e-3)))
+                            for k in kinds for l in k.layers])
+    Js = J * e_fit[None, :]  # in units of the fitted scales
+    U, d, _ = np.linalg.svd(np.sqrt(v) * Js, full_matrices=False)
+    factor2 = max(marginal_e2(d ** 2, (U.T @ (np.sqrt(v) * r0)) ** 2, 1.0 + r / K), 1.0)
+    prior = factor2 * e_fit ** 2
+    lam, Wv = np.linalg.eigh(v * (J.T @ J) + np.diag(1.0 / prior))
+    return Wv * (1.0 / np.sqrt(np.maximum(lam, 1e-300)))[None, :]
+
+
+def _mean_out(p32, x, noise, physics, t, arch):
+    return jnp.mean(forward(p32, x[:, None, :], noise, physics, arch, t=t).y, axis=1)
+
+
+_mean_output = jax.jit(_mean_out, static_argnames=("arch",))
+
+
+def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measurement, ref, *,
+                      channel_values, shots: int | None = None, B: int = OFFSET_REPLICATES) -> np.ndarray:
+    """Channel values of a model with fitted offsets under the null *with* its estimation
+    error, for :func:`~gift_theory.lab.compare`'s ``null_replicates``: B times, data are
+    simulated from the fitted model as the truth on the fitting inputs, the offsets refitted
+    (the same estimator, with the model's scales, from the fitted values), and the refitted
+    model scored on data simulated on the held-out inputs.
+
+    With taps every layer's offsets are identified and the fitted model stands for the truth;
+    without taps most directions are not, and each replicate's truth is drawn from the
+    offsets' posterior (the part the data cannot see, at its full size).
+
+    Returns
+    -------
+    (B, n_test, L', C) array
+    """
+    kinds = kinds_of([n for n in model.offsets if fitted_as_offsets(n)], fit_meas.arch)
+    if not kinds:
+        raise ValueError("offset_replicates: the model has no fitted offsets")
+    arch = fit_meas.arch
+    base = base_model(model, fit_meas)
+    fitted = offset_deltas(model, base, fit_meas, kinds)
+    scales = {k: float(model.offsets[k.effect]) for k in kinds}
+    spread = (None if fit_meas.has_taps
+              else _posterior_spread(named_subkey(key, "posterior"), model, base, fit_meas, kinds))
+    shapes = [k.shape(arch, l) for k in kinds for l in k.layers]
+    out = []
+    for b in range(B):
+        kb = jax.random.fold_in(key, b)
+        k_tr, k_te, k_fit, k_cmp, k_truth = (named_subkey(kb, s) for s in ("fit_data", "test_data", "refit", "score",
+                                                                            "truth"))
+        truth = model
+        if spread is not None:
+            z = spread @ np.asarray(jax.random.normal(k_truth, (spread.shape[1],)), np.float64)
+            flat = np.concatenate([np.ravel(a) for k in kinds for a in fitted[k]]) + z
+            deltas = _split_by_kind(unflat_vector(flat, shapes), kinds)
+            p, ph = apply_all(kinds, deltas, base.weights(fit_meas), base.physics, arch)
+            truth = Model(ph, p, model.offsets)
+        sim_tr = resimulate(k_tr, truth, fit_meas)
+        deltas = estimate_offsets(k_fit, sim_tr, base.physics, base.weights(fit_meas), kinds, scales, start=fitted)
+        p, ph = apply_all(kinds, deltas, base.weights(fit_meas), base.physics, arch)
+        refit = Model(ph, p, model.offsets)
+        out.append(channel_values(k_cmp, refit, resimulate(k_te, truth, test_meas), ref, shots))
+    return np.stack(out)

@@ -1,0 +1,149 @@
+"""Stage 1 of the lab: a model of the device and its shots for a measurement's inputs.
+
+A :class:`Model` is the core's generative process (CONTRACTS §2) with the physics it believes
+and the weights it believes are programmed. Its shots come from the core: standard draws of
+:func:`gift_theory.sample_noise` (the physics' own noise law, each site from its own named
+subkey, so the draws of a site are common to every candidate model) through
+:func:`gift_theory.forward`. There is no second simulator in the lab.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._measurement import Measurement
+from .._model import (
+    compiled_draws,
+    forward,
+    layer_step,
+    named_subkey,
+    noisy_input,
+    sample_noise,
+)
+from .._params import Layer
+
+
+@dataclasses.dataclass(frozen=True)
+class Model:
+    """A model of the device: physics plus the weights it believes are programmed.
+
+    physics : :class:`gift_theory.Physics`
+    params : the weights the model runs with; None: the measurement's programmed weights.
+        They differ from the programmed ones when an effect fitted as per-device offsets
+        (``weight_error``: ``W + E_hat``, ``bias_offset``: ``b + delta_hat``) was estimated.
+    offsets : ``{effect name: fitted prior scale}`` of the effects fitted as offsets (their
+        per-device values live in ``params``)
+    """
+
+    physics: object
+    params: tuple | None = None
+    offsets: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def effects(self) -> list[str]:
+        return list(self.physics.names) + [n for n in self.offsets if n not in self.physics.names]
+
+    def params_json(self) -> dict:
+        out = {}
+        for k, v in self.physics.params().items():
+            a = np.asarray(v if not isinstance(v, (tuple, list)) else np.concatenate([np.ravel(x) for x in v]))
+            out[k] = float(a) if a.ndim == 0 else [float(x) for x in a.ravel()]
+        out.update({k: float(v) for k, v in self.offsets.items()})
+        return out
+
+    def describe(self) -> str:
+        d = self.physics.describe()
+        for name, scale in self.offsets.items():
+            d += f" + {name}(scale={scale:.4g}, fitted offsets)"
+        return d
+
+    def weights(self, meas: Measurement) -> tuple:
+        return self.params if self.params is not None else meas.params
+
+
+def params32(params):
+    """Weights as float32 :class:`Layer` s (what every jitted pass of the lab takes)."""
+    return tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+
+
+def default_model_shots(r: int) -> int:
+    """Model shots per input when not told: 4 r (the model's own sampling noise in the
+    statistic then is a quarter of the data's, so candidates differ by physics, not luck)."""
+    return 4 * int(r)
+
+
+def tiled_times(meas: Measurement, K: int):
+    """The measured acquisition times tiled to K model shots per input (n, K), or None."""
+    if meas.t is None:
+        return None
+    reps = -(-K // meas.r)
+    return jnp.asarray(np.tile(meas.t, (1, reps))[:, :K], jnp.float32)
+
+
+def draws(key, physics, meas: Measurement, K: int) -> dict:
+    """Standard draws of ``physics`` for K shots of each input of ``meas`` (the core's sampler)."""
+    return compiled_draws(key, physics, arch=meas.arch, shape=(meas.n, int(K)), dtype=jnp.float32)
+
+
+@functools.partial(jax.jit, static_argnames=("arch",))
+def layer_outputs(params, x, noise, physics, arch, t):
+    """Every layer's output a_1..a_L for inputs x (n, d_0) and draws of batch (n, K)
+    (jitted core ``forward``; compiled once per physics structure and shape, shared by the
+    fit and the comparison)."""
+    return forward(params, x[:, None, :], noise, physics, arch, t=t, taps=True).taps
+
+
+def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
+    """Shots of the model for the measurement's inputs (and times): one (n, K, d_l) array per
+    measured layer (taps then output). ``K = shots`` (default 4 r); times are the measured
+    ones, tiled when K exceeds r. Drawn in chunks of 2 r shots (the fit's shape: one
+    compiled program serves both), chunk c from ``fold_in(key, c)``."""
+    K = default_model_shots(meas.r) if shots is None else int(shots)
+    params = params32(model.weights(meas))
+    chunk = 2 * meas.r if K % (2 * meas.r) == 0 else K
+    x = jnp.asarray(meas.x, jnp.float32)
+    t = tiled_times(meas, chunk)
+    parts = [layer_outputs(params, x, draws(jax.random.fold_in(key, c), model.physics, meas, chunk), model.physics,
+                           meas.arch, t) for c in range(K // chunk)]
+    outs = parts[0] if len(parts) == 1 else tuple(jnp.concatenate(p, axis=1) for p in zip(*parts))
+    return tuple(outs[l - 1] for l in meas.layer_ids())
+
+
+@functools.partial(jax.jit, static_argnames=("arch", "layer"))
+def _one_step(key, W, b, a, physics, t, arch, layer):
+    noise = sample_noise(key, arch, physics, a.shape[:2], jnp.float32)
+    if layer == 1:
+        a = noisy_input(a, noise, physics)
+    return layer_step(W, b, a, noise, physics, arch, layer, t=t)[0]
+
+
+def one_step_shots(key, model: Model, meas: Measurement, layer: int):
+    """The model's layer ``layer`` fed with the *measured* output of the layer before, same
+    shot (needs taps for layer >= 2; layer 1 is fed x and the model's input noise).
+    Returns (n, r, d_l)."""
+    W, b = params32(model.weights(meas))[layer - 1]
+    if layer == 1:
+        a = jnp.broadcast_to(jnp.asarray(meas.x, jnp.float32)[:, None, :], (meas.n, meas.r, meas.x.shape[1]))
+    else:
+        a = jnp.asarray(meas.taps[layer - 2], jnp.float32)
+    t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
+    return _one_step(key, W, b, a, model.physics, t, meas.arch, layer)
+
+
+def noiseless_pre(model: Model, meas: Measurement):
+    """The model's noiseless pre-activations z_l (n, d_l) of every layer, through the core's
+    forward pass with every draw zero (every effect's hooks apply; gains at 1 + 0)."""
+    arch = meas.arch
+    noise = {k: jnp.zeros((meas.n, 1) + tuple(ev), jnp.float32) for k, ev in model.physics.draws(arch).items()}
+    out = forward(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32)[:, None, :], noise, model.physics,
+                  arch, t=None, taps=True)
+    return [np.asarray(z[:, 0], np.float64) for z in out.pre]
+
+
+__all__ = ["Model", "params32", "default_model_shots", "tiled_times", "draws", "layer_outputs", "model_shots",
+           "one_step_shots", "noiseless_pre", "named_subkey"]

@@ -25,6 +25,7 @@ class WeightError(Effect):
     bounds = {"e": (0.0, float("inf"))}
     defaults = {"e": 0.02}
     stage = "weights"
+    mechanism = "weight_error"
     order = 1
     static_fields = ("seed",)
     description = "a fixed per-device error E ~ N(0, e^2) added to every weight"

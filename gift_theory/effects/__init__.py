@@ -68,6 +68,8 @@ from .uniform import Uniform as Uniform
 from .weight_error import WeightError as WeightError
 from ._physics import Physics as Physics
 from ._physics import awgn as awgn
+from ._plugins import load_entry_points as load_entry_points
+from ._plugins import load_plugin as load_plugin
 
 #: the CONTRACTS §2 names, in catalogue order (the effects the contract's table lists)
 EFFECT_NAMES = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "drift",

@@ -15,10 +15,12 @@ weight_error       e (device: seed)        weights         weight_error         
 shot               q                       readout         input_dependent_noise  :mod:`.shot`
 saturation         v_max                   readout         readout_nonlinearity   :mod:`.saturation`
 quantization       bits, v_range           readout         readout_nonlinearity   :mod:`.quantization`
+bias_offset        sigma (device: seed)    bias            bias_offset            :mod:`.bias_offset`
+activation_gain    kappa (hidden layers)   activation      activation_mismatch    :mod:`.activation_gain`
 =================  ======================  ==============  =====================  ======================
 
 The first eleven are CONTRACTS §2's table (:data:`EFFECT_NAMES`); :data:`BUILTIN` lists all
-built-in ones. A user adds an effect in a file of their own (CONTRACTS §2b)::
+thirteen built-in ones. A user adds an effect in a file of their own (CONTRACTS §2b)::
 
     from gift_theory.effects import Effect, register
 
@@ -66,6 +68,8 @@ from .saturation import Saturation as Saturation
 from .shot import Shot as Shot
 from .uniform import Uniform as Uniform
 from .weight_error import WeightError as WeightError
+from .bias_offset import BiasOffset as BiasOffset
+from .activation_gain import ActivationGain as ActivationGain
 from ._physics import Physics as Physics
 from ._physics import awgn as awgn
 from ._plugins import load_entry_points as load_entry_points
@@ -75,8 +79,8 @@ from ._plugins import load_plugin as load_plugin
 EFFECT_NAMES = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "drift",
                 "crosstalk", "weight_error", "shot", "saturation", "quantization")
 
-#: every built-in effect, in catalogue order
-BUILTIN = EFFECT_NAMES
+#: every built-in effect, in catalogue order: CONTRACTS §2's eleven, then the open-catalogue ones
+BUILTIN = EFFECT_NAMES + ("bias_offset", "activation_gain")
 
 if set(BUILTIN) != set(REGISTRY):  # pragma: no cover - a module was added without listing it
     raise ImportError(f"effect registry and catalogue disagree: {sorted(set(BUILTIN) ^ set(REGISTRY))}")

@@ -1,12 +1,15 @@
 """The ONN model M_s and its generalisation with physical effects.
 
-Paper eqs. def:matrices-Ai and def:matrix-AL; CONTRACTS §1-2::
+Paper eqs. def:matrices-Ai and def:matrix-AL; CONTRACTS §1-2, §2b::
 
     a_0 = x + n_a0
     u_l = W_l^eff a_{l-1}
-    z_l = g_l u_l + b_l + n_wl                  l = 1..L
-    a_l = D(sigma(z_l) + n_al)                  l = 1..L-1
+    z_l = g_l u_l + b_l^eff + n_wl              l = 1..L
+    a_l = D(act_l(z_l) + n_al)                  l = 1..L-1
     M_s(x, w, N) = a_L = D(z_L)
+
+with W^eff, b^eff, g, act (sigma by default) and D given by the physics' effects acting
+on layer l (:class:`~gift_theory.effects.Physics`).
 
 Randomness enters only through a dict of *standard* draws (unit variance; the law of
 the additive ones set by the physics), which the forward pass scales: additive noise is
@@ -120,28 +123,31 @@ def noisy_input(x, noise: dict, physics: Physics):
 def layer_step(W, b, a, noise: dict, physics: Physics, arch: Architecture, layer: int, *, t=None):
     """Layer ``layer`` of the generative process fed with ``a`` (its input a_{l-1}).
 
-    ``u = W_eff a``, ``z = g u + b + s n_w``, output ``D(sigma(z) + s n_a)`` (hidden) or
-    ``D(z)`` (last layer), through the physics' hooks. Used by :func:`forward` and by the
-    measurement lab's one-step checks (``a`` the *measured* previous layer).
+    ``u = W_eff a``, ``z = g u + b_eff + s n_w``, output ``D(act(z) + s n_a)`` (hidden;
+    ``act`` the activation hooks composed around ``arch.sigma``) or ``D(z)`` (last layer),
+    through the hooks of the physics' effects whose scope includes ``layer``. Used by
+    :func:`forward` and by the measurement lab's one-step checks (``a`` the *measured*
+    previous layer).
 
     Returns
     -------
     (output a_l, pre-activation z_l)
     """
     s = physics.s
-    W = physics.effective_weights(W, layer)
+    depth = arch.depth
+    W = physics.effective_weights(W, layer, depth)
     u = a @ W.T
-    g = physics.gain(noise, layer, t, u.shape)
-    z = (u if g is None else g * u) + b
+    g = physics.gain(noise, layer, t, u.shape, depth)
+    z = (u if g is None else g * u) + physics.bias(b, layer, depth)
     if f"w{layer}" in noise:
         z = z + s * noise[f"w{layer}"]
-    if layer < arch.depth:
-        out = arch.sigma(z)
+    if layer < depth:
+        out = physics.activation(z, arch.sigma, layer, depth)
         if f"a{layer}" in noise:
             out = out + s * noise[f"a{layer}"]
     else:
         out = z
-    return physics.readout(out, noise, layer), z
+    return physics.readout(out, noise, layer, depth), z
 
 
 def simulate(key: jax.Array, params, x, physics: Physics, arch: Architecture, shots: int = 1, *, t=None,

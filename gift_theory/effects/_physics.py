@@ -1,4 +1,19 @@
-"""A composition of effects: the physics of one device or one model of it."""
+"""A composition of effects: the physics of one device or one model of it.
+
+:class:`Physics` holds the effects of one device in the canonical order and dispatches the
+stages of the generative process (CONTRACTS §2, §2b) to them::
+
+    W_eff = effective_weights(W, l, L)          weights hooks, in order
+    b_eff = bias(b, l, L)                       bias hooks, in order
+    g_l   = gain(noise, l, t, shape, L)         product of the gain hooks (None: no gain)
+    act_l = activation(z, sigma, l, L)          activation hooks composed around sigma
+    D(v)  = readout(v, noise, l, L)             readout hooks, in order
+
+Every dispatcher skips the effects whose ``layers`` scope excludes layer ``l`` of an
+``L``-layer network. ``L`` (``depth``) may be omitted while every effect's scope is
+``"all"`` or a tuple (the built-in effects but ``activation_gain``); a scope
+``"hidden"``/``"output"`` then raises ``ValueError``.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +25,7 @@ import jax.numpy as jnp
 
 from .. import _random
 from .._errors import GiftInputError
-from ._base import REGISTRY, STAGES, Effect, make_effect, parse_effect
+from ._base import REGISTRY, STAGES, Effect, as_per_neuron, is_per_neuron, json_value, make_effect, parse_effect
 from .awgn import Awgn
 
 
@@ -120,22 +135,31 @@ class Physics:
                 return e.name
         return "gaussian"
 
-    def params(self) -> dict[str, float]:
-        """All physical parameters as ``{"s": ..., "q": ..., ...}`` (names are unique)."""
-        out: dict[str, float] = {}
+    def params(self) -> dict:
+        """All physical parameters as ``{"s": ..., "q": ..., ...}`` (names are unique).
+
+        A per-neuron parameter held as arrays is a tuple with one 1-D array per layer."""
+        out: dict = {}
         for e in self.effects:
             out.update(e.param_dict())
         return out
 
-    def params_json(self) -> dict[str, float]:
-        return {k: float(v) for k, v in self.params().items()}
+    def params_json(self) -> dict:
+        """:meth:`params` as JSON values: numbers, a per-neuron parameter as a list of lists."""
+        return {k: json_value(v) for k, v in self.params().items()}
 
     def replace(self, where: str = "parameters", **values) -> "Physics":
-        """A copy with parameters changed by name: ``phys.replace(s=0.2, q=0.01)``."""
+        """A copy with parameters changed by name: ``phys.replace(s=0.2, q=0.01)``.
+
+        A per-neuron parameter takes a scalar or one 1-D array per layer (a tuple or list).
+        """
         todo = dict(values)
         new = []
         for e in self.effects:
             mine = {p: todo.pop(p) for p in list(todo) if p in e.params}
+            for p, v in mine.items():
+                if p in e.shape and (is_per_neuron(v) or getattr(v, "ndim", 0) >= 1):
+                    mine[p] = as_per_neuron(v)
             new.append(dataclasses.replace(e, **mine) if mine else e)
         if todo:
             raise GiftInputError(f"{where}: no effect of {', '.join(self.names) or 'this physics'} "
@@ -149,6 +173,10 @@ class Physics:
         kept = [e for e in self.effects if e.name != effect.name]
         return Physics.of(kept + [effect])
 
+    def expand(self, arch, dtype=None) -> "Physics":
+        """A copy whose per-neuron parameters are per-layer arrays (:meth:`Effect.expand`)."""
+        return Physics(tuple(e.expand(arch, dtype) for e in self.effects))
+
     def without(self, name: str) -> "Physics":
         return Physics(tuple(e for e in self.effects if e.name != name))
 
@@ -156,7 +184,7 @@ class Physics:
         parts = []
         for e in self.effects:
             pd = e.param_dict()
-            parts.append(e.name + ("(" + ", ".join(f"{k}={float(v):.4g}" for k, v in pd.items()) + ")" if pd else ""))
+            parts.append(e.name + ("(" + ", ".join(f"{k}={_brief(v)}" for k, v in pd.items()) + ")" if pd else ""))
         return " + ".join(parts) if parts else "noiseless"
 
     # ---- the stages -------------------------------------------------------------------
@@ -174,30 +202,76 @@ class Physics:
                 return e.standard(key, shape, dtype)
         return _random.normal(key, shape, dtype)
 
-    def effective_weights(self, W: jax.Array, layer: int) -> jax.Array:
+    def effective_weights(self, W: jax.Array, layer: int, depth: int | None = None) -> jax.Array:
+        """W_eff of layer ``layer`` (1-based) of a ``depth``-layer network: the weights hooks in order."""
         for e in self.effects:
-            if e.stage == "weights":
+            if e.stage == "weights" and e.acts_on(layer, depth):
                 W = e.weights(W, layer)
         return W
 
-    def gain(self, noise, layer, t, shape):
+    def bias(self, b: jax.Array, layer: int, depth: int | None = None) -> jax.Array:
+        """b_eff of layer ``layer``: the bias hooks in order (``b`` itself without any)."""
+        for e in self.effects:
+            if e.stage == "bias" and e.acts_on(layer, depth):
+                b = e.bias(b, layer)
+        return b
+
+    def gain(self, noise, layer, t, shape, depth: int | None = None):
+        """g_l: the product of the gain hooks acting on ``layer``; ``None`` when there is none."""
         g = None
         for e in self.effects:
-            if e.stage == "gain":
+            if e.stage == "gain" and e.acts_on(layer, depth):
                 gi = e.gain(noise, layer, t, shape)
                 g = gi if g is None else g * gi
         return g
 
-    def readout(self, v, noise, layer):
+    def activation(self, z: jax.Array, sigma, layer: int, depth: int | None = None) -> jax.Array:
+        """act_l(z) of hidden layer ``layer``, the value before its activation noise.
+
+        The activation hooks acting on ``layer`` are composed in the canonical order: the
+        first receives the architecture's ``sigma``, each next one the function the previous
+        one defines (``z -> previous.activation(z, sigma, layer)``). Without any: ``sigma(z)``.
+        """
         for e in self.effects:
-            if e.stage == "readout":
+            if e.stage == "activation" and e.acts_on(layer, depth):
+                sigma = _Composed(e, sigma, layer)
+        return sigma(z)
+
+    def readout(self, v, noise, layer, depth: int | None = None):
+        """One pass through the readout chain D of layer ``layer``: the readout hooks in order."""
+        for e in self.effects:
+            if e.stage == "readout" and e.acts_on(layer, depth):
                 v = e.readout(v, noise, layer)
         return v
 
-    def validate(self, where: str = "effects") -> "Physics":
+    def validate(self, where: str = "effects", arch=None) -> "Physics":
+        """Check every effect's parameters (:meth:`Effect.validate`); ``arch`` also checks
+        the per-neuron arrays against the network's widths."""
         for e in self.effects:
-            e.validate(where)
+            e.validate(where, arch)
         return self
+
+
+class _Composed:
+    """``z -> effect.activation(z, sigma, layer)``: one activation hook wrapped around ``sigma``."""
+
+    __slots__ = ("effect", "sigma", "layer")
+
+    def __init__(self, effect, sigma, layer):
+        self.effect, self.sigma, self.layer = effect, sigma, layer
+
+    def __call__(self, z):
+        return self.effect.activation(z, self.sigma, self.layer)
+
+
+def _brief(v) -> str:
+    """A parameter value in :meth:`Physics.describe`: the number, or a summary of per-neuron arrays."""
+    if is_per_neuron(v):
+        vals = [float(x) for row in v for x in jnp.ravel(jnp.asarray(row))]
+        if not vals:
+            return "per-neuron[]"
+        return f"per-neuron[{len(vals)}, mean {sum(vals) / len(vals):.4g}]"
+    return f"{float(v):.4g}"
 
 
 def awgn(s: float) -> Physics:

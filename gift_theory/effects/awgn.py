@@ -29,6 +29,7 @@ class Awgn(Effect):
     bounds = {"s": (0.0, float("inf"))}
     defaults = {"s": 0.1}
     stage = "level"
+    mechanism = "noise_level"
     description = "additive noise of standard deviation s at input, weighted sums and hidden activations"
 
     def draws(self, arch):

@@ -18,6 +18,7 @@ class CommonMode(Effect):
     bounds = {"c": (0.0, float("inf"))}
     defaults = {"c": 0.05}
     stage = "gain"
+    mechanism = "gain_fluctuation"
     order = 1
     description = "per-layer per-shot gain 1 + c xi shared by the layer's neurons (laser intensity noise)"
 

@@ -24,6 +24,7 @@ class Crosstalk(Effect):
     params = ("k",)
     defaults = {"k": 0.02}
     stage = "weights"
+    mechanism = "weight_error"
     description = "each weight picks up k times its two row neighbours"
 
     def weights(self, W, layer):

@@ -17,6 +17,7 @@ class Drift(Effect):
     params = ("r",)
     defaults = {"r": 0.05}
     stage = "gain"
+    mechanism = "gain_fluctuation"
     order = 2
     needs_times = True
     description = "gain 1 + r t drifting linearly with the acquisition time t"

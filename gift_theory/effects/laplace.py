@@ -13,6 +13,7 @@ from ._base import Effect, register
 class Laplace(Effect):
     name = "laplace"
     stage = "law"
+    mechanism = "noise_law"
     description = "additive noise drawn from a Laplace law with standard deviation s"
 
     @staticmethod

@@ -18,6 +18,7 @@ class Multiplicative(Effect):
     bounds = {"m": (0.0, float("inf"))}
     defaults = {"m": 0.05}
     stage = "gain"
+    mechanism = "input_dependent_noise"
     description = "per-neuron per-shot gain 1 + m xi on the weighted sum"
 
     def draws(self, arch):

@@ -20,6 +20,7 @@ class Quantization(Effect):
     bounds = {"bits": (1.0, 32.0), "v_range": (1e-12, float("inf"))}
     defaults = {"bits": 8.0, "v_range": 2.0}
     stage = "readout"
+    mechanism = "readout_nonlinearity"
     order = 2
     description = "uniform ADC of `bits` bits on [-v_range, v_range]"
 

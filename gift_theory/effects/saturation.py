@@ -18,6 +18,7 @@ class Saturation(Effect):
     bounds = {"v_max": (1e-12, float("inf"))}
     defaults = {"v_max": 2.0}
     stage = "readout"
+    mechanism = "readout_nonlinearity"
     order = 0
     description = "soft readout saturation v_max tanh(v / v_max)"
 

@@ -25,6 +25,7 @@ class Shot(Effect):
     bounds = {"q": (0.0, float("inf"))}
     defaults = {"q": 0.01}
     stage = "readout"
+    mechanism = "input_dependent_noise"
     order = 1
     description = "signal-dependent readout noise of variance q |v|"
 

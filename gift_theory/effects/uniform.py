@@ -13,6 +13,7 @@ from ._base import Effect, register
 class Uniform(Effect):
     name = "uniform"
     stage = "law"
+    mechanism = "noise_law"
     order = 1
     description = "additive noise drawn uniformly with standard deviation s"
 

@@ -26,6 +26,7 @@ class WeightError(Effect):
     bounds = {"e": (0.0, float("inf"))}
     defaults = {"e": 0.02}
     stage = "weights"
+    mechanism = "weight_error"
     order = 1
     static_fields = ("seed",)
     offsets_of = "W"

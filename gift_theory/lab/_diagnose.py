@@ -31,7 +31,7 @@ import numpy as np
 
 from .._errors import GiftInputError
 from .._measurement import Measurement
-from ..effects import REGISTRY
+from ..effects import BUILTIN, REGISTRY
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, one_step_check
 from ._fit import fit_model, split_inputs
@@ -47,7 +47,8 @@ ALPHA = 0.01
 def default_candidates(meas: Measurement) -> list[str]:
     """Every registered effect a diagnosis of ``meas`` tries: all but awgn, and those silent
     without acquisition times only when the file has them."""
-    return [n for n, cls in REGISTRY.items() if n != "awgn" and (meas.t is not None or not cls.needs_times)]
+    names = list(BUILTIN) + [n for n in REGISTRY if n not in BUILTIN]  # catalogue order, then plugins
+    return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)]
 
 
 @dataclasses.dataclass(frozen=True)

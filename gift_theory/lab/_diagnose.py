@@ -15,7 +15,8 @@ by default: the built-in ones and any plugin) are fitted on the fitting half and
 the held-out half. Candidates are ranked by ``discrepancy_after + 2 sd * (parameters the
 effect adds)`` -- sd the baseline's standard deviation of the discrepancy under the model, a
 per-device offset family counted by its effective degrees of freedom -- so a one-parameter
-effect that explains the data beats a many-parameter one that also does (CONTRACTS §4).
+effect that explains the data beats a many-parameter one that also does (CONTRACTS §4); a
+candidate that passes its test ranks before every one that fails (:func:`rank_key`).
 ``missing_effect_detected`` is the baseline's goodness-of-fit test, ``p_value < 0.01``.
 A model with fitted offsets is tested against a refit null (:mod:`._fit_offsets`).
 """
@@ -180,12 +181,19 @@ class Diagnosis:
                 "seconds": self.seconds}
 
 
+def rank_key(c: Candidate):
+    """Candidates that pass their test (p >= 0.01) come first, each group by penalised score: a
+    model that fits is an answer, one that fails is not, whatever parameters it spends (a
+    per-device offset family with its hundreds of effective parameters must not lose to a
+    one-parameter effect that leaves the data unexplained)."""
+    return (c.comparison.p_value < ALPHA, c.score)
+
+
 def _improves(pair: Candidate, first: Candidate) -> bool:
-    """A pair replaces its first effect at the top only if it beats its penalised score and
-    passes the test: between two failing models the discrepancy's own noise (~ sqrt(4 Q))
-    dwarfs the parsimony penalty, and a failing pair is not an answer (measured: fitted
-    weight offsets that still fail were "improved" by a 1 % drift gain)."""
-    return pair.score < first.score and pair.comparison.p_value >= ALPHA
+    """A pair replaces its first effect at the top only if it passes the test and ranks before
+    it (:func:`rank_key`): a failing pair is not an answer (measured: fitted weight offsets
+    that still fail were "improved" by a 1 % drift gain)."""
+    return pair.comparison.p_value >= ALPHA and rank_key(pair) < rank_key(first)
 
 
 def _merge_second_stage(first: Candidate, stage2: list, singles: list) -> list:
@@ -193,10 +201,10 @@ def _merge_second_stage(first: Candidate, stage2: list, singles: list) -> list:
     effect (:func:`_improves`), the first effect itself right after it (the path that led
     there), the other improving pairs, then everything else by penalised score. A runner-up
     tried on top of the first is listed as the pair only."""
-    better = sorted((c for c in stage2 if _improves(c, first)), key=lambda c: c.score)
+    better = sorted((c for c in stage2 if _improves(c, first)), key=rank_key)
     named = {c.effects[-1] for c in stage2}
     rest = sorted([c for c in stage2 if not any(c is b for b in better)] + [c for c in singles if c.effects[0] not in named],
-                  key=lambda c: c.score)
+                  key=rank_key)
     return better[:1] + [first] + better[1:] + rest
 
 
@@ -252,7 +260,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         ranking.append(cand)
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
              f"p = {cand.comparison.p_value:.3g} ({cand.seconds:.1f} s)", verbose)
-    ranking.sort(key=lambda c: c.score)
+    ranking.sort(key=rank_key)
     if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
         first = ranking[0]
         rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]

@@ -87,7 +87,7 @@ def test_weight_error_is_named_first_and_passes_against_its_refit_null():
     top = d.ranking[0].comparison
     assert top.replicates > 0 and top.p_value >= 0.01
     assert top.net_discrepancy < top.discrepancy < 0.2 * d.baseline_comparison.discrepancy
-    assert abs(d.ranking[0].model.extra["weight_error"] - 0.25) < 0.05
+    assert abs(d.ranking[0].model.offsets["weight_error"] - 0.25) < 0.05
     # the rivals have no offsets: scored without replicates
     assert all(c.comparison.replicates == 0 for c in d.ranking[1:])
 
@@ -114,8 +114,9 @@ def test_null_reports_nothing_missing(tmp_path, capsys):
     assert out["baseline"]["effects"] == ["awgn"] and abs(out["baseline"]["params"]["s"] - 0.1) < 0.02
     for r in out["ranking"]:
         assert set(r) >= {"effect", "discrepancy_after", "p_value_after", "params"}
-    # every candidate of the catalogue is ranked (drift too: the file has times)
-    assert sorted(r["effect"] for r in out["ranking"]) == sorted(e for e in gt.EFFECT_NAMES if e != "awgn")
+    # every built-in effect is ranked (drift too: the file has times), each with its mechanism class
+    assert all(r["mechanism"] == gt.effects.REGISTRY[r["effect"]].mechanism for r in out["ranking"])
+    assert sorted(r["effect"] for r in out["ranking"]) == sorted(e for e in gt.effects.BUILTIN if e != "awgn")
 
 
 def test_fit_command_contract(tmp_path, capsys):

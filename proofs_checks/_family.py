@@ -568,7 +568,11 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
 
     num = _numeric(fam)
     s0, st = float(s0), float(st)
-    n_int = 5                                            # simultaneous intervals (Bonferroni)
+    # simultaneous intervals (Bonferroni), each two-sided at alpha / n_int: ||v||^2, C1, the criticality
+    # residual, C1_proof, C2, the descent difference, two for the sup over zeta (its upper bound, one-sided at
+    # the maximiser; its lower bound, one-sided at three fixed points), and per known critical point of
+    # J_st its gradient test (split over the coordinates) and J_st(w_t) - J_st(w0)
+    n_int = 8 + 2 * len(fam.wt or [])
     alpha = 1.0 - confidence
     z = float(stats.norm.isf(alpha / (2 * n_int)))
     f = num.per_sample

@@ -131,7 +131,9 @@ def theorem2_guarantee(key=None, precise: bool = False) -> dict:
     st_ = _onn.setup(precise)
     p, th1 = st_.problem, st_.theorem1
     kappas = (0.004, 0.002)
-    lev = level(1 + 2 * len(kappas))                # the shared Theorem-1 intervals + two tests per eta
+    # two tests per eta; the shared Theorem-1 intervals are at ALPHA_CHECK / 4 (_onn.HYPOTHESIS_CONFIDENCE),
+    # which two slots of ALPHA_CHECK / 6 cover: 4/6 + 1/4 < 1
+    lev = level(2 + 2 * len(kappas))
     D = _printed_D(jax.random.fold_in(key, 0), st_, K2=64 if precise else 32)
     Dm = np.asarray(D.mean)
     Dn = float(np.linalg.norm(Dm))

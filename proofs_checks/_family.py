@@ -449,7 +449,12 @@ def _theorem1_sympy(fam: Family, s0, st, *, rtol, max_pieces) -> dict:
         "descent": {"exists": descent, "detail": descent_detail},
         "hypotheses": hyps, "conclusion": conclusion,
     }
-    res["evidence"] = _evidence(res, extra=f"C1 = {C1}" + (f", sup via {sup['how']}" if sup else ""))
+    pts_text = "; ".join(f"({', '.join(p)}): {fmt(d)}" for p, d in zip(res["critical_points_st"],
+                                                                    res["J_st_wt_minus_J_st_w0"]))
+    res["evidence"] = _evidence(res, extra=f"C1 = {C1} (exact)" + (f"; sup over zeta {sup['how']}" if sup else "")
+                                + f"; critical points of J_st ({how_pts}; "
+                                  f"{'complete' if complete else 'not complete'}) with J_st(w_t) - J_st(w0): "
+                                  f"{pts_text or 'none found'}")
     return res
 
 

@@ -750,8 +750,10 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
                                                         f"(paired over the same samples)"},
         "wt": wt_rows, "hypotheses": hyps, "conclusion": conclusion,
     }
-    wt_text = "; ".join(f"known critical point {i + 1} of J_st: max |z| of grad J_st = {r['max_abs_z_grad']:.1f} "
-                        f"(< {r['z_crit']:.1f}: {r['consistent_with_critical']}), J_st(w_t) - J_st(w0) = "
+    wt_text = "; ".join(f"known critical point {i + 1} of J_st (critical by the family's statement): max |z| of "
+                        f"grad J_st = {r['max_abs_z_grad']:.1f} vs {r['z_crit']:.1f} ("
+                        f"{'not contradicted' if r['consistent_with_critical'] else 'CONTRADICTED: not used'}), "
+                        f"J_st(w_t) - J_st(w0) = "
                         f"{fmt(r['J_st_wt_minus_J_st_w0']['value'])} [{fmt(r['J_st_wt_minus_J_st_w0']['lo'])}, "
                         f"{fmt(r['J_st_wt_minus_J_st_w0']['hi'])}]" for i, r in enumerate(wt_rows))
     res["evidence"] = _evidence(res, extra=(wt_text + "; " if wt_text else "")

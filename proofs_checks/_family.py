@@ -60,6 +60,9 @@ class Family(NamedTuple):
 class FamilyError(ValueError):
     """A family that breaks the contract of CONTRACTS §5b (one line, names the rule)."""
 
+    def __init__(self, message):
+        super().__init__(" ".join(str(message).split()))      # one line, whatever the cause's text
+
 
 # --------------------------------------------------------------------------------------
 # building and loading families
@@ -82,6 +85,16 @@ def family(J, w0, *, s=None, w=None, wt=None, name: str = "family") -> Family:
         extra = J.free_symbols - set(ws) - {s}
         if extra:
             raise FamilyError(f"`J` depends on symbols other than s and w: {', '.join(sorted(map(str, extra)))}")
+        undef = J.atoms(sp.core.function.AppliedUndef)
+        if undef:
+            raise FamilyError(f"`J` contains undefined functions: {', '.join(sorted(map(str, undef)))}")
+        if J.has(sp.I):
+            raise FamilyError("`J` must be real (it contains the imaginary unit I)")
+        kinks = [f.__name__ for f in (sp.Abs, sp.sign, sp.Heaviside, sp.Piecewise, sp.Max, sp.Min, sp.floor,
+                                      sp.ceiling) if J.has(f)]
+        if kinks:
+            raise FamilyError(f"`J` must be smooth in s and w (Theorem 1 differentiates it three times); it "
+                              f"contains {', '.join(kinks)}")
         w0s = list(w0) if isinstance(w0, (list, tuple)) else [w0]
         if len(w0s) != len(ws):
             raise FamilyError(f"`w0` has {len(w0s)} entries but `w` has {len(ws)}")
@@ -116,7 +129,7 @@ def load_family(path: str) -> Family:
         raise FamilyError(f"{path}: no such file")
     try:
         ns = runpy.run_path(path, run_name="gift_family")
-    except Exception as exc:  # the user's file failed to run
+    except (Exception, SystemExit) as exc:  # the user's file failed to run (or called exit)
         raise FamilyError(f"{path}: failed to run: {type(exc).__name__}: {exc}") from None
     if "J" not in ns or "w0" not in ns:
         raise FamilyError(f"{path}: must define `J` and `w0` (and `s`, `w` for a sympy family)")
@@ -374,6 +387,11 @@ def _theorem1_sympy(fam: Family, s0, st, *, rtol, max_pieces) -> dict:
     z = sp.Symbol("zeta", real=True)
     h = sp.simplify(sum(sp.diff(g, s, 2).subs(sub0).subs(s, z) * x for g, x in zip(grad, v)))
     gst = [sp.simplify(g.subs(sub0).subs(s, ste)) for g in grad]
+    for what, vals in (("grad J_s0(w0)", g0), ("d/ds grad J_s0(w0)", v), ("grad J_st(w0)", gst)):
+        for x in vals:
+            num = sp.N(x, 30)
+            if not (num.is_real and num.is_finite):
+                raise FamilyError(f"{what} is not a finite real number ({x}): J must be real and smooth near w0")
     C1 = sp.simplify(sum(a * b for a, b in zip(gst, v)))
     gap = sp.Abs(ste - s0e)
     a, b = (s0e, ste) if s0e <= ste else (ste, s0e)
@@ -431,7 +449,12 @@ def _theorem1_sympy(fam: Family, s0, st, *, rtol, max_pieces) -> dict:
         "descent": {"exists": descent, "detail": descent_detail},
         "hypotheses": hyps, "conclusion": conclusion,
     }
-    res["evidence"] = _evidence(res, extra=f"C1 = {C1}" + (f", sup via {sup['how']}" if sup else ""))
+    pts_text = "; ".join(f"({', '.join(p)}): {fmt(d)}" for p, d in zip(res["critical_points_st"],
+                                                                    res["J_st_wt_minus_J_st_w0"]))
+    res["evidence"] = _evidence(res, extra=f"C1 = {C1} (exact)" + (f"; sup over zeta {sup['how']}" if sup else "")
+                                + f"; critical points of J_st ({how_pts}; "
+                                  f"{'complete' if complete else 'not complete'}) with J_st(w_t) - J_st(w0): "
+                                  f"{pts_text or 'none found'}")
     return res
 
 
@@ -480,14 +503,17 @@ def _evidence(res: dict, extra: str = "") -> str:
              f"{res['corrected_condition']}; C1 = {iv(res['C1'])}"]
     if crit0["verified"] is False:
         parts.append(f"w0 is not a critical point of J_s0 ({crit0['detail']}): outside the theorem's hypotheses")
+    elif crit0["verified"] is None:
+        parts.append(f"w0 is not verified to be a critical point of J_s0 ({crit0['detail']}): the theorem's "
+                     f"hypotheses are not verified on this instance")
     parts.append(f"conclusion (w0 != w_t and J_st(w_t) < J_st(w0) for every critical point w_t of J_st): "
                  f"{res['conclusion']}")
     if res["conclusion"] == "fails":
-        if res["printed_condition"] == "holds" and crit0["verified"]:
+        if res["printed_condition"] == "holds" and all(h["verified"] is True for h in res["hypotheses"]):
             parts.append("the printed condition holds and the conclusion fails: a counterexample to Theorem 1 as printed")
         else:
-            parts.append("the printed condition is not met (or w0 is not critical), so this is no counterexample "
-                         "to the theorem")
+            parts.append("a hypothesis of the theorem (the printed condition, w0 critical, ...) is not verified "
+                         "here, so this is no counterexample to the theorem")
     elif res["printed_condition"] != "holds":
         parts.append("the sufficient condition is not met: the theorem says nothing here")
     d = res["descent"]
@@ -547,7 +573,11 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
 
     num = _numeric(fam)
     s0, st = float(s0), float(st)
-    n_int = 5                                            # simultaneous intervals (Bonferroni)
+    # simultaneous intervals (Bonferroni), each two-sided at alpha / n_int: ||v||^2, C1, the criticality
+    # residual, C1_proof, C2, the descent difference, two for the sup over zeta (its upper bound, one-sided at
+    # the maximiser; its lower bound, one-sided at three fixed points), and per known critical point of
+    # J_st its gradient test (split over the coordinates) and J_st(w_t) - J_st(w0)
+    n_int = 8 + 2 * len(fam.wt or [])
     alpha = 1.0 - confidence
     z = float(stats.norm.isf(alpha / (2 * n_int)))
     f = num.per_sample
@@ -566,9 +596,14 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
 
         F2 = jax.jit(lambda zeta: jax.jacfwd(dk(2), argnums=0)(w0, zeta))          # (K, P)
         F3 = lambda zeta: jax.jacfwd(dk(3), argnums=0)(w0, zeta)
-        g0 = np.asarray(jac_w(w0, jnp.float64(s0)))
-        gt_ = np.asarray(jac_w(w0, jnp.float64(st)))
-        vs = np.asarray(ds(w0, jnp.float64(s0)))
+        try:
+            g0 = np.asarray(jac_w(w0, jnp.float64(s0)))
+            gt_ = np.asarray(jac_w(w0, jnp.float64(st)))
+            vs = np.asarray(ds(w0, jnp.float64(s0)))
+        except Exception as exc:       # only the user's J runs here
+            raise FamilyError(f"J(w, s) cannot be differentiated by JAX at w0: {type(exc).__name__}: {exc}") from None
+        if not (np.all(np.isfinite(g0)) and np.all(np.isfinite(gt_)) and np.all(np.isfinite(vs))):
+            raise FamilyError("grad J or d/ds grad J is not finite at w0 (s0 or st)")
         K, P = vs.shape
         v_bar = vs.mean(0)
         vv, vv_se = _ustat(vs, vs)
@@ -641,8 +676,24 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
         printed, corrected = status(prhs), status(crhs)
         # w0 critical (approximately: the proof uses grad J_s0(w0)^T v = 0)
         g0_bar, g0_se = g0.mean(0), (g0.std(0, ddof=1) / math.sqrt(K) if K > 1 else np.zeros(P))
-        crit_ok = abs(res0) <= z * res0_se + 1e-10 * max(abs(C1), 1e-300) if K > 1 else abs(res0) <= 1e-10 * max(
-            abs(C1), 1e-12)
+        # The proof uses grad J_s0(w0) = 0 only through r = grad J_s0(w0)^T v: C1 = r + C1_proof with
+        # C1_proof = (grad J_st(w0) - grad J_s0(w0))^T v. A trained w0 is critical only approximately, so
+        # "verified" means: the upper confidence limit of |r| is below the lower confidence limit of
+        # |C1_proof| (r cannot change the sign of C1 -- critical to the precision the proof needs);
+        # "not verified" (False) when r != 0 is significant; undecided (None) otherwise.
+        res_hi = abs(res0) + z * res0_se
+        c1p_lo = abs(C1p) - z * C1p_se
+        if K > 1:
+            crit_ok = True if res_hi < c1p_lo else (False if abs(res0) > z * res0_se else None)
+            crit_text = (f"grad J_s0(w0)^T v = {fmt(res0)} +- {fmt(res0_se)} (|.| <= {fmt(res_hi)} at the confidence) "
+                         f"against |C1_proof| = |(grad J_st - grad J_s0)(w0)^T v| >= {fmt(max(c1p_lo, 0.0))}: "
+                         + ("the residual cannot change the sign of C1" if crit_ok else
+                            "significantly nonzero" if crit_ok is False else
+                            "not resolved (the residual may matter)"))
+        else:                          # deterministic family: float64 rounding only
+            scale = max(abs(C1), abs(C1p), vv * abs(st - s0), 1e-300)
+            crit_ok = abs(res0) <= 1e-10 * scale
+            crit_text = f"grad J_s0(w0)^T v = {fmt(res0)} (float64; tolerance 1e-10 x {fmt(scale)})"
         # descent along v: alpha = C1 / (2 C2) of the quadratic model, paired per-sample test
         hvp = jax.jit(lambda wf, t: jax.jvp(lambda q: jax.jacfwd(f)(q, jnp.float64(st)), (wf,), (t,))[1])
         H = np.asarray(hvp(w0, jnp.asarray(v_bar)))                          # (K, P)
@@ -672,15 +723,17 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
     refuting = [r for r in wt_rows if r["consistent_with_critical"] and r["J_st_wt_minus_J_st_w0"]["lo"] >= 0]
     conclusion = decide(fails=bool(refuting))
     hyps = [_hyp("s_positive", "s0, st in (0, inf)", s0 > 0 and st > 0, f"s0 = {s0:g}, st = {st:g}"),
-            _hyp("w0_critical", "w0 in {grad J_s0 = 0} (ass:Nonempty-minimizer-sets)", bool(crit_ok),
-                 f"grad J_s0(w0)^T v = {fmt(res0)} +- {fmt(res0_se)} (C1 = {fmt(C1)}); max |grad J_s0(w0)| = "
-                 f"{fmt(float(np.max(np.abs(g0_bar))))}"),
-            _hyp("printed_condition", "ass:Laplacian-properties as printed", printed == "holds", printed)]
+            _hyp("w0_critical", "w0 in {grad J_s0 = 0} (ass:Nonempty-minimizer-sets)", crit_ok,
+                 f"{crit_text}; max |grad J_s0(w0)| = {fmt(float(np.max(np.abs(g0_bar))))}"),
+            _hyp("printed_condition", "ass:Laplacian-properties as printed", printed == "holds",
+                 f"{printed}: |st - s0| = {fmt(gap)} vs printed rhs in [{fmt(prhs['lo'])}, {fmt(prhs['hi'])}]")]
     if fam.wt:
         hyps.append(_hyp("wt_exists", "{grad J_st = 0} nonempty (ass:Nonempty-minimizer-sets)",
                          any(r["consistent_with_critical"] for r in wt_rows),
-                         f"{len(wt_rows)} critical point(s) of J_st given by the family, "
-                         f"{sum(r['consistent_with_critical'] for r in wt_rows)} consistent with grad J_st = 0"))
+                         f"{len(wt_rows)} critical point(s) of J_st given by the family (their criticality is the "
+                         f"family's statement, e.g. analytic; a gradient test can only fail to contradict it), "
+                         f"{sum(r['consistent_with_critical'] for r in wt_rows)} not contradicted by the test "
+                         f"(max |z| of grad J_st below the Bonferroni critical value)"))
     I = lambda m, se: _iv(m, m - z * se, m + z * se)
     res = {
         "family": "numeric", "name": fam.name, "s0": s0, "st": st, "gap": gap, "confidence": confidence,
@@ -697,8 +750,10 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
                                                         f"(paired over the same samples)"},
         "wt": wt_rows, "hypotheses": hyps, "conclusion": conclusion,
     }
-    wt_text = "; ".join(f"known critical point {i + 1} of J_st: max |z| of grad J_st = {r['max_abs_z_grad']:.1f} "
-                        f"(< {r['z_crit']:.1f}: {r['consistent_with_critical']}), J_st(w_t) - J_st(w0) = "
+    wt_text = "; ".join(f"known critical point {i + 1} of J_st (critical by the family's statement): max |z| of "
+                        f"grad J_st = {r['max_abs_z_grad']:.1f} vs {r['z_crit']:.1f} ("
+                        f"{'not contradicted' if r['consistent_with_critical'] else 'CONTRADICTED: not used'}), "
+                        f"J_st(w_t) - J_st(w0) = "
                         f"{fmt(r['J_st_wt_minus_J_st_w0']['value'])} [{fmt(r['J_st_wt_minus_J_st_w0']['lo'])}, "
                         f"{fmt(r['J_st_wt_minus_J_st_w0']['hi'])}]" for i, r in enumerate(wt_rows))
     res["evidence"] = _evidence(res, extra=(wt_text + "; " if wt_text else "")

@@ -47,11 +47,26 @@ def c1_closed_form(e):
     return diff, [r for r in roots if r.is_positive is not False], sp.simplify(gB2)
 
 
-def _example_hypotheses(L_list):
+def _example_hypotheses(L_list, theorem1: bool = True):
+    """The example's setting and Theorem 1's hypotheses on the symbolic chains, computed: J_s has the
+    form m2 (V - W)^2 + s^2 W^2 of input noise on an uncorrelated input, s0 > 0, and the balanced
+    point is critical (sympy)."""
+    setting, crit, s0_pos = [], [], []
+    for L in L_list:
+        e = lc.symbolic_example(L)
+        W = sp.Mul(*e["w"])
+        setting.append(sp.simplify(e["J"] - (e["m2"] * (e["V"] - W) ** 2 + e["s"] ** 2 * W ** 2)) == 0
+                       and bool(e["m2"].is_positive))
+        crit.append(all(sp.simplify(r) == 0 for r in e["critical_residual"]))
+        s0_pos.append(bool(e["s0"].is_positive))
     return [hypothesis("example", "deep linear network, AWGN on the input only, uncorrelated inputs of equal second "
-                       "moment, y = V x", True, f"scalar chains of depth {L_list} with E[x^2] = m2, symbolic V, m2 > 0"),
-            hypothesis("w0_critical", "w0 a critical point of J_s0 (Theorem 1)", True,
-                       "the balanced factorisation of m2 V/(m2 + s0^2): grad J_s0(w0) = 0 (sympy)")]
+                       "moment, y = V x", all(setting), f"scalar chains of depth {list(L_list)}: J_s = m2 (V - W)^2 + "
+                       f"s^2 W^2 with W = w1...wL, E[x^2] = m2 > 0, symbolic V (sympy)"),
+            *([hypothesis("s_positive", "s0, st in (0, inf) (Theorem 1)", all(s0_pos), "s0, st positive symbols")]
+              if theorem1 else []),
+            hypothesis("w0_critical", "w0 a critical point of J_s0 (Theorem 1)", all(crit),
+                       f"the balanced factorisation of m2 V/(m2 + s0^2): grad J_s0(w0) = 0 (sympy) at depths "
+                       f"{list(L_list)}: {crit}")]
 
 
 def linear_example_bound(key=None, precise: bool = False) -> dict:
@@ -66,7 +81,8 @@ def linear_example_bound(key=None, precise: bool = False) -> dict:
     verdict = symbolic_verdict(all(r["diff"] == 0 for r in rows))
     corrected_sym = all(r["corr"] == 0 for r in rows)
     # C1 = 2 s0 (st^2 - s0^2) ||grad B||^2 exactly, ||grad B|| > 0, and C1 = 0 only at st = s0 (st > 0)
-    c1_ok = all(r["c1"][0] == 0 and [sp.simplify(x - r["e"]["s0"]) for x in r["c1"][1]] == [0] for r in rows)
+    c1_ok = all(r["c1"][0] == 0 and bool(r["c1"][2].is_positive)
+                and [sp.simplify(x - r["e"]["s0"]) for x in r["c1"][1]] == [0] for r in rows)
     with jax.enable_x64(True):
         zmax, P = mc_cross_check(key, K1=16384 if precise else 4096)
     from ._record import z_crit
@@ -97,7 +113,9 @@ def linear_example_bound(key=None, precise: bool = False) -> dict:
         f"{rows[0]['diff']} (L=1), {fmt(pr - ex)} at s0=||V||=1/2, E x^2=1 (L=2: {fmt(pr)} vs {fmt(ex)}), L=3 "
         f"{'0' if rows[2]['diff'] == 0 else 'nonzero'}; C1 - 2 s0 (st^2 - s0^2) ||grad B(w0)||^2 = "
         f"{[str(r['c1'][0]) for r in rows]} (L = 1, 2, 3) with ||grad B(w0)||^2 = "
-        f"{[str(r['c1'][2]) for r in rows]} > 0, positive roots of C1 in st: {[[str(x) for x in r['c1'][1]] for r in rows]}; "
+        f"{[str(r['c1'][2]) for r in rows]} (positive: {[bool(r['c1'][2].is_positive) for r in rows]}), positive "
+        f"roots of C1 in st: {[[str(x) for x in r['c1'][1]] for r in rows]}, so C1 != 0 for every st != s0 at "
+        f"depths 1-3: {c1_ok}; "
         f"corrected rhs = 2 s0 for L=1..3: {corrected_sym}; Monte-Carlo pathwise d/ds grad J vs closed form (L=2): "
         f"max |z| = {zmax:.1f} over {P} coordinates (Bonferroni z_crit {zc:.1f}); {lev.text()}",
         correction=correction, counterexample=counter, hypotheses=_example_hypotheses([1, 2, 3]))
@@ -123,8 +141,8 @@ def linear_example_text_claim(key=None, precise: bool = False) -> dict:
         rows.append((L, v0, c10))
     v_zero = all(all(x == 0 for x in v0) and c10 == 0 for _, v0, c10 in rows)
     verdict = symbolic_verdict(not v_zero)
-    hyps = _example_hypotheses([1, 2, 3]) + [
-        hypothesis("numbers", "||V||_2 = 1/2 and E[x_i^2] = 1", True, "substituted"),
+    hyps = _example_hypotheses([1, 2, 3], theorem1=False) + [
+        hypothesis("numbers", "||V||_2 = 1/2 and E[x_i^2] = 1", True, "set by the check: the text's numbers"),
         hypothesis("theorem1_s0_positive", "Theorem 1 requires s0 in (0, inf)", False,
                    "the text extends the guarantee to s0 = 0 ('no noise in training'), beyond the theorem; the "
                    "refutation is of the text's own claim at s0 = 0", needed_for_refutation=False)]

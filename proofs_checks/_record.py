@@ -76,16 +76,23 @@ def record(id: str, claim: str, verdict: str, evidence: str, correction: str | N
 
     A "fails" verdict must carry a counterexample or a computed difference (in
     ``counterexample``) and a correction that the same check verified; a refutation needs
-    every hypothesis verified on its instance.
+    every hypothesis it rests on (``needed_for_refutation``) verified -- True, not None -- and
+    its evidence then names them.
     """
     if verdict not in VERDICTS:
         raise ValueError(f"verdict must be one of {VERDICTS}, got {verdict!r}")
     if verdict == "fails" and counterexample is None:
         raise ValueError(f"{id}: a 'fails' verdict needs a counterexample or a computed difference")
     hypotheses = list(hypotheses or [])
-    if verdict == "fails" and any(h.get("verified") is False and h.get("needed_for_refutation", True)
-                                  for h in hypotheses):
-        raise ValueError(f"{id}: a refutation on an instance outside the statement's hypotheses")
+    needed = [h for h in hypotheses if h.get("needed_for_refutation", True)]
+    if verdict == "fails":
+        unverified = [h["name"] for h in needed if h.get("verified") is not True]
+        if unverified:
+            raise ValueError(f"{id}: a refutation on an instance whose hypotheses are not all verified "
+                             f"({', '.join(unverified)})")
+        if needed:
+            evidence = (f"{evidence.rstrip()} [The refutation is inside the statement's hypotheses: "
+                        f"{', '.join(h['name'] for h in needed)} verified on its instance(s).]")
     return {"id": id, "claim": claim, "verdict": verdict, "evidence": evidence,
             "correction": correction, "counterexample": counterexample, "hypotheses": hypotheses}
 

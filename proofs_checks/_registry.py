@@ -46,7 +46,7 @@ def run_checks(ids=None, *, precise: bool = False, seed: int = 0, log=None) -> l
     A check that raises is reported as "inconclusive" with the error as evidence (the run
     goes on). ``log`` (default stderr) receives one progress line per check.
     """
-    from ._record import record
+    from ._record import decide, record
 
     log = sys.stderr if log is None else log
     ids = CHECK_IDS if ids is None else tuple(ids)
@@ -59,7 +59,7 @@ def run_checks(ids=None, *, precise: bool = False, seed: int = 0, log=None) -> l
                 # each check's key depends on its id and the seed only (not on which checks run)
                 rec = CHECKS[cid](key=jax.random.fold_in(key, CHECK_IDS.index(cid) + 1), precise=precise)
         except Exception as exc:  # a crashed check decides nothing
-            rec = record(cid, "(check did not run)", "inconclusive", f"the check raised {type(exc).__name__}: {exc}")
+            rec = record(cid, "(check did not run)", decide(), f"the check raised {type(exc).__name__}: {exc}")
         rec["seconds"] = round(time.perf_counter() - t, 2)
         log.write(f"gift check: {cid}: {rec['verdict']} ({rec['seconds']:.1f} s)\n")
         log.flush()

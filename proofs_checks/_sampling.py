@@ -16,7 +16,7 @@ from scipy import stats
 import gift_theory as gt
 
 from . import _mc
-from ._record import combine, equality_verdict, fmt, hypothesis, level, record
+from ._record import combine, decide, equality_verdict, fmt, hypothesis, level, record
 
 
 def _flat_samples(est):
@@ -201,11 +201,7 @@ def stabilises(block_means, block_ses, confidence: float = 1 - 1e-5, rel: float 
     chi2 = float(np.sum(w * (block_means - pooled) ** 2))
     p = float(stats.chi2.sf(chi2, len(block_means) - 1))
     # a heavy tail shows as blocks whose spread exceeds their own standard errors
-    if p < 1 - confidence:
-        return "fails", p, pooled, pooled_se
-    if pooled_se < rel * pooled:
-        return "holds", p, pooled, pooled_se
-    return "inconclusive", p, pooled, pooled_se
+    return decide(fails=p < 1 - confidence, holds=pooled_se < rel * pooled), p, pooled, pooled_se
 
 
 def square_integrability(key=None, precise: bool = False) -> dict:

@@ -39,8 +39,9 @@ def steps_hypothesis(eps0: float, k0: float, power: float):
                       f"converges: {conv} (sympy)")
 
 
-def common_hypotheses():
-    """(A1), (A2), (A3), (A5), (B1) on the linear instances (identity activation, Gaussian data)."""
+def common_hypotheses(in_box=None):
+    """(A1), (A2), (A3), (A5), (B1) on the linear instances (identity activation, Gaussian data);
+    ``in_box``: whether every recorded iterate lies in H (the projection works), when known."""
     z = sp.Symbol("z", real=True)
     derivs = [sp.diff(z, z, k) for k in range(1, 4)]
     return [hypothesis("A1/B1", "sigma in C^r_PB (r >= 2, r >= dim W)", all(d.is_constant() for d in derivs),
@@ -48,7 +49,9 @@ def common_hypotheses():
             hypothesis("A2", "E ||Y||^m ||X||^n < inf (m <= 4)", True,
                        "x ~ N(0, I), y = V x: polynomial moments of a Gaussian are finite"),
             hypothesis("A3", "fresh independent (x, y) and N each step", True, "one fresh key per step (by construction)"),
-            hypothesis("A5", "H is the box of ass:H-is-a-hyperrectangle", True, "gt.project onto a gt.Box")]
+            hypothesis("A5", "H is the box of ass:H-is-a-hyperrectangle", True if in_box is None else bool(in_box),
+                       "gt.project onto a gt.Box" + ("" if in_box is None else
+                                                     f"; every recorded iterate inside the box: {bool(in_box)}"))]
 
 
 def _eps(k, eps0, k0, power):
@@ -112,24 +115,34 @@ def sgd_limit_points(key=None, precise: bool = False) -> dict:
     N = [2500, 10000, 40000] if not precise else [5000, 20000, 80000]
     arch = gt.Architecture((2, 1), activation="identity", noise_sites="all")
     inner_box, tight_box = gt.Box(-1.0, 1.0, -1.0, 1.0), gt.Box(-0.5, 0.5, -0.5, 0.5)
-    W_star = np.asarray(_TASK.V) / (1 + s ** 2)           # minimiser of the strictly convex J_s (b* = 0)
-    hess = 2 * np.diag([1 + s ** 2, 1 + s ** 2, 1.0])
+    with jax.enable_x64(True):
+        # J_s is quadratic in (W, b) here: its Hessian and minimiser from the closed form (jax, exact to rounding)
+        flat_any, unravel = gt.flatten(gt.init_params(jax.random.PRNGKey(0), arch, dtype=jnp.float64))
+        hess = np.asarray(jax.jacfwd(lambda f: exact_grad(unravel(f), s))(flat_any))
+        w_star = np.asarray(flat_any) - np.linalg.solve(hess, np.asarray(exact_grad(unravel(flat_any), s)))
+    W_star = w_star[:-1].reshape(np.asarray(_TASK.V).shape)   # flat order (W, b), as gt.flatten
+    diagonal = bool(np.allclose(hess, np.diag(np.diag(hess)), atol=1e-12))
     convex = bool(np.all(np.linalg.eigvalsh(hess) > 0))
-    interior = bool(np.all(np.abs(W_star) < 1.0))
-    binds = bool(np.any(np.abs(W_star) > 0.5))
+    interior = bool(np.all(np.abs(w_star) < 1.0))
+    binds = bool(np.any(np.abs(w_star) > 0.5))
     with jax.enable_x64(True):
         rows = {}
         for name, box, k in (("inner", inner_box, 0), ("tight", tight_box, 1)):
             its = run_replicates(jax.random.fold_in(key, k), arch, s, box, N, R=R, eps0=eps0, k0=k0, power=power)
             g = [np.linalg.norm(np.asarray(jax.vmap(lambda p: exact_grad(p, s))(w)), axis=1) for w in its]
-            # the constrained minimiser: J_s is a separable strictly convex quadratic (Hessian diagonal), so it is
-            # the unconstrained one clipped to the box
-            kkt = np.concatenate([np.clip(W_star.ravel(), box.W_min, box.W_max), [0.0]])
+            # the constrained minimiser: J_s is a separable strictly convex quadratic (Hessian diagonal, checked
+            # above), so it is the unconstrained one clipped to the box
+            kkt = np.concatenate([np.clip(W_star.ravel(), box.W_min, box.W_max),
+                                  np.clip(w_star[-1:], box.b_min, box.b_max)])
+            flat_its = [np.asarray(jax.vmap(lambda p: gt.flatten(p)[0])(w)) for w in its]
+            lo_b = np.array([box.W_min] * W_star.size + [box.b_min])
+            hi_b = np.array([box.W_max] * W_star.size + [box.b_max])
+            in_box = all(bool(np.all((f >= lo_b) & (f <= hi_b))) for f in flat_its)
             pg = [np.linalg.norm(np.asarray(jax.vmap(lambda p: gt.flatten(p)[0])(w)) - kkt, axis=1) for w in its]
             g_kkt = float(np.linalg.norm(np.asarray(exact_grad(gt.flatten(jax.tree_util.tree_map(
                 lambda a: a[0], its[0]))[1](jnp.asarray(kkt)), s))))
             g0 = np.linalg.norm(np.asarray(jax.vmap(lambda p: exact_grad(p, 0.0))(its[-1])), axis=1)
-            rows[name] = dict(g=g, pg=pg, g0=g0, g_kkt=g_kkt, last=np.asarray(gt.flatten(jax.tree_util.tree_map(
+            rows[name] = dict(g=g, pg=pg, g0=g0, g_kkt=g_kkt, in_box=in_box, last=np.asarray(gt.flatten(jax.tree_util.tree_map(
                 lambda a: a[0], its[-1]))[0]))
     # inside (B2): grad J_s -> 0; per-replicate log decrease of ||grad J_s|| over each 4x smaller step size
     inn = rows["inner"]
@@ -142,12 +155,13 @@ def sgd_limit_points(key=None, precise: bool = False) -> dict:
     verdict = decide(fails=any(v == "fails" for v, _ in tests), holds=all(v == "holds" for v, _ in tests))
     # the binding box: (B2) fails at the constrained minimiser, where grad J != 0 and the projected gradient is 0
     tb = rows["tight"]
-    hyps = common_hypotheses() + [
+    hyps = common_hypotheses(in_box=rows["inner"]["in_box"] and rows["tight"]["in_box"]) + [
         steps_hypothesis(eps0, k0, power),
-        hypothesis("B2", "grad J|_H != 0 => -grad J|_H + pi != 0", convex and interior,
-                   f"box [-1, 1]: J_s strictly convex (Hessian eigenvalues {np.linalg.eigvalsh(hess).round(3).tolist()}) "
-                   f"with minimiser W* = {W_star.round(3).tolist()}, b* = 0 interior, so the only zero of the "
-                   f"projected gradient is W*: (B2) holds on all of H"),
+        hypothesis("B2", "grad J|_H != 0 => -grad J|_H + pi != 0", convex and interior and diagonal,
+                   f"box [-1, 1]: J_s strictly convex (Hessian of the closed form: eigenvalues "
+                   f"{np.linalg.eigvalsh(hess).round(3).tolist()}, diagonal: {diagonal}) with minimiser W* = "
+                   f"{W_star.round(3).tolist()}, b* = {fmt(float(w_star[-1]))} interior: {interior}, so the only zero "
+                   f"of the projected gradient is W*: (B2) holds on all of H"),
         hypothesis("B2 (binding box)", "grad J|_H != 0 => -grad J|_H + pi != 0", not binds,
                    f"box [-0.5, 0.5] excludes W*: at the constrained minimiser the projected gradient is 0 while "
                    f"||grad J_s|| = {fmt(float(np.median(tb['g'][-1])))} (median over runs): (B2) fails whenever the "

@@ -61,7 +61,8 @@ def lemma_gaussian_product_derivative(max_L: int = 3) -> dict:
         f"sympy, L=1..{max_L}, symbolic d_i and |n_i|^2: (lhs - printed rhs)/prod = {factored} for L=1, i.e. "
         f"(1 - 1/s)(d - |n|^2/s^2): zero only where s = 1 or |n|^2 = d s^2 (sympy: |n|^2 = {sp.solve(diff1, r2[0])}, or s = 1), so the printed identity "
         f"fails as an identity in s and n; with the factor 1/s the difference simplifies to "
-        f"{'0' if corrected_ok else 'a nonzero expression'} for every L. Exact",
+        f"{'0' if corrected_ok else 'a nonzero expression'} for every L. Exact (sympy): no statistical test, no "
+        f"tolerance",
         correction=("d/ds prod_i phi_s(n_i) = s^-1 sum_i (s^-2 |n_i|^2 - d_i) prod_j phi_s(n_j) "
                     "(verified symbolically for L=1..%d)" % max_L) if corrected_ok else None,
         counterexample=counter,
@@ -132,7 +133,7 @@ def backprop_formulas(widths=(2, 2, 2, 1)) -> dict:
         verdict,
         f"sympy on a {'-'.join(map(str, widths))} network with symbolic weights, biases, noises and an "
         f"undefined activation sigma: {len(nonzero)} of the gradient entries differ from the formulas "
-        f"(reading the printed A^(i-1) as A^(l-1), an index typo)",
+        f"(reading the printed A^(i-1) as A^(l-1), an index typo). Exact (sympy): no statistical test, no tolerance",
         correction=None,
         counterexample=None if verdict == "holds" else {"differing_entries": [str(e) for e in nonzero[:3]]},
         hypotheses=[hypothesis("sigma", "sigma differentiable (A1)", True, "an undefined sympy Function: any sigma")])
@@ -214,7 +215,7 @@ def score_function_identity(widths=(1, 1, 1), activation: str = "quadratic") -> 
         f"exact Gaussian expectations (sympy) on a {'-'.join(map(str, widths))} network with sigma(z)=z+z^2/2: "
         f"printed rhs / true d/ds grad J = {', '.join(ratio_set)} for every parameter; the rhs with "
         f"weight (s^-2|N|^2-d)/s and -2 R A^T (the loss gradient) matches "
-        f"{'exactly' if corrected_ok else 'NOT'}",
+        f"{'exactly' if corrected_ok else 'NOT'}. Exact (sympy): no statistical test, no tolerance",
         correction=("d/ds grad_W(l) J_s = int E_N[ s^-1 (sum_alpha (s^-2 |N^alpha|^2 - d_alpha)) "
                     "(-2 R^(l) (A^(l-1))^T) ] dmu; hence the printed D^[0] estimates -(s0/2) d/ds grad J_s0 "
                     "(verified symbolically here)") if corrected_ok else None,

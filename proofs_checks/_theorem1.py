@@ -73,7 +73,8 @@ def search_families(key, n: int = 4000, dim: int = 3):
     [1e-2, 1e2]). Counts, for the printed condition, the cases where C1(st) has the wrong sign
     or is 0 -- the theorem claims no sign, but each such case yields, by the intermediate value
     theorem, an st* between s0 and st with C1(st*) = 0 where the printed condition still holds
-    (the sup over the shorter zeta range is no larger): a counterexample, found here -- and for
+    (the sup over the shorter zeta range is no larger): a counterexample to the proof's step
+    C1 != 0 (in dimension 3 not to the conclusion: g(st*) need not vanish), found here -- and for
     the corrected condition the cases with C1 (st - s0) <= 0 (it claims the sign)."""
     rng = np.random.default_rng(np.asarray(jax.random.randint(key, (), 0, 2 ** 31 - 1)).item())
     out = dict(n_printed=0, wrong_sign_printed=0, zero_found=0, zero_inside=0, n_corrected=0, bad_corrected=0,
@@ -162,24 +163,28 @@ def theorem1_condition(key=None, precise: bool = False) -> dict:
     search = search_families(key, n=20000 if precise else 4000)
     hyps, refuted, rows = [], False, []
     for name, r in res.items():
-        inside = all(h["verified"] for h in r["hypotheses"] if h["name"] in ("s_positive", "w0_critical",
-                                                                            "printed_condition"))
-        hyps += [hypothesis(f"{name}: {h['name']}", h["statement"], h["verified"], str(h["detail"]))
-                 for h in r["hypotheses"] if h["name"] in ("s_positive", "w0_critical", "printed_condition")]
+        mine = [h for h in r["hypotheses"] if h["name"] in ("s_positive", "w0_critical", "printed_condition")]
+        inside = all(h["verified"] is True for h in mine)
+        hyps += _instance_hypotheses(name, mine, inside)
         c1_zero = r["C1"]["value"] == 0.0 and r["C1_exact"] == "0"
         refuted |= inside and c1_zero
-        rows.append(f"{name}.py (s0 = {r['s0']:g}, st = {r['st']:g}): |st - s0| = {fmt(r['gap'])} < printed rhs "
-                    f"{fmt(r['printed_rhs']['value'])} (exact) yet C1 = {r['C1_exact']}; corrected rhs "
+        rows.append(f"{name}.py (s0 = {r['s0']:g}, st = {r['st']:g}; "
+                    f"{'inside the hypotheses' if inside else 'OUTSIDE the hypotheses, not used'}): |st - s0| = "
+                    f"{fmt(r['gap'])}, printed rhs {fmt(r['printed_rhs']['value'])} (exact): printed condition "
+                    f"{r['printed_condition']}; C1 = {r['C1_exact']}; corrected rhs "
                     f"{fmt(r['corrected_rhs']['value'])}: corrected condition {r['corrected_condition']}")
     corrected_ok = search["bad_corrected"] == 0 and all(r["corrected_condition"] != "holds" for r in res.values())
     verdict = symbolic_verdict(not refuted)
-    evidence = ("exact sympy families inside the hypotheses (s0, st > 0, w0 critical, printed condition holding "
-                "exactly): " + "; ".join(rows)
+    evidence = ("exact sympy families (hypotheses: s0, st > 0, w0 critical, printed condition holding exactly): "
+                + "; ".join(rows)
                 + f". Random cubic families (exact roots at 50 digits): the printed condition admitted "
                   f"{search['n_printed']} cases; in {search['wrong_sign_printed']} C1(st) has the sign opposite to "
                   f"st - s0 or is 0 (the theorem claims no sign, so these are no counterexample by themselves), and "
                   f"in {search['zero_inside']} of them the intermediate value theorem gives st* between s0 and st "
-                  f"with C1(st*) = 0 and the printed condition still holding at st*: counterexamples. The corrected "
+                  f"with C1(st*) = 0 and the printed condition still holding at st* (st* computed): counterexamples "
+                  f"to the proof's step 'condition => C1 != 0' (not to the conclusion: in these 3-D families "
+                  f"grad J_st*(w0) = g(st*) need not vanish; the 1-D exact families above refute the conclusion "
+                  f"too). The corrected "
                   f"condition admitted {search['n_corrected']} cases, {search['bad_corrected']} with C1 (st - s0) <= 0. "
                   "Proof steps: " + "; ".join(f"{k}: {'error' if err else 'not an error'} ({det})"
                                               for k, (err, det) in steps.items())
@@ -234,6 +239,30 @@ def descent_confirmation(key, st_, lev, K2: int = 128):
     return v, float(d.mean), float(d.se), z
 
 
+def _inside(r) -> bool:
+    """All of Theorem 1's hypotheses verified (True, not None) on the instance ``r``."""
+    return all(h["verified"] is True for h in r["hypotheses"])
+
+
+def _instance_hypotheses(label: str, hyps, inside: bool) -> list:
+    """An instance's hypotheses for a record: they carry a refutation only if the instance is
+    inside them; an instance outside is reported as a finding (needed_for_refutation=False)."""
+    out = []
+    for h in hyps:
+        detail = str(h["detail"]) + ("" if inside else " (instance outside the hypotheses: reported, not used "
+                                                      "for the verdict)")
+        out.append(hypothesis(f"{label}: {h['name']}", h["statement"], h["verified"], detail,
+                              needed_for_refutation=inside and h.get("needed_for_refutation", True)))
+    return out
+
+
+def _points_text(r) -> str:
+    """The critical points of J_st of an exact result with J_st(w_t) - J_st(w0) for each."""
+    pts = [f"({', '.join(p)}): {fmt(d)}" for p, d in zip(r["critical_points_st"], r["J_st_wt_minus_J_st_w0"])]
+    return (f"critical set of J_st ({'complete' if r['critical_points_complete'] else 'incomplete'}) with "
+            f"J_st(w_t) - J_st(w0): " + "; ".join(pts))
+
+
 def theorem1_conclusion(key=None, precise: bool = False) -> dict:
     from . import _onn
 
@@ -243,52 +272,56 @@ def theorem1_conclusion(key=None, precise: bool = False) -> dict:
     chain = theorem1(load_family(_families_path("linear_chain")), "0.5", "0.8")
     st_ = _onn.setup(precise)
     onn = st_.theorem1
-    inside = lambda r: all(h["verified"] for h in r["hypotheses"])
-    exact_refuted = [r for r in (quartic, chain) if inside(r) and r["conclusion"] == "fails"]
-    onn_refuted = inside(onn) and onn["conclusion"] == "fails"
-    verdict = decide(fails=bool(exact_refuted) or onn_refuted)
+    ins = {"quartic": _inside(quartic), "chain": _inside(chain), "onn": _inside(onn)}
+    refuting = [name for name, r in (("quartic", quartic), ("chain", chain), ("onn", onn))
+                if ins[name] and r["conclusion"] == "fails"]
+    verdict = decide(fails=bool(refuting))
     d_v, d_mean, d_se, d_z = descent_confirmation(jax.random.fold_in(key, 1), st_, lev)
-    corrected_ok = (quartic["corrected_condition"] != "holds" and chain["descent"]["exists"] is True
-                    and d_v == "holds")
+    corrected_ok = (quartic["corrected_condition"] != "holds" and chain["corrected_condition"] == "holds"
+                    and chain["descent"]["exists"] is True and onn["corrected_condition"] == "holds" and d_v == "holds")
     wt_row = onn["wt"][0]
     dj = wt_row["J_st_wt_minus_J_st_w0"]
-    hyps = ([hypothesis(f"quartic: {h['name']}", h["statement"], h["verified"], str(h["detail"]))
-             for h in quartic["hypotheses"]]
-            + [hypothesis(f"linear chain L=2: {h['name']}", h["statement"], h["verified"], str(h["detail"]))
-               for h in chain["hypotheses"]]
-            + [dict(h, name=f"tanh ONN: {h['name']}") for h in _onn.hypotheses_of_theorem1(onn)])
+    hyps = (_instance_hypotheses("quartic", quartic["hypotheses"], ins["quartic"])
+            + _instance_hypotheses("linear chain L=2", chain["hypotheses"], ins["chain"])
+            + [dict(h, name=f"tanh ONN: {h['name']}",
+                    needed_for_refutation=ins["onn"] and h["needed_for_refutation"])
+               for h in _onn.hypotheses_of_theorem1(onn)])
+    where = lambda name: "inside the hypotheses" if ins[name] else "OUTSIDE the hypotheses (not used for the verdict)"
     evidence = (
-        f"exact: quartic family J_s = A + s^2 B + s^4 C (B' = -2.21, C' = 1, s0 = 1, st = 1.1): printed condition "
-        f"{quartic['printed_condition']} (rhs {fmt(quartic['printed_rhs']['value'])} > 0.1), the only critical point "
-        f"of J_st is w0 itself (C1 = {quartic['C1_exact']}), so w0 = w_t: conclusion {quartic['conclusion']}; "
-        f"linear example, depth 2 (V = 1/2, E x^2 = 1, s0 = 1/2, st = 0.8): printed and corrected conditions "
-        f"{chain['printed_condition']}/{chain['corrected_condition']}, but the critical set of J_st contains the "
-        f"saddle w = 0 with J_st(0) - J_st(w0) = {fmt(chain['J_st_wt_minus_J_st_w0'][-1])} > 0 (and the curve "
-        f"w1 w2 = const of minimisers, {fmt(chain['J_st_wt_minus_J_st_w0'][0])}): conclusion {chain['conclusion']}. "
-        f"tanh ONN 3-4-2, n = {st_.problem.x.shape[0]} teacher points, s0 = {st_.s0:g}, st = {st_.st:g}: printed "
-        f"rhs {fmt(onn['printed_rhs']['value'])} [{fmt(onn['printed_rhs']['lo'])}, {fmt(onn['printed_rhs']['hi'])}], "
-        f"corrected rhs {fmt(onn['corrected_rhs']['value'])} [{fmt(onn['corrected_rhs']['lo'])}, "
-        f"{fmt(onn['corrected_rhs']['hi'])}] vs |st - s0| = {fmt(onn['gap'])}: both conditions hold (sup over zeta "
-        f"bounded rigorously, simultaneous confidence 1 - {1 - _onn.HYPOTHESIS_CONFIDENCE:.2g}); w_t = (W = 0, "
-        f"hidden b = 0, b_L = mean y) is critical for every s (analytically; max |z| of grad J_st(w_t) = "
-        f"{wt_row['max_abs_z_grad']:.1f} < {wt_row['z_crit']:.1f}) and J_st(w_t) - J_st(w0) = {fmt(dj['value'])} "
-        f"[{fmt(dj['lo'])}, {fmt(dj['hi'])}]: conclusion {onn['conclusion']}. What the proof shows holds: "
-        f"J_st(w0 - alpha v) - J_st(w0) = {fmt(d_mean)} +- {fmt(d_se)} at alpha = C1/(2 C2) = {fmt(onn['alpha'])} "
-        f"(fresh draws, paired; z = {d_z:.1f}: {d_v}). {lev.text()}")
+        f"exact: quartic family J_s = A + s^2 B + s^4 C (B' = -2.21, C' = 1, s0 = 1, st = 1.1; {where('quartic')}): "
+        f"printed condition {quartic['printed_condition']} (rhs {fmt(quartic['printed_rhs']['value'])} vs |st - s0| = "
+        f"{fmt(quartic['gap'])}), corrected {quartic['corrected_condition']}, C1 = {quartic['C1_exact']}; "
+        f"{_points_text(quartic)}: conclusion {quartic['conclusion']}; "
+        f"linear example, depth 2 (V = 1/2, E x^2 = 1, s0 = 1/2, st = 0.8; {where('chain')}): printed / corrected "
+        f"conditions {chain['printed_condition']} / {chain['corrected_condition']}; {_points_text(chain)}: conclusion "
+        f"{chain['conclusion']}. tanh ONN 3-4-2, n = {st_.problem.x.shape[0]} teacher points, s0 = {st_.s0:g}, st = "
+        f"{st_.st:g} ({where('onn')}): printed rhs {fmt(onn['printed_rhs']['value'])} [{fmt(onn['printed_rhs']['lo'])}, "
+        f"{fmt(onn['printed_rhs']['hi'])}] -> printed condition {onn['printed_condition']}, corrected rhs "
+        f"{fmt(onn['corrected_rhs']['value'])} [{fmt(onn['corrected_rhs']['lo'])}, {fmt(onn['corrected_rhs']['hi'])}] "
+        f"-> corrected condition {onn['corrected_condition']}, vs |st - s0| = {fmt(onn['gap'])} (sup over zeta bounded "
+        f"rigorously in zeta, simultaneous confidence 1 - {1 - _onn.HYPOTHESIS_CONFIDENCE:.2g}); w_t = (W = 0, hidden "
+        f"b = 0, b_L = mean y) is critical for every s analytically (the gradient test does not contradict it: max |z| "
+        f"= {wt_row['max_abs_z_grad']:.1f} vs {wt_row['z_crit']:.1f}) and J_st(w_t) - J_st(w0) = {fmt(dj['value'])} "
+        f"[{fmt(dj['lo'])}, {fmt(dj['hi'])}]: conclusion {onn['conclusion']}. Refuting instances inside the "
+        f"hypotheses: {refuting or 'none'}. What the proof shows: J_st(w0 - alpha v) - J_st(w0) = {fmt(d_mean)} +- "
+        f"{fmt(d_se)} at alpha = C1/(2 C2) = {fmt(onn['alpha'])} (fresh draws, paired; z = {d_z:.1f}: {d_v}). "
+        f"{lev.text()}")
     correction = None
     if corrected_ok:
         correction = ("under the corrected condition there is alpha != 0 (of the sign of C1, small) with "
                       "J_st(w0 - alpha d/ds grad J_s0(w0)) < J_st(w0): w0 is not a minimiser of J_st, and every "
                       "global minimiser w_t of J_st (when one exists) has J_st(w_t) < J_st(w0) -- not every critical "
                       "point (saddles and worse critical points exist: the linear chain's w = 0, the ONN's trivial "
-                      "point); verified exactly on the linear chain and by the paired test on the ONN")
+                      "point); verified exactly on the linear chain (both conditions hold) and by the paired test on "
+                      "the ONN (corrected condition holding at the confidence)")
     counter = None
     if verdict == "fails":
         counter = {"quartic": {"s0": 1.0, "st": 1.1, "critical_points_st": quartic["critical_points_st"],
                                "J_st(w_t)-J_st(w0)": quartic["J_st_wt_minus_J_st_w0"]},
                    "linear_chain_L2": {"s0": 0.5, "st": 0.8, "critical_points_st": chain["critical_points_st"],
                                        "J_st(w_t)-J_st(w0)": chain["J_st_wt_minus_J_st_w0"]},
-                   "tanh_onn": {"w_t": "W_l = 0, b_l = 0 (l<L), b_L = mean(y)", "J_st(w_t)-J_st(w0)": dj}}
+                   "tanh_onn": {"w_t": "W_l = 0, b_l = 0 (l<L), b_L = mean(y)", "J_st(w_t)-J_st(w0)": dj},
+                   "refuting_instances_inside_hypotheses": refuting}
     return record(
         "theorem1_conclusion",
         "thm:FT-is-needed, eq. ENOt-wt-is-strictly-less-than-ENOt-w0: under ass:Nonempty-minimizer-sets and "

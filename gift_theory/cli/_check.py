@@ -62,10 +62,13 @@ def _run_theorem1(args):
     if missing:
         raise GiftInputError(f"gift check theorem1: missing {', '.join(missing)}")
     try:
-        fam = load_family(args.family)
-        res = theorem1(fam, args.s0, args.st, confidence=args.confidence)
+        fam = load_family(args.family)          # its errors name the file
     except FamilyError as exc:
         raise GiftInputError(f"gift check theorem1 --family {exc}") from None
+    try:
+        res = theorem1(fam, args.s0, args.st, confidence=args.confidence)
+    except FamilyError as exc:
+        raise GiftInputError(f"gift check theorem1 --family {args.family}: {exc}") from None
     out = contract_json(res)          # exactly the CONTRACTS §5b object
     if not getattr(args, "json", False):
         out["_full"] = res             # the text form shows everything

@@ -53,3 +53,26 @@ def test_theorem1_subcommand_bad_input(tmp_path, capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "Traceback" not in err
+
+
+BAD_FAMILIES = {
+    "syntax.py": "import sympy as sp\ns = sp.Symbol('s'\n",                                 # syntax error
+    "names.py": "import sympy as sp\ns = sp.Symbol('s')\nw = sp.Symbol('w')\n",             # no J, no w0
+    "exits.py": "raise SystemExit(3)\n",                                                  # the file exits
+    "numpy_J.py": "import numpy as np\ndef J(w, s):\n    return np.sum(np.asarray(w) ** 2) * s\nw0 = [1.0, 2.0]\n",
+    "undefined.py": "import sympy as sp\ns, w = sp.symbols('s w')\nJ = w**2/2 + sp.Function('f')(s)*w\nw0 = 0\n",
+    "complex.py": "import sympy as sp\ns, w = sp.symbols('s w')\nJ = w**2/2 + sp.I*s*w\nw0 = 0\n",
+    "kink.py": "import sympy as sp\ns, w = sp.symbols('s w')\nJ = sp.Abs(w) + (s - 1)*w\nw0 = 0\n",
+    "log.py": "import sympy as sp\ns, w = sp.symbols('s w')\nJ = sp.log(w) + s*w\nw0 = 0\n",   # not finite at w0
+}
+
+
+def test_theorem1_bad_family_files_exit_2_one_line(tmp_path, capsys):
+    """Every broken family file: exit status 2, one line naming the file, no traceback."""
+    for name, text in BAD_FAMILIES.items():
+        f = tmp_path / name
+        f.write_text(text)
+        assert main(["check", "theorem1", "--family", str(f), "--s0", "1", "--st", "1.1", "--json"]) == 2, name
+        out = capsys.readouterr()
+        assert out.out == "" and out.err.count("\n") == 1 and "Traceback" not in out.err, (name, out.err)
+        assert name in out.err, out.err

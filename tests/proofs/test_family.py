@@ -83,8 +83,38 @@ def test_small_onn_numeric_family(x64):
         assert r[k]["lo"] <= r[k]["value"] <= r[k]["hi"], k
     sup = r["sup_abs_d2_dot_v"]
     assert sup["lo"] <= sup["value"] <= sup["hi"]
+    # the rigorous upper end bounds |(d2/ds2 grad J_zeta(w0))^T v| (its U-statistic plus z se) at every zeta of
+    # a fine grid -- a grid can only miss the sup, never exceed a valid bound
+    from proofs_checks._family import _ustat
+
+    d1 = jax.jacfwd(J, argnums=0)
+    vs = np.asarray(jax.jacfwd(d1, argnums=1)(jnp.asarray(flat), 0.2))
+    F2 = jax.jit(lambda z: jax.jacfwd(jax.jacfwd(d1, argnums=1), argnums=1)(jnp.asarray(flat), z))
+    for z in np.linspace(0.2, 0.25, 41):
+        T, se = _ustat(np.asarray(F2(z)), vs)
+        assert abs(T) + r["z"] * se <= sup["hi"] * (1 + 1e-9), (z, T, se, sup)
     assert r["wt"] and r["wt"][0]["consistent_with_critical"]
     j = contract_json(r)
     assert set(j) == {"printed_condition", "corrected_condition", "C1", "conclusion", "evidence"}
     if r["conclusion"] == "fails" and r["printed_condition"] != "holds":
         assert "no counterexample" in r["evidence"]
+
+
+def test_w0_critical_is_a_power_backed_hypothesis(x64):
+    """Monte-Carlo family E[(V x + e - W x)^2 + s^2 W^2 x^2], W = w1 w2: at the population critical
+    point the residual grad J_s0(w0)^T v cannot change the sign of C1 at the confidence (verified);
+    at 1.3 times it the residual is significant (not verified, so nothing can be refuted there)."""
+    kx, ke = jax.random.split(jax.random.PRNGKey(0))
+    x = np.asarray(jax.random.normal(kx, (4096,), jnp.float64))
+    e = 0.5 * np.asarray(jax.random.normal(ke, (4096,), jnp.float64))
+
+    def J(w, s):
+        W = w[0] * w[1]
+        return (0.5 * x + e - W * x) ** 2 + s ** 2 * W ** 2 * x ** 2
+
+    c = math.sqrt(0.5 / (1 + 0.3 ** 2))
+    verified = {}
+    for scale in (1.0, 1.3):
+        r = theorem1(family(J, np.full(2, c * scale)), 0.3, 0.6, confidence=0.95)
+        verified[scale] = next(h["verified"] for h in r["hypotheses"] if h["name"] == "w0_critical")
+    assert verified == {1.0: True, 1.3: False}

@@ -44,3 +44,28 @@ def test_levels_split_the_family_wise_error():
     lv = level(4)
     assert lv.alpha * 4 * SHARES == pytest.approx(FAMILY_ALPHA)
     assert lv.z2 > lv.z1 > 0 and "family-wise" in lv.text()
+
+
+def test_refutation_needs_every_hypothesis_verified_and_says_so():
+    from proofs_checks._record import hypothesis
+
+    undecided = hypothesis("w0_critical", "...", None, "not resolved")
+    with pytest.raises(ValueError):
+        record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [undecided])
+    ok = hypothesis("w0_critical", "...", True, "exact")
+    r = record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [ok])
+    assert "inside the statement's hypotheses: w0_critical verified" in r["evidence"]
+    assert record("x", "c", "inconclusive", "e", hypotheses=[undecided])["evidence"] == "e"
+
+
+def test_no_literal_verdicts_in_the_checks():
+    """Verdicts come from decide()/the verdict rules: no check module assigns a verdict string."""
+    import pathlib
+    import re
+
+    import proofs_checks
+
+    root = pathlib.Path(proofs_checks.__file__).parent
+    pat = re.compile(r"verdict\s*=\s*[\"'](holds|fails|inconclusive)[\"']")
+    hits = [f"{p.name}: {m.group(0)}" for p in root.glob("*.py") for m in pat.finditer(p.read_text())]
+    assert hits == []

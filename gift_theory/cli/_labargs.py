@@ -7,9 +7,11 @@ import os
 import jax
 
 from .._errors import require
+from ._plugins import add_plugin_argument, load_plugins
 
 
 def add_common(parser):
+    add_plugin_argument(parser)
     parser.add_argument("measurement", metavar="MEAS", help="measurement file: .npz (CONTRACTS §3) or long-format .csv")
     parser.add_argument("--weights", help="weights .npz (W1..WL, b1..bL) for a CSV measurement")
     parser.add_argument("--seed", type=int, default=0, help="seed of the held-out split, the model shots and the fit")
@@ -19,8 +21,10 @@ def add_common(parser):
 
 
 def load(args):
+    """Load the plugins (a bad one stops here, before any work), then the measurement file."""
     from ..lab import load_measurement
 
+    load_plugins(args)
     require(args.shots is None or args.shots >= 2, f"--shots {args.shots}: needs at least 2")
     return load_measurement(args.measurement, weights=args.weights)
 

@@ -12,9 +12,11 @@ import jax
 import numpy as np
 
 from .._errors import require
+from ._plugins import add_plugin_argument, load_plugins
 
 
 def add_arguments(parser):
+    add_plugin_argument(parser)
     parser.add_argument("--arch", help="widths d_0-...-d_L, e.g. 16-32-16-8 (default: from --weights)")
     parser.add_argument("--weights", help=".npz with W1..WL, b1..bL to program (default: random, from --seed)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random weights, inputs and shots")
@@ -36,6 +38,7 @@ def run(args):
     from .._io import atomic_write
     from ..lab import load_weights, save_csv, save_measurement, simulate_measurement
 
+    load_plugins(args)
     require(args.inputs >= 1, f"--inputs {args.inputs}: needs at least 1")
     require(args.shots >= 2, f"--shots {args.shots}: needs at least 2")
     out = args.out

@@ -208,6 +208,18 @@ def moment_channels(M, Y, split, rng):
     return _product_channels(_take(Y, split[:, :h]), _take(Y, split[:, h:2 * h]), MA, MB, eps)
 
 
+def paired_moment_channels(M, Y, split):
+    """The moment channels of a one-step check, (n, 3): model shot k was fed the measured input
+    of shot k, so the model's halves are the data's (``split``): each half's difference then
+    depends on that half's shots only, and the product of the two has mean zero under the model."""
+    M = np.asarray(M, np.float64)
+    Y = np.asarray(Y, np.float64)
+    h = Y.shape[1] // 2
+    eps = _variance_floor(Y)
+    A, B = split[:, :h], split[:, h:2 * h]
+    return _product_channels(_take(Y, A), _take(Y, B), [_take(M, A)], [_take(M, B)], eps)
+
+
 def floor_moment_channels(Y, split):
     """The moment channels between the halves of the measured shots (quarters of r/4 shots)."""
     Y = np.asarray(Y, np.float64)

@@ -17,8 +17,8 @@ import numpy as np
 
 from .._measurement import Measurement
 from .._model import named_subkey
-from ._channels import Reference, cell_statistic, channel_values, combine, reference
-from ._qtest import q_test, replicate_null, student_p
+from ._channels import Reference, cell_statistic, channel_values, combine, paired_moment_channels, reference
+from ._qtest import over_inputs, q_test, replicate_null, student_p
 from ._shots import Model, one_step_shots
 
 
@@ -106,19 +106,66 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
                       cells=cells, channel_z=zl, channels=ref.channels, net_discrepancy=net, replicates=B)
 
 
-def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None = None) -> list[dict]:
-    """Per measured layer: the one-step discrepancy (layer model fed the measured previous
-    layer, same shot), its se, z and p-value. Without taps only layer 1 can be fed (when the
-    network has one layer, that is the output); deeper layers need the taps."""
+def layer_level(key, model: Model, meas: Measurement, layer: int, iters: int = 20) -> float:
+    """The additive noise level s at which layer ``layer``'s one-step shots are as variable as the
+    measured ones (mean log variance over the layer's cells, both from r shots, so their
+    small-sample bias is the same): bisection on log s over [s / 20, 20 s]."""
+    li = meas.layer_ids().index(layer)
+    target = float(np.mean(np.log(np.var(meas.layers()[li], axis=1, ddof=1) + 1e-30)))
+    s0 = max(float(model.physics.s), 1e-4)
+
+    def gap(log_s):
+        m = Model(model.physics.replace(s=float(np.exp(log_s))), model.params, model.offsets)
+        M = np.asarray(one_step_shots(key, m, meas, layer), np.float64)
+        return float(np.mean(np.log(np.var(M, axis=1, ddof=1) + 1e-30))) - target
+
+    lo, hi = np.log(s0 / 20.0), np.log(s0 * 20.0)
+    if gap(lo) >= 0:
+        return float(np.exp(lo))
+    if gap(hi) <= 0:
+        return float(np.exp(hi))
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if gap(mid) < 0 else (lo, mid)
+    return float(np.exp(0.5 * (lo + hi)))
+
+
+def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None = None, *,
+                   own_level: bool = True) -> list[dict]:
+    """Per measured layer: the one-step discrepancy (the layer's model fed the measured previous
+    layer, same shot), its se, z and p-value (Student t over inputs of the cells' channel values:
+    the energy channels, and the moment channels when r >= 8).
+
+    own_level : give each layer the noise level that matches its own measured variability
+        (:func:`layer_level`, reported as ``s``), so that a misfit elsewhere -- which inflates
+        the jointly fitted s -- does not make a healthy layer fail on its variance alone; a
+        layer fails on the shape of its response and noise, not on a level another layer set.
+
+    Without taps only layer 1 can be fed (when the network has one layer, that is the
+    output); deeper layers need the taps.
+    """
     if ref is None:
         ref = reference(named_subkey(key, "floor"), meas)
     rows = []
     for li, (l, Y) in enumerate(zip(meas.layer_ids(), meas.layers())):
         if meas.taps is None and l > 1:
             continue
-        M = one_step_shots(jax.random.fold_in(key, l), model, meas, l)
+        k_l = jax.random.fold_in(key, l)
+        m, level, level_z = model, float(model.physics.s), 0.0
+        if own_level and "awgn" in model.physics:
+            # how far the layer's variability is from the joint level's (log variances of r shots
+            # on both sides: the same small-sample bias), then the layer at its own level
+            M0 = np.asarray(one_step_shots(k_l, model, meas, l), np.float64)
+            gap = np.mean(np.log(np.var(Y, axis=1, ddof=1) + 1e-30) - np.log(np.var(M0, axis=1, ddof=1) + 1e-30), 1)
+            level_z = over_inputs(gap)
+            level = layer_level(k_l, model, meas, l)
+            m = Model(model.physics.replace(s=level), model.params, model.offsets)
+        M = one_step_shots(k_l, m, meas, l)
         C = cell_statistic(M, jnp.asarray(Y, jnp.float32), paired=True, scales=ref.scales[li])
-        T = (C * ref.weights[li][None, :2]).mean(axis=1)
+        if len(ref.channels) > 2:
+            C = np.concatenate([C, paired_moment_channels(np.asarray(M, np.float64), Y, ref.split)], axis=1)
+        T = (C * ref.weights[li][None, :C.shape[1]]).mean(axis=1)
         D, se, p = student_p(T)
-        rows.append({"layer": l, "discrepancy": D, "se": se, "z": D / se if se > 0 else float("nan"), "p_value": p})
+        rows.append({"layer": l, "discrepancy": D, "se": se, "z": D / se if se > 0 else float("nan"), "p_value": p,
+                     "s": level, "level_z": level_z})
     return rows

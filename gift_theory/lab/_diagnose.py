@@ -38,7 +38,10 @@ from ._compare import Comparison, compare, one_step_check
 from ._fit import fit_model, split_inputs
 from ._fit_moments import MomentProblem
 from ._fit_offsets import effective_dof, fitted_as_offsets, kinds_of, offset_replicates
-from ._localise import residuals, signatures, where_it_fails
+from ._fit_offsets import prior_check
+from ._localise import layer_evidence, one_step_residuals, residuals, signatures, where_it_fails
+from ._mechanisms import Context, fit_gains, mechanisms
+from ._verdict import as_json_fields, explanation, failing_layers, verdict_line
 from ._shots import Model
 
 #: the significance level of the goodness-of-fit test (CONTRACTS §4)
@@ -159,6 +162,12 @@ class Diagnosis:
     has_taps: bool = False
     signatures: dict = dataclasses.field(default_factory=dict)
     where: dict | None = None
+    explained: bool = False
+    reasons: tuple = ()
+    verdict: str = ""
+    failing_layers: tuple | None = None
+    mechanisms: tuple = ()
+    evidence: tuple = ()
 
     @property
     def missing_effect_detected(self) -> bool:
@@ -171,7 +180,9 @@ class Diagnosis:
                              "discrepancy": c.discrepancy, "noise_floor": c.noise_floor, "p_value": c.p_value,
                              "se": c.se, "floor_se": c.floor_se, "channel_z": c.as_dict()["channel_z"]},
                 "missing_effect_detected": self.missing_effect_detected,
+                **as_json_fields(self.explained, self.reasons, self.verdict, self.failing_layers, self.mechanisms),
                 "ranking": [cand.as_json() for cand in self.ranking],
+                "evidence": list(self.evidence),
                 "where": list(self.one_step),
                 "signatures": self.signatures,
                 "worst_cells": [] if self.where is None else self.where["worst"][:10],
@@ -273,10 +284,29 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
             _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
                  f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
         ranking = _merge_second_stage(first, stage2, ranking[1:])
-    steps = tuple(one_step_check(session.k_step, base, meas)) if meas.has_taps else ()
+    # localise: where the baseline fails, each layer on its own
+    taps = meas.has_taps
+    steps = tuple(one_step_check(session.k_step, base, meas)) if taps else ()
+    failing = failing_layers(steps) if taps else None
     res = residuals(session.k_step, base, meas, shots)
-    return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, meas.has_taps,
-                     signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res))
+    local = one_step_residuals(session.k_step, base, meas, {r["layer"]: r["s"] for r in steps}) if taps else res
+    evidence = layer_evidence(local)
+    # name mechanisms, then the verdict
+    ctx = Context({row["layer"]: row for row in evidence}, meas.arch.depth, taps, failing,
+                  fit_gains(ranking, base_cmp), {r["layer"]: (r["s"], r["level_z"]) for r in steps})
+    mechs = mechanisms(ctx)
+    top = ranking[0] if ranking else None
+    prior, top_steps = (), None
+    if top is not None and base_cmp.p_value < ALPHA and top.comparison.p_value >= ALPHA:
+        prior = prior_check(top.model, session.fit_meas)
+        top_steps = one_step_check(session.k_step, top.model, meas, own_level=False) if taps else None
+    explained, reasons = explanation(top, base_cmp, top_steps, prior)
+    line = verdict_line(explained, reasons, top, base_cmp, mechs, failing)
+    _log(line, verbose)
+    return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps,
+                     signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res),
+                     explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),
+                     tuple(evidence))
 
 
 @dataclasses.dataclass(frozen=True)

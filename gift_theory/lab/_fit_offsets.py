@@ -574,3 +574,45 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
         refit = Model(ph, p, model.offsets)
         out.append(channel_values(k_cmp, refit, resimulate(k_te, truth, test_meas), ref, shots))
     return np.stack(out)
+
+
+# ---- is the fitted model its own effect? --------------------------------------------------------
+
+def prior_check(model: Model, meas: Measurement) -> list[dict]:
+    """Do the fitted weight offsets look like ``weight_error``'s prior -- E iid N(0, e^2), drawn
+    independently of the programmed W? Two tests per layer, each a z (one-sided where the
+    alternative is one-sided):
+
+    ``w_correlation``  atanh of the correlation of E_hat with W, times sqrt(P - 3): offsets
+                       proportional to W are a gain (an activation slope seen through the
+                       weights), not an error drawn apart from them;
+    ``w_structure``    where the layer has more rows than columns (d_out >= d_in + 3), the F
+                       test of E_hat = W M (each row of the error a fixed linear map of the row
+                       of W: a coupling between the inputs, dense crosstalk): the share of
+                       E_hat in the column space of W against d_in / d_out under the prior.
+
+    Returns one row per layer with offsets: ``{layer, test, z}`` for each test that applies.
+    """
+    from scipy import stats
+
+    kinds = [k for k in kinds_of(list(model.offsets), meas.arch) if k.target == "W"]
+    if not kinds:
+        return []
+    deltas = offset_deltas(model, base_model(model, meas), meas, kinds)[kinds[0]]
+    out = []
+    for l, E in zip(kinds[0].layers, deltas):
+        W = np.asarray(meas.params[l - 1].W, np.float64)
+        P = E.size
+        if P > 3 and np.std(E) > 0 and np.std(W) > 0:
+            rho = float(np.corrcoef(E.ravel(), W.ravel())[0, 1])
+            out.append({"layer": int(l), "test": "w_correlation",
+                        "z": float(np.arctanh(np.clip(rho, -0.999999, 0.999999)) * np.sqrt(P - 3))})
+        d_out, d_in = W.shape
+        if d_out >= d_in + 3 and np.linalg.matrix_rank(W) == d_in:
+            proj = W @ np.linalg.pinv(W) @ E
+            ss_p, ss_r = float(np.sum(proj ** 2)), float(np.sum((E - proj) ** 2))
+            df1, df2 = d_in * d_in, (d_out - d_in) * d_in
+            F = (ss_p / df1) / max(ss_r / df2, 1e-300)
+            z = float(stats.norm.isf(max(stats.f.sf(F, df1, df2), 1e-300)))
+            out.append({"layer": int(l), "test": "w_structure", "z": z})
+    return out

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from scipy import stats
@@ -29,26 +30,8 @@ from scipy import stats
 from .._measurement import Measurement
 from .._model import forward, named_subkey
 from ..effects import REGISTRY
-from ._shots import Model, model_shots, noiseless_pre, params32
-
-
-def t_to_z(mean: float, se: float, df: int) -> float:
-    """A Student t statistic on the normal scale (two-sided: the sign is kept)."""
-    if not np.isfinite(se) or se <= 0:
-        return 0.0 if mean == 0 else float(np.sign(mean)) * 40.0
-    t = mean / se
-    with np.errstate(over="ignore", under="ignore", divide="ignore"):
-        z = float(stats.norm.isf(stats.t.sf(abs(t), df=df)))
-    return float(np.sign(t) * (z if np.isfinite(z) else abs(t)))
-
-
-def over_inputs(T) -> float:
-    """z of the mean of per-input values T (n,) against zero (Student t over inputs)."""
-    T = np.asarray(T, np.float64)
-    T = T[np.isfinite(T)]
-    if T.size < 3:
-        return float("nan")
-    return t_to_z(float(T.mean()), float(T.std(ddof=1) / np.sqrt(T.size)), T.size - 1)
+from ._qtest import over_inputs
+from ._shots import Model, model_shots, noiseless_pre, one_step_pre, one_step_shots, params32
 
 
 def _kurt(A):
@@ -115,13 +98,12 @@ class Residuals:
         return [(p - m) / (2 * h) for p, m in zip(*out)]
 
 
-def residuals(key, model: Model, meas: Measurement, shots: int | None = None) -> Residuals:
-    """The :class:`Residuals` of ``model`` on ``meas`` (model shots K = ``shots``, default 4 r)."""
-    Ms = [np.asarray(M, np.float64) for M in model_shots(named_subkey(key, "residual_shots"), model, meas, shots)]
+def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres) -> Residuals:
     r = meas.r
-    pres = noiseless_pre(model, meas)
+    layers = dict(zip(meas.layer_ids(), meas.layers()))
     out = {k: [] for k in ("Y", "MA", "MB", "mean_resid", "var_resid", "kurt_resid", "mB", "vB", "pre")}
-    for l, M, Y in zip(meas.layer_ids(), Ms, meas.layers()):
+    for l, M, pre in zip(layer_ids, Ms, pres):
+        Y = layers[l]
         h = M.shape[1] // 2
         MA, MB = M[:, :h], M[:, h:2 * h]
         mA, vA = MA.mean(1), MA.var(1, ddof=1)
@@ -138,8 +120,33 @@ def residuals(key, model: Model, meas: Measurement, shots: int | None = None) ->
         out["kurt_resid"].append(_kurt(Y) - kM)
         out["mB"].append(mB)
         out["vB"].append(vB)
-        out["pre"].append(pres[l - 1])
-    return Residuals(meas, model, meas.layer_ids(), t=meas.t, **out)
+        out["pre"].append(pre)
+    return Residuals(meas, model, tuple(layer_ids), t=meas.t, **out)
+
+
+def residuals(key, model: Model, meas: Measurement, shots: int | None = None) -> Residuals:
+    """The :class:`Residuals` of ``model`` on ``meas``: the model's own shots of every measured
+    layer (K = ``shots``, default 4 r), errors of earlier layers propagated."""
+    Ms = [np.asarray(M, np.float64) for M in model_shots(named_subkey(key, "residual_shots"), model, meas, shots)]
+    pres = noiseless_pre(model, meas)
+    return _residuals_from(meas, model, meas.layer_ids(), Ms, [pres[l - 1] for l in meas.layer_ids()])
+
+
+def one_step_residuals(key, model: Model, meas: Measurement, levels: dict | None = None, draws: int = 4) -> Residuals:
+    """The :class:`Residuals` of each layer on its own (taps): the layer's model fed the measured
+    layer before, ``draws`` model shots per measured shot, each layer at its noise level
+    ``levels[l]`` (default the model's s). Layer l's residuals then say what is wrong *in* layer
+    l, not what it inherits."""
+    ids = [l for l in meas.layer_ids() if l == 1 or meas.has_taps]
+    Ms, pres = [], []
+    for l in ids:
+        m = model
+        if levels and l in levels and "awgn" in model.physics:
+            m = Model(model.physics.replace(s=levels[l]), model.params, model.offsets)
+        Ms.append(np.asarray(one_step_shots(jax.random.fold_in(named_subkey(key, "one_step_residuals"), l), m, meas,
+                                            l, draws=draws), np.float64))
+        pres.append(one_step_pre(model, meas, l))
+    return _residuals_from(meas, model, ids, Ms, pres)
 
 
 def signatures(key, model: Model, meas: Measurement, shots: int | None = None, res: Residuals | None = None) -> dict:
@@ -166,57 +173,95 @@ def signatures(key, model: Model, meas: Measurement, shots: int | None = None, r
 
 # ---- localised evidence for the mechanism rules ----------------------------------------------
 
-def _profile_fit(e, zpre):
-    """Per neuron, regress per-input residuals e (n,) on [1, z_c, z_c^2 - mean] (z_c the centred,
-    scaled pre-activation): coefficients and their z (OLS with the residual's spread)."""
-    n = e.shape[0]
-    zc = (zpre - zpre.mean()) / (zpre.std() + 1e-12)
-    X = np.stack([np.ones(n), zc, zc ** 2 - np.mean(zc ** 2)], axis=1)
-    beta, *_ = np.linalg.lstsq(X, e, rcond=None)
-    resid = e - X @ beta
-    s2 = float(resid @ resid) / max(n - 3, 1)
-    cov = s2 * np.linalg.pinv(X.T @ X)
-    return beta, beta / np.sqrt(np.maximum(np.diag(cov), 1e-300))
+def chi_z(zs) -> float:
+    """A chi-square of independent N(0, 1) values on the normal scale (one-sided)."""
+    zs = np.asarray(zs, np.float64)
+    zs = zs[np.isfinite(zs)]
+    if zs.size == 0:
+        return 0.0
+    return float(stats.norm.isf(max(stats.chi2.sf(float(np.sum(zs ** 2)), df=zs.size), 1e-300)))
+
+
+def _design(zpre):
+    """Per neuron: the columns [1, z, z^2 - mean] of the standardised pre-activation, (d, n, 3)."""
+    zc = (zpre - zpre.mean(0)) / (zpre.std(0) + 1e-12)
+    return np.stack([np.ones_like(zc), zc, zc ** 2 - np.mean(zc ** 2, 0)], axis=-1).transpose(1, 0, 2)
+
+
+def _profiles(e, X):
+    """Per neuron j, OLS of e[:, j] on X[j]: coefficients (d, 3) and their z (d, 3)."""
+    betas, zs = [], []
+    for j in range(e.shape[1]):
+        beta, *_ = np.linalg.lstsq(X[j], e[:, j], rcond=None)
+        resid = e[:, j] - X[j] @ beta
+        s2 = float(resid @ resid) / max(e.shape[0] - 3, 1)
+        cov = s2 * np.linalg.pinv(X[j].T @ X[j])
+        betas.append(beta)
+        zs.append(beta / np.sqrt(np.maximum(np.diag(cov), 1e-300)))
+    return np.array(betas), np.array(zs)
+
+
+def _beyond_profiles(res: Residuals, li: int, X) -> float:
+    """Reproducible mean residual that no per-neuron function of z explains (a linear-map
+    error): the two halves of the measured shots give residual means ra, rb against disjoint
+    model halves; each is projected off the neuron's profile design; sum of ra . rb over inputs
+    and neurons, self-normalised (zero mean under the model: the halves are independent)."""
+    Y, MA, MB, vB = res.Y[li], res.MA[li], res.MB[li], res.vB[li]
+    h = Y.shape[1] // 2
+    se = np.sqrt(vB * (1.0 / max(h, 1) + 1.0 / MA.shape[1]) + 1e-300)
+    ra = (Y[:, :h].mean(1) - MA.mean(1)) / se
+    rb = (Y[:, h:2 * h].mean(1) - MB.mean(1)) / se
+    T = np.zeros(Y.shape[0])
+    for j in range(Y.shape[2]):
+        P = X[j] @ np.linalg.pinv(X[j])
+        T += (ra[:, j] - P @ ra[:, j]) * (rb[:, j] - P @ rb[:, j])
+    return float(np.sum(T) / np.sqrt(np.sum(T ** 2) + 1e-300))
+
+
+def _excess_covariance(res: Residuals, li: int) -> np.ndarray:
+    """Per input: the variance of the layer's sum over neurons beyond the sum of the per-neuron
+    variances (a gain shared by the neurons), measured minus model (half A), over the model's
+    (half B) per-neuron variances."""
+    def excess(S):
+        return np.var(np.sum(S, -1), axis=1, ddof=1) - np.sum(S.var(1, ddof=1), -1)
+    return (excess(res.Y[li]) - excess(res.MA[li])) / (np.sum(res.vB[li], -1) + 1e-300)
 
 
 def layer_evidence(res: Residuals) -> list[dict]:
-    """Per measured layer: how its mean residuals and excess variances depend on the model's
-    noiseless pre-activation, neuron by neuron, each summarised as a z over the layer.
+    """Per layer of ``res``: how its residuals depart from the model, each departure a z over the
+    layer (N(0, 1) or one-sided chi-square on the normal scale under the model).
 
-    Returns one dict per measured layer:
-    ``offset_z`` -- chi-square of the per-neuron constant offsets on the normal scale (a
-    per-neuron stripe: a bias offset); ``slope_z``, ``curve_z`` -- the same for the per-neuron
-    slope and curvature of the mean residual against z (an odd or even distortion of the
-    transfer: an activation or readout mismatch); ``common_slope_z`` -- the slope shared by the
-    layer's neurons (a gain: every neuron's residual grows with its z the same way);
-    ``var_level_z`` -- the mean excess variance over the layer (noise level), ``var_abs_z`` --
-    excess variance along |z - median| (signal-dependent noise), ``kurt_z`` -- excess
-    kurtosis (noise law), ``time_z`` -- mean residual along acquisition time (drift).
+    ``offset_z``        per-neuron constant shifts of the mean (chi-square over neurons)
+    ``profile_z``       per-neuron slopes and curvatures of the mean residual against the
+                        pre-activation z (chi-square over neurons): a distorted transfer
+    ``common_offset_z``, ``common_slope_z``, ``common_curve_z``
+                        the same shared by every neuron of the layer (signed; over inputs)
+    ``structure_z``     reproducible mean residual beyond every per-neuron function of z
+    ``var_level_z``     excess variance, ``var_abs_z`` excess variance along |z| (signed)
+    ``kurt_z``          excess kurtosis at equal sample size (signed)
+    ``corr_z``          excess covariance shared by the neurons (signed)
+    ``time_z``          mean residual along acquisition time (signed; files with times)
     """
     out = []
     for li, l in enumerate(res.layer_ids):
         e, v, k, zpre = res.mean_resid[li], res.var_resid[li], res.kurt_resid[li], res.pre[li]
-        n, d = e.shape
-        coefs = np.array([_profile_fit(e[:, j], zpre[:, j])[1] for j in range(d)])  # (d, 3) z's
-        betas = np.array([_profile_fit(e[:, j], zpre[:, j])[0] for j in range(d)])
-
-        def chi_z(zs):
-            q = float(np.sum(zs ** 2))
-            return float(stats.norm.isf(max(stats.chi2.sf(q, df=len(zs)), 1e-300)))
-
-        zc = (zpre - zpre.mean(0)) / (zpre.std(0) + 1e-12)
+        X = _design(zpre)
+        betas, zs = _profiles(e, X)
+        zc = X[:, :, 1].T
         absz = np.abs(zc) - np.mean(np.abs(zc), axis=0)
-        row = {"layer": int(l), "neurons": int(d),
-               "offset_z": chi_z(coefs[:, 0]), "slope_z": chi_z(coefs[:, 1]), "curve_z": chi_z(coefs[:, 2]),
+        row = {"layer": int(l), "neurons": int(e.shape[1]),
+               "offset_z": chi_z(zs[:, 0]), "profile_z": chi_z(zs[:, 1:].ravel()),
+               "common_offset_z": over_inputs(np.sum(e, axis=1)),
                "common_slope_z": over_inputs(np.sum(e * zc, axis=1)),
-               "common_curve_z": over_inputs(np.sum(e * (zc ** 2 - np.mean(zc ** 2, 0)), axis=1)),
+               "common_curve_z": over_inputs(np.sum(e * X[:, :, 2].T, axis=1)),
+               "structure_z": _beyond_profiles(res, li, X),
                "var_level_z": over_inputs(np.sum(v, axis=1)),
                "var_abs_z": over_inputs(np.sum(v * absz, axis=1)),
                "kurt_z": over_inputs(np.sum(k, axis=1)),
-               "offsets": betas[:, 0].tolist()}
+               "corr_z": over_inputs(_excess_covariance(res, li)) if e.shape[1] > 1 else 0.0}
         if res.t is not None:
             tc = res.t.mean(1) - res.t.mean()
-            row["time_z"] = over_inputs(tc * np.sum(e * np.sign(res.mB[li] + 1e-300), axis=1))
+            row["time_z"] = over_inputs(tc * np.sum(e * np.sign(res.mB[li]), axis=1))
         out.append(row)
     return out
 

@@ -98,3 +98,22 @@ def q_test(T, shift=None, extra_var=None):
         tr1, tr2 = float(np.sum(lam)), float(np.sum(lam ** 2))
         p = min(max(float(stats.chi2.sf(Q * tr1 / tr2, df=tr1 * tr1 / tr2)), 1e-300), 1.0 / (NULL_DRAWS + 1))
     return Q, float(p), float(Qs.mean()), float(Qs.std(ddof=1)), z
+
+
+def t_to_z(mean: float, se: float, df: int) -> float:
+    """A Student t statistic on the normal scale (two-sided: the sign is kept)."""
+    if not np.isfinite(se) or se <= 0:
+        return 0.0 if mean == 0 else float(np.sign(mean)) * 40.0
+    t = mean / se
+    with np.errstate(over="ignore", under="ignore", divide="ignore"):
+        z = float(stats.norm.isf(stats.t.sf(abs(t), df=df)))
+    return float(np.sign(t) * (z if np.isfinite(z) else abs(t)))
+
+
+def over_inputs(T) -> float:
+    """z of the mean of per-input values T (n,) against zero (Student t over inputs)."""
+    T = np.asarray(T, np.float64)
+    T = T[np.isfinite(T)]
+    if T.size < 3:
+        return float("nan")
+    return t_to_z(float(T.mean()), float(T.std(ddof=1) / np.sqrt(T.size)), T.size - 1)

@@ -114,25 +114,43 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     return tuple(outs[l - 1] for l in meas.layer_ids())
 
 
-@functools.partial(jax.jit, static_argnames=("arch", "layer"))
-def _one_step(key, W, b, a, physics, t, arch, layer):
-    noise = sample_noise(key, arch, physics, a.shape[:2], jnp.float32)
+@functools.partial(jax.jit, static_argnames=("arch", "layer", "q"))
+def _one_step(key, W, b, a, physics, t, arch, layer, q):
+    shape = a.shape[:2] + ((q,) if q else ())
+    noise = sample_noise(key, arch, physics, shape, jnp.float32)
+    if q:  # q draws per measured shot: the measured input and time repeat
+        a = a[:, :, None, :]
+        t = None if t is None else t[:, :, None] * jnp.ones((1, 1, q), t.dtype)
     if layer == 1:
         a = noisy_input(a, noise, physics)
-    return layer_step(W, b, a, noise, physics, arch, layer, t=t)[0]
+    out = layer_step(W, b, a, noise, physics, arch, layer, t=t)[0]
+    return out.reshape(out.shape[0], -1, out.shape[-1]) if q else out
 
 
-def one_step_shots(key, model: Model, meas: Measurement, layer: int):
+def one_step_shots(key, model: Model, meas: Measurement, layer: int, draws: int = 0):
     """The model's layer ``layer`` fed with the *measured* output of the layer before, same
     shot (needs taps for layer >= 2; layer 1 is fed x and the model's input noise).
-    Returns (n, r, d_l)."""
+
+    Returns (n, r, d_l): model shot k fed measured shot k; with ``draws`` = q > 0, (n, r q, d_l):
+    q model draws per measured shot (shot k's draws at k q .. k q + q - 1)."""
     W, b = params32(model.weights(meas))[layer - 1]
     if layer == 1:
         a = jnp.broadcast_to(jnp.asarray(meas.x, jnp.float32)[:, None, :], (meas.n, meas.r, meas.x.shape[1]))
     else:
         a = jnp.asarray(meas.taps[layer - 2], jnp.float32)
     t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
-    return _one_step(key, W, b, a, model.physics, t, meas.arch, layer)
+    return _one_step(key, W, b, a, model.physics, t, meas.arch, layer, int(draws))
+
+
+def one_step_pre(model: Model, meas: Measurement, layer: int) -> np.ndarray:
+    """Layer ``layer``'s noiseless pre-activation (n, d_l) fed with the mean over shots of the
+    measured layer before (x for layer 1)."""
+    W, b = params32(model.weights(meas))[layer - 1]
+    depth = meas.arch.depth
+    a = meas.x if layer == 1 else np.mean(meas.taps[layer - 2], axis=1)
+    W = model.physics.effective_weights(W, layer, depth)
+    z = jnp.asarray(a, jnp.float32) @ W.T + model.physics.bias(b, layer, depth)
+    return np.asarray(z, np.float64)
 
 
 def noiseless_pre(model: Model, meas: Measurement):

@@ -1,0 +1,206 @@
+"""Stage 7 of the lab: from where the model fails to which mechanism (CONTRACTS §6).
+
+The localised evidence (:func:`~gift_theory.lab._localise.layer_evidence`: per layer, how the
+residuals depart from the model, each departure a z) and the candidates' fits are turned into
+the ranked ``mechanisms`` list, one class per entry with its layers, its score (a z: how far
+the strongest evidence for it stands beyond the model's noise) and one line of evidence.
+
+**This is the one place where a mechanism rule lives.** Each rule is a function
+``(ctx) -> (score, layers, evidence) | None`` registered in :data:`RULES` under its class; to
+teach the lab a new mechanism, add a rule here. A class is listed when its score exceeds
+:data:`THRESHOLD`; the list is sorted by score.
+
+With taps the evidence is each layer's own (its model fed the measured layer before); without
+taps only the output is seen, errors of the hidden layers folded into it, and a hidden-layer
+class is reported on the hidden layers as a possibility the output cannot localise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..effects import MECHANISMS, REGISTRY
+
+#: a class is listed when its evidence stands this many standard deviations out
+THRESHOLD = 4.0
+
+
+@dataclasses.dataclass
+class Context:
+    """What the rules read.
+
+    evidence : {layer: layer_evidence row}
+    depth : L
+    taps : whether the evidence is per layer (one-step, with taps) or the output only
+    failing : the failing layers (with taps), else None
+    fit_gain : {class: z} the best moment-fitted candidate of each class: how many baseline
+        standard deviations its held-out discrepancy fell below the baseline's
+    levels : {layer: (s_layer, level_z)} per-layer noise levels of the one-step check
+    """
+
+    evidence: dict
+    depth: int
+    taps: bool
+    failing: list | None
+    fit_gain: dict
+    levels: dict
+
+
+def _layers_where(ctx, keys, hidden=None, min_z=THRESHOLD, absolute=True):
+    out = []
+    for l, row in ctx.evidence.items():
+        if hidden is True and l == ctx.depth or hidden is False and l != ctx.depth:
+            continue
+        vals = [abs(row.get(k, 0.0)) if absolute else row.get(k, 0.0) for k in keys]
+        if max(vals) > min_z:
+            out.append(l)
+    return out
+
+
+def _best(ctx, keys, hidden=None, absolute=True):
+    """The largest evidence among ``keys`` on the layers selected, and its (layer, key)."""
+    best, where = 0.0, None
+    for l, row in ctx.evidence.items():
+        if hidden is True and l == ctx.depth or hidden is False and l != ctx.depth:
+            continue
+        for k in keys:
+            v = row.get(k, 0.0)
+            v = abs(v) if absolute else v
+            if np.isfinite(v) and v > best:
+                best, where = v, (l, k)
+    return best, where
+
+
+def _line(where, score, extra=""):
+    return f"{where[1].replace('_z', '')} z = {score:.1f} at layer {where[0]}{extra}" if where else extra
+
+
+def _with_fit(ctx, cls, score, layers, text):
+    g = ctx.fit_gain.get(cls, 0.0)
+    if g > score:
+        return g, layers, (text + "; " if text else "") + f"a fitted {cls} effect lowers the held-out discrepancy by {g:.1f} sd"
+    return score, layers, text
+
+
+SHAPE = ("common_slope_z", "common_curve_z", "common_offset_z", "profile_z")
+
+
+def rule_activation(ctx):
+    """Hidden layers whose mean response is a distorted function of the pre-activation."""
+    hidden = list(range(1, ctx.depth))
+    if not hidden:
+        return None
+    if ctx.taps:
+        score, where = _best(ctx, SHAPE, hidden=True)
+        layers = _layers_where(ctx, SHAPE, hidden=True)
+        return _with_fit(ctx, "activation_mismatch", score, layers,
+                         _line(where, score, " (mean residual against the pre-activation)"))
+    score, where = _best(ctx, SHAPE, hidden=False)
+    return _with_fit(ctx, "activation_mismatch", 0.5 * score, hidden,
+                     _line(where, score, " at the output (hidden layers cannot be seen without taps)"))
+
+
+def rule_readout(ctx):
+    """The output's mean response is a distorted function of its own pre-activation -- with taps,
+    while the hidden layers respond as modelled."""
+    score, where = _best(ctx, SHAPE, hidden=False)
+    if ctx.taps and ctx.failing and any(l < ctx.depth for l in ctx.failing):
+        score *= 0.5  # hidden layers fail too: the output's distortion may be inherited
+    return _with_fit(ctx, "readout_nonlinearity", score, [ctx.depth] if score > THRESHOLD else [],
+                     _line(where, score, " (the output's transfer)"))
+
+
+def rule_bias(ctx):
+    """Per-neuron constant shifts of the mean with no common shape."""
+    best, where = 0.0, None
+    for l, row in ctx.evidence.items():
+        common = max(abs(row.get(k, 0.0)) for k in ("common_slope_z", "common_curve_z", "common_offset_z"))
+        v = row.get("offset_z", 0.0) - 0.5 * common
+        if v > best:
+            best, where = v, (l, "offset_z")
+    layers = [l for l, row in ctx.evidence.items() if row.get("offset_z", 0.0) > THRESHOLD]
+    return _with_fit(ctx, "bias_offset", best, layers, _line(where, best, " (per-neuron shifts, no shared shape)"))
+
+
+def rule_weight(ctx):
+    """Reproducible mean residuals that no per-neuron function of z explains: the linear map."""
+    score, where = _best(ctx, ("structure_z",), absolute=False)
+    return _with_fit(ctx, "weight_error", score, _layers_where(ctx, ("structure_z",), absolute=False),
+                     _line(where, score, " (reproducible beyond every per-neuron response curve)"))
+
+
+def rule_input_dependent(ctx):
+    score, where = _best(ctx, ("var_abs_z",), absolute=False)
+    return _with_fit(ctx, "input_dependent_noise", score, _layers_where(ctx, ("var_abs_z",), absolute=False),
+                     _line(where, score, " (excess variance growing with |z|)"))
+
+
+def rule_law(ctx):
+    score, where = _best(ctx, ("kurt_z",))
+    return _with_fit(ctx, "noise_law", score, _layers_where(ctx, ("kurt_z",)), _line(where, score, " (kurtosis)"))
+
+
+def rule_gain(ctx):
+    score, where = _best(ctx, ("corr_z", "time_z"), absolute=True)
+    return _with_fit(ctx, "gain_fluctuation", score, _layers_where(ctx, ("corr_z", "time_z")),
+                     _line(where, score, " (fluctuation shared by the neurons, or a trend in time)"))
+
+
+def rule_level(ctx):
+    """A layer whose own noise level differs from the jointly fitted one."""
+    best, layer = 0.0, None
+    for l, (s_l, z) in ctx.levels.items():
+        if abs(z) > best:
+            best, layer = abs(z), l
+    layers = [l for l, (_, z) in ctx.levels.items() if abs(z) > THRESHOLD]
+    text = (f"layer {layer}'s own noise level {ctx.levels[layer][0]:.3g} (variance z = {ctx.levels[layer][1]:.1f} "
+            f"at the joint level)" if layer is not None else "")
+    return _with_fit(ctx, "noise_level", best, layers, text)
+
+
+#: class -> rule (CONTRACTS §6's classes)
+RULES = {
+    "noise_level": rule_level,
+    "noise_law": rule_law,
+    "input_dependent_noise": rule_input_dependent,
+    "gain_fluctuation": rule_gain,
+    "weight_error": rule_weight,
+    "bias_offset": rule_bias,
+    "activation_mismatch": rule_activation,
+    "readout_nonlinearity": rule_readout,
+}
+assert set(RULES) == set(MECHANISMS), "every CONTRACTS §6 class has a rule"
+
+
+def fit_gains(ranking, base_cmp) -> dict:
+    """{class: z}: for each class, how far (in the baseline's sd of Q) its best moment-fitted
+    candidate's held-out discrepancy fell below the baseline's. Offset families are left out:
+    with hundreds of free values they lower the discrepancy whatever the physics."""
+    from ._fit_offsets import fitted_as_offsets
+
+    out = {}
+    unit = base_cmp.se if base_cmp.se > 0 else 1.0
+    for c in ranking:
+        if len(c.effects) != 1 or fitted_as_offsets(c.effects[0]):
+            continue
+        cls = REGISTRY[c.effects[0]].mechanism
+        g = (base_cmp.discrepancy - c.comparison.discrepancy) / unit
+        out[cls] = max(out.get(cls, 0.0), float(g))
+    return out
+
+
+def mechanisms(ctx: Context) -> list[dict]:
+    """The ranked mechanism classes the evidence points to (score > :data:`THRESHOLD`)."""
+    out = []
+    for cls, rule in RULES.items():
+        r = rule(ctx)
+        if r is None:
+            continue
+        score, layers, text = r
+        if np.isfinite(score) and score > THRESHOLD:
+            out.append({"mechanism": cls, "layers": sorted(int(l) for l in layers), "score": float(score),
+                        "evidence": text})
+    out.sort(key=lambda m: -m["score"])
+    return out

@@ -34,23 +34,38 @@ def run(args):
 
 def render(out) -> str:
     b = out["baseline"]
-    lines = [f"baseline awgn (s = {b['params'].get('s', float('nan')):.4g}): held-out discrepancy "
+    lines = [out.get("verdict", ""),
+             f"baseline awgn (s = {b['params'].get('s', float('nan')):.4g}): held-out discrepancy "
              f"{b['discrepancy']:.4g} +- {b['se']:.2g}, noise floor {b['noise_floor']:.4g} +- {b['floor_se']:.2g}, "
              f"p = {b['p_value']:.3g}",
              "missing effect detected: " + ("YES (p < 0.01)" if out["missing_effect_detected"] else "no (the baseline passes)")]
-    lines.append("ranking (held-out discrepancy after fitting, parsimony-penalised):")
+    if out.get("failing_layers") is not None:
+        fl = out["failing_layers"]
+        lines.append("failing layers (one-step check, 0.01 with Bonferroni over the layers): "
+                     + (", ".join(map(str, fl)) if fl else "none"))
+    if out.get("mechanisms"):
+        lines.append("mechanisms the localised evidence points to (CONTRACTS section 6; score in sd):")
+        for m in out["mechanisms"]:
+            where = f"layers {', '.join(map(str, m['layers']))}" if m["layers"] else "layers ?"
+            lines.append(f"  {m['mechanism']:<22s} {where:<14s} {m['score']:7.1f}  {m['evidence']}")
+    if not out.get("explained", True) and out.get("reasons"):
+        lines.append("why not explained: " + "; ".join(out["reasons"]))
+    lines.append("ranking (held-out discrepancy after fitting; models that pass first, then by parsimony-penalised "
+                 "discrepancy):")
     for i, r in enumerate(out["ranking"], 1):
-        ps = ", ".join(f"{k}={v:.4g}" for k, v in r["params"].items())
+        ps = ", ".join(f"{k}={v:.4g}" for k, v in r["params"].items() if isinstance(v, (int, float)))
         name = " + ".join(r.get("with", []) + [r["effect"]])
-        lines.append(f"  {i:2d}. {name:<28s} {r['discrepancy_after']:10.4g}  p = {r['p_value_after']:<9.3g} {ps}")
+        lines.append(f"  {i:2d}. {name:<28s} {r['discrepancy_after']:10.4g}  p = {r['p_value_after']:<9.3g} "
+                     f"[{r.get('mechanism', '')}] {ps}")
     if any("net_discrepancy_after" in r for r in out["ranking"]):
-        lines.append("  (fitted weight offsets: p against the refit null, i.e. net of the offsets' estimation error)")
+        lines.append("  (fitted offsets: p against the refit null, i.e. net of the offsets' estimation error)")
         if not out.get("refit_null_calibrated", True):
             lines.append(NO_TAPS_CAVEAT)
     if out.get("where"):
-        lines.append("one-step check per layer (layer fed the measured layer before):")
+        lines.append("one-step check per layer (layer fed the measured layer before, at its own noise level s):")
         for w in out["where"]:
-            lines.append(f"  layer {w['layer']}: discrepancy {w['discrepancy']:.4g} (z = {w['z']:.1f}, p = {w['p_value']:.3g})")
+            lines.append(f"  layer {w['layer']}: discrepancy {w['discrepancy']:.4g} (z = {w['z']:.1f}, "
+                         f"p = {w['p_value']:.3g}, s = {w.get('s', float('nan')):.3g})")
     if out.get("signatures"):
         lines.append("signatures against the baseline (z > 3 stands out):")
         for name, s in out["signatures"].items():

@@ -464,13 +464,16 @@ class Effect:
 
         Default, from the parameter's ``bounds`` and ``defaults``: a positive parameter (lower
         bound >= 0) 16 log-spaced values over [default / 1000, 30 default], a signed one 25
-        evenly spaced values over +-15 |default|, both inside the bounds. ``layers``: the
-        measured layer outputs (each (n, r, d_l)), for an effect whose scale is the data's.
+        evenly spaced values over its bounds when they are finite, else over +-15 |default|;
+        always inside the bounds. ``layers``: the measured layer outputs (each (n, r, d_l)),
+        for an effect whose scale is the data's.
         """
         lo, hi = cls.bounds.get(param, (-np.inf, np.inf))
         d = abs(float(cls.defaults.get(param, 1.0))) or 1.0
         if lo >= 0:
-            vals = np.geomspace(d * 1e-3, d * 30.0, 16)
+            vals = np.geomspace(max(d * 1e-3, lo, 1e-12), d * 30.0, 16)
+        elif np.isfinite(lo) and np.isfinite(hi):
+            vals = np.linspace(lo, hi, 25)
         else:
             vals = np.linspace(-15.0 * d, 15.0 * d, 25)
         vals = vals[(vals >= lo) & (vals <= hi)]

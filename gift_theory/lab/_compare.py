@@ -18,7 +18,7 @@ import numpy as np
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._channels import Reference, cell_statistic, channel_values, combine, paired_moment_channels, reference
-from ._qtest import over_inputs, q_test, replicate_null, student_p
+from ._qtest import over_inputs, q_test, replicate_null
 from ._shots import Model, one_step_shots
 
 
@@ -133,8 +133,8 @@ def layer_level(key, model: Model, meas: Measurement, layer: int, iters: int = 2
 def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None = None, *,
                    own_level: bool = True) -> list[dict]:
     """Per measured layer: the one-step discrepancy (the layer's model fed the measured previous
-    layer, same shot), its se, z and p-value (Student t over inputs of the cells' channel values:
-    the energy channels, and the moment channels when r >= 8).
+    layer, same shot) -- the Q-test of :mod:`._qtest` on the cells' channels (the energy ones,
+    and the moment ones when r >= 8) -- its sd under the model, z and p-value.
 
     own_level : give each layer the noise level that matches its own measured variability
         (:func:`layer_level`, reported as ``s``), so that a misfit elsewhere -- which inflates
@@ -164,8 +164,7 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
         C = cell_statistic(M, jnp.asarray(Y, jnp.float32), paired=True, scales=ref.scales[li])
         if len(ref.channels) > 2:
             C = np.concatenate([C, paired_moment_channels(np.asarray(M, np.float64), Y, ref.split)], axis=1)
-        T = (C * ref.weights[li][None, :C.shape[1]]).mean(axis=1)
-        D, se, p = student_p(T)
-        rows.append({"layer": l, "discrepancy": D, "se": se, "z": D / se if se > 0 else float("nan"), "p_value": p,
-                     "s": level, "level_z": level_z})
+        Q, p, null_mean, null_sd, _ = q_test(C)
+        rows.append({"layer": l, "discrepancy": Q, "se": null_sd, "z": (Q - null_mean) / null_sd if null_sd > 0
+                     else float("nan"), "p_value": p, "s": level, "level_z": level_z})
     return rows

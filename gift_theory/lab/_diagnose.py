@@ -238,7 +238,11 @@ def _check_candidates(names, meas: Measurement) -> list:
     return list(names)
 
 
-def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = None,
+#: runners-up fitted on top of a failing first effect (the greedy second step)
+SECOND = 4
+
+
+def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
              verbose: bool = False) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
@@ -250,8 +254,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         awgn; those that need acquisition times only when the file has them)
     shots : model shots per input (default 4 r)
     second : when the best single effect still fails (p < 0.01), the best ``second``
-        runners-up (default: all) are each fitted on top of it (a greedy forward step, for
-        two missing effects) and ranked with the rest by penalised score
+        runners-up (default 4; None: all) are each fitted on top of it (a greedy forward step,
+        for two missing effects) and ranked with the rest
 
     Returns
     -------
@@ -301,7 +305,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         prior = prior_check(top.model, session.fit_meas)
         top_steps = one_step_check(session.k_step, top.model, meas, own_level=False) if taps else None
     explained, reasons = explanation(top, base_cmp, top_steps, prior)
-    line = verdict_line(explained, reasons, top, base_cmp, mechs, failing)
+    closest = min(ranking, key=lambda c: c.comparison.discrepancy) if ranking else None
+    line = verdict_line(explained, reasons, top, base_cmp, mechs, failing, closest)
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps,
                      signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res),

@@ -35,14 +35,7 @@ import numpy as np
 from scipy import optimize
 
 from .._measurement import Measurement
-from .._model import (
-    forward,
-    layer_step,
-    named_subkey,
-    noisy_input,
-    sample_noise,
-    simulate,
-)
+from .._model import compiled_draws, forward, layer_step, named_subkey, noisy_input, simulate
 from .._params import Layer
 from ..effects import REGISTRY
 from ._shots import Model, params32, tiled_times
@@ -195,7 +188,7 @@ def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: in
     arch, n, r = meas.arch, meas.n, meas.r
     if layer == 1:
         K = 256  # the model's mean response must be much sharper than the measured mean (r shots)
-        noise = sample_noise(key, arch, physics, (n, K), jnp.float32)
+        noise = compiled_draws(key, physics, arch=arch, shape=(n, K), dtype=jnp.float32)
         a = jnp.asarray(meas.x, jnp.float32)[:, None, :]
         t = tiled_times(meas, K)
         Y = meas.layers()[0]
@@ -203,7 +196,7 @@ def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: in
         resid_var = float(np.mean(np.var(Y, axis=1))) / r
         axis = 1
     else:
-        noise = sample_noise(key, arch, physics, (n, r, draws_per_shot), jnp.float32)
+        noise = compiled_draws(key, physics, arch=arch, shape=(n, r, draws_per_shot), dtype=jnp.float32)
         a = jnp.asarray(meas.taps[layer - 2], jnp.float32)[:, :, None, :]
         t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)[:, :, None] * jnp.ones((1, 1, draws_per_shot))
         Y = meas.layers()[layer - 1]
@@ -263,7 +256,7 @@ def _forward_with(deltas, kinds, p32, x, noise, physics, t, arch):
 
 def _joint_setup(key, meas: Measurement, physics):
     K = max(meas.r, 32)
-    noise = sample_noise(key, meas.arch, physics, (meas.n, K), jnp.float32)
+    noise = compiled_draws(key, physics, arch=meas.arch, shape=(meas.n, K), dtype=jnp.float32)
     t = tiled_times(meas, K)
     targets = tuple(jnp.asarray(np.mean(Y, axis=1), jnp.float32) for Y in meas.layers())
     inv_v = tuple(jnp.float32(1.0 / max(float(np.mean(np.var(Y, axis=1))) / meas.r, 1e-12)) for Y in meas.layers())

@@ -52,6 +52,8 @@ class Residuals:
         averaged over its groups of r): the same estimator at the same size, mean zero
     mB, vB : the model's per-cell mean and variance from half B (scales and directions)
     pre : the model's noiseless pre-activation z_l
+    gain_dir : d(noiseless output)/d g of a gain g on the layer's weighted sum at g = 1:
+        sigma'(z) u on a hidden layer, u on the output (u = z - b: the weighted sum)
     t : (n, r) acquisition times or None
     """
 
@@ -67,6 +69,7 @@ class Residuals:
     mB: list
     vB: list
     pre: list
+    gain_dir: list
     t: np.ndarray | None
 
     @property
@@ -98,10 +101,22 @@ class Residuals:
         return [(p - m) / (2 * h) for p, m in zip(*out)]
 
 
+def _gain_direction(model: Model, meas: Measurement, layer: int, pre):
+    """sigma'(z) u (hidden) or u (output), u = z - b_eff: where a common gain moves the layer."""
+    b = np.asarray(model.physics.bias(params32(model.weights(meas))[layer - 1].b, layer, meas.arch.depth), np.float64)
+    u = pre - b[None, :]
+    if layer == meas.arch.depth:
+        return u
+    sigma = meas.arch.sigma
+    h = 1e-3
+    slope = (np.asarray(sigma(jnp.asarray(pre + h)), np.float64) - np.asarray(sigma(jnp.asarray(pre - h)), np.float64)) / (2 * h)
+    return slope * u
+
+
 def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres) -> Residuals:
     r = meas.r
     layers = dict(zip(meas.layer_ids(), meas.layers()))
-    out = {k: [] for k in ("Y", "MA", "MB", "mean_resid", "var_resid", "kurt_resid", "mB", "vB", "pre")}
+    out = {k: [] for k in ("Y", "MA", "MB", "mean_resid", "var_resid", "kurt_resid", "mB", "vB", "pre", "gain_dir")}
     for l, M, pre in zip(layer_ids, Ms, pres):
         Y = layers[l]
         h = M.shape[1] // 2
@@ -121,6 +136,7 @@ def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres) -> Res
         out["mB"].append(mB)
         out["vB"].append(vB)
         out["pre"].append(pre)
+        out["gain_dir"].append(_gain_direction(model, meas, l, pre))
     return Residuals(meas, model, tuple(layer_ids), t=meas.t, **out)
 
 
@@ -183,22 +199,32 @@ def chi_z(zs) -> float:
 
 
 def _design(zpre):
-    """Per neuron: the columns [1, z, z^2 - mean] of the standardised pre-activation, (d, n, 3)."""
+    """Per neuron: the columns [1, z, z^2 - mean, z^3 - fit] of the standardised pre-activation,
+    (d, n, 4): a smooth distortion of a neuron's transfer is a function of its z."""
     zc = (zpre - zpre.mean(0)) / (zpre.std(0) + 1e-12)
-    return np.stack([np.ones_like(zc), zc, zc ** 2 - np.mean(zc ** 2, 0)], axis=-1).transpose(1, 0, 2)
+    z2 = zc ** 2 - np.mean(zc ** 2, 0)
+    z3 = zc ** 3 - zc * np.mean(zc ** 4, 0) / np.maximum(np.mean(zc ** 2, 0), 1e-12)
+    return np.stack([np.ones_like(zc), zc, z2, z3], axis=-1).transpose(1, 0, 2)
 
 
 def _profiles(e, X):
-    """Per neuron j, OLS of e[:, j] on X[j]: coefficients (d, 3) and their z (d, 3)."""
+    """Per neuron j, OLS of e[:, j] on X[j]: coefficients (d, k) and their z (d, k)."""
     betas, zs = [], []
     for j in range(e.shape[1]):
         beta, *_ = np.linalg.lstsq(X[j], e[:, j], rcond=None)
         resid = e[:, j] - X[j] @ beta
-        s2 = float(resid @ resid) / max(e.shape[0] - 3, 1)
+        s2 = float(resid @ resid) / max(e.shape[0] - X.shape[2], 1)
         cov = s2 * np.linalg.pinv(X[j].T @ X[j])
         betas.append(beta)
         zs.append(beta / np.sqrt(np.maximum(np.diag(cov), 1e-300)))
     return np.array(betas), np.array(zs)
+
+
+def _mixed_signs(zs, z_min: float = 2.0) -> float:
+    """How mixed the signs of the significant values are: 1 - |mean sign| over |z| > z_min (1:
+    balanced, 0: all one way; 1 when fewer than three are significant)."""
+    sig = zs[np.abs(zs) > z_min]
+    return 1.0 if sig.size < 3 else float(1.0 - abs(np.mean(np.sign(sig))))
 
 
 def _beyond_profiles(res: Residuals, li: int, X) -> float:
@@ -219,21 +245,25 @@ def _beyond_profiles(res: Residuals, li: int, X) -> float:
 
 
 def _excess_covariance(res: Residuals, li: int) -> np.ndarray:
-    """Per input: the variance of the layer's sum over neurons beyond the sum of the per-neuron
-    variances (a gain shared by the neurons), measured minus model (half A), over the model's
-    (half B) per-neuron variances."""
+    """Per input: the variance of the shots projected on the layer's gain direction beyond the
+    sum of the per-neuron variances along it (a gain shared by the neurons adds a rank-one
+    covariance there), measured minus model (half A), over the model's (half B) variance along it."""
+    g = res.gain_dir[li]
+    w = g / np.sqrt(np.sum(g ** 2, axis=1, keepdims=True) + 1e-300)
+
     def excess(S):
-        return np.var(np.sum(S, -1), axis=1, ddof=1) - np.sum(S.var(1, ddof=1), -1)
-    return (excess(res.Y[li]) - excess(res.MA[li])) / (np.sum(res.vB[li], -1) + 1e-300)
+        return np.var(np.einsum("nkd,nd->nk", S, w), axis=1, ddof=1) - np.sum(w ** 2 * S.var(1, ddof=1), -1)
+    return (excess(res.Y[li]) - excess(res.MA[li])) / (np.sum(w ** 2 * res.vB[li], -1) + 1e-300)
 
 
 def layer_evidence(res: Residuals) -> list[dict]:
     """Per layer of ``res``: how its residuals depart from the model, each departure a z over the
     layer (N(0, 1) or one-sided chi-square on the normal scale under the model).
 
-    ``offset_z``        per-neuron constant shifts of the mean (chi-square over neurons)
-    ``profile_z``       per-neuron slopes and curvatures of the mean residual against the
-                        pre-activation z (chi-square over neurons): a distorted transfer
+    ``offset_z``        per-neuron constant shifts of the mean (chi-square over neurons);
+                        ``offset_mixed`` how mixed their signs are (1 - |mean sign|)
+    ``profile_z``       per-neuron slope, curvature and cubic term of the mean residual against
+                        the pre-activation z (chi-square over neurons): a distorted transfer
     ``common_offset_z``, ``common_slope_z``, ``common_curve_z``
                         the same shared by every neuron of the layer (signed; over inputs)
     ``structure_z``     reproducible mean residual beyond every per-neuron function of z
@@ -250,7 +280,8 @@ def layer_evidence(res: Residuals) -> list[dict]:
         zc = X[:, :, 1].T
         absz = np.abs(zc) - np.mean(np.abs(zc), axis=0)
         row = {"layer": int(l), "neurons": int(e.shape[1]),
-               "offset_z": chi_z(zs[:, 0]), "profile_z": chi_z(zs[:, 1:].ravel()),
+               "offset_z": chi_z(zs[:, 0]), "offset_mixed": _mixed_signs(zs[:, 0]),
+               "profile_z": chi_z(zs[:, 1:].ravel()),
                "common_offset_z": over_inputs(np.sum(e, axis=1)),
                "common_slope_z": over_inputs(np.sum(e * zc, axis=1)),
                "common_curve_z": over_inputs(np.sum(e * X[:, :, 2].T, axis=1)),

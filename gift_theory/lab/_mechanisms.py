@@ -84,7 +84,9 @@ def _with_fit(ctx, cls, score, layers, text):
     return score, layers, text
 
 
-SHAPE = ("common_slope_z", "common_curve_z", "common_offset_z", "profile_z")
+#: a distortion of the transfer shared by the layer's neurons (a per-neuron one, ``profile_z``, is
+#: also what an error of the linear map leaves: it is the weight rule's, not this one's)
+SHAPE = ("common_slope_z", "common_curve_z", "common_offset_z")
 
 
 def rule_activation(ctx):
@@ -113,11 +115,12 @@ def rule_readout(ctx):
 
 
 def rule_bias(ctx):
-    """Per-neuron constant shifts of the mean with no common shape."""
+    """Per-neuron constant shifts of the mean, of either sign (offsets drawn per neuron), with no
+    shape shared by the neurons (a shift all one way is a distorted transfer)."""
     best, where = 0.0, None
     for l, row in ctx.evidence.items():
         common = max(abs(row.get(k, 0.0)) for k in ("common_slope_z", "common_curve_z", "common_offset_z"))
-        v = row.get("offset_z", 0.0) - 0.5 * common
+        v = (row.get("offset_z", 0.0) - 0.5 * common) * min(1.0, 2.0 * row.get("offset_mixed", 1.0))
         if v > best:
             best, where = v, (l, "offset_z")
     layers = [l for l, row in ctx.evidence.items() if row.get("offset_z", 0.0) > THRESHOLD]
@@ -149,12 +152,14 @@ def rule_gain(ctx):
 
 
 def rule_level(ctx):
-    """A layer whose own noise level differs from the jointly fitted one."""
+    """A layer whose own noise level differs from the jointly fitted one, and which passes its
+    one-step check at its own level (its level is all that is wrong there)."""
     best, layer = 0.0, None
+    ok = {l for l in ctx.levels if not ctx.failing or l not in ctx.failing}
     for l, (s_l, z) in ctx.levels.items():
-        if abs(z) > best:
+        if l in ok and abs(z) > best:
             best, layer = abs(z), l
-    layers = [l for l, (_, z) in ctx.levels.items() if abs(z) > THRESHOLD]
+    layers = [l for l, (_, z) in ctx.levels.items() if l in ok and abs(z) > THRESHOLD]
     text = (f"layer {layer}'s own noise level {ctx.levels[layer][0]:.3g} (variance z = {ctx.levels[layer][1]:.1f} "
             f"at the joint level)" if layer is not None else "")
     return _with_fit(ctx, "noise_level", best, layers, text)
@@ -174,16 +179,18 @@ RULES = {
 assert set(RULES) == set(MECHANISMS), "every CONTRACTS §6 class has a rule"
 
 
-def fit_gains(ranking, base_cmp) -> dict:
-    """{class: z}: for each class, how far (in the baseline's sd of Q) its best moment-fitted
-    candidate's held-out discrepancy fell below the baseline's. Offset families are left out:
-    with hundreds of free values they lower the discrepancy whatever the physics."""
+def fit_gains(ranking, base_cmp, alpha: float = 0.01) -> dict:
+    """{class: z}: for each class with a moment-fitted candidate that passes its held-out test,
+    how far (in the baseline's sd of Q) its discrepancy fell below the baseline's. A failing
+    candidate is no evidence for its class (an extra parameter absorbs part of any misfit), and
+    offset families are left out (with hundreds of free values they lower the discrepancy
+    whatever the physics)."""
     from ._fit_offsets import fitted_as_offsets
 
     out = {}
     unit = base_cmp.se if base_cmp.se > 0 else 1.0
     for c in ranking:
-        if len(c.effects) != 1 or fitted_as_offsets(c.effects[0]):
+        if len(c.effects) != 1 or fitted_as_offsets(c.effects[0]) or c.comparison.p_value < alpha:
             continue
         cls = REGISTRY[c.effects[0]].mechanism
         g = (base_cmp.discrepancy - c.comparison.discrepancy) / unit

@@ -124,15 +124,17 @@ def _one_step(key, W, b, a, physics, t, arch, layer, q):
     if layer == 1:
         a = noisy_input(a, noise, physics)
     out = layer_step(W, b, a, noise, physics, arch, layer, t=t)[0]
-    return out.reshape(out.shape[0], -1, out.shape[-1]) if q else out
+    # draw-major: block j holds draw j of every measured shot, so each block of r shots has the
+    # measured input's spread, like the measured shots themselves
+    return jnp.swapaxes(out, 1, 2).reshape(out.shape[0], -1, out.shape[-1]) if q else out
 
 
 def one_step_shots(key, model: Model, meas: Measurement, layer: int, draws: int = 0):
     """The model's layer ``layer`` fed with the *measured* output of the layer before, same
     shot (needs taps for layer >= 2; layer 1 is fed x and the model's input noise).
 
-    Returns (n, r, d_l): model shot k fed measured shot k; with ``draws`` = q > 0, (n, r q, d_l):
-    q model draws per measured shot (shot k's draws at k q .. k q + q - 1)."""
+    Returns (n, r, d_l): model shot k fed measured shot k; with ``draws`` = q > 0, (n, q r, d_l):
+    q model draws per measured shot, draw j of shot k at j r + k."""
     W, b = params32(model.weights(meas))[layer - 1]
     if layer == 1:
         a = jnp.broadcast_to(jnp.asarray(meas.x, jnp.float32)[:, None, :], (meas.n, meas.r, meas.x.shape[1]))

@@ -66,8 +66,10 @@ def explanation(top, baseline_cmp, top_steps=None, prior=()) -> tuple[bool, list
                   f"its fitted values"]
 
 
-def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failing) -> str:
-    """The one plain line of ``gift diagnose``."""
+def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failing, closest=None) -> str:
+    """The one plain line of ``gift diagnose``; ``closest``: the candidate with the lowest
+    held-out discrepancy (what remains is said of it; default ``top``)."""
+    closest = top if closest is None else closest
     if explained:
         if baseline_cmp.p_value >= ALPHA:
             return (f"explained: the awgn model fits the data (p = {baseline_cmp.p_value:.3g}); no physical effect "
@@ -75,9 +77,9 @@ def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failin
         return (f"explained: awgn + {' + '.join(top.effects)} fits the held-out data (p = "
                 f"{top.comparison.p_value:.3g}, discrepancy {top.comparison.discrepancy:.4g} against a floor of "
                 f"{baseline_cmp.noise_floor:.4g})")
-    best = (f"the best model, awgn + {' + '.join(top.effects)}, leaves a discrepancy of "
-            f"{top.comparison.discrepancy:.4g} (p = {top.comparison.p_value:.3g}) against a floor of "
-            f"{baseline_cmp.noise_floor:.4g} +- {baseline_cmp.floor_se:.2g}" if top is not None else "")
+    best = (f"the closest model, awgn + {' + '.join(closest.effects)}, leaves a held-out discrepancy of "
+            f"{closest.comparison.discrepancy:.4g} (p = {closest.comparison.p_value:.3g}) against a floor of "
+            f"{baseline_cmp.noise_floor:.4g} +- {baseline_cmp.floor_se:.2g}" if closest is not None else "")
     where = ""
     if mechanisms:
         parts = [f"{m['mechanism']}" + (f" in layer(s) {', '.join(map(str, m['layers']))}" if m["layers"] else "")
@@ -86,7 +88,8 @@ def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failin
     elif failing:
         where = f"; look at layer(s) {', '.join(map(str, failing))}"
     return ("NOT EXPLAINED: nothing gift knows explains these data -- " + best
-            + ("" if top is None or top.comparison.p_value < ALPHA else f" but {reasons[0]}") + where)
+            + ("" if top is None or top.comparison.p_value < ALPHA else f"; awgn + {' + '.join(top.effects)} passes, "
+               f"but {reasons[0]}") + where)
 
 
 def as_json_fields(explained: bool, reasons, line: str, failing, mechanisms) -> dict:

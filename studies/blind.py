@@ -327,13 +327,15 @@ def summarize(rows, builtin: bool) -> dict:
     return summary
 
 
-def score(folder, limit=None, out=sys.stdout, runner="inprocess", match=None):
+def score(folder, limit=None, out=sys.stdout, runner="inprocess", match=None, keep=None):
     """Run ``gift diagnose`` on every file of ``folder`` and score it from the labels.
 
     Labels come from ``folder/labels.json`` (open study) or, for the built-in study, from each
     file's ``hidden`` keys, which gift never reads. File i (in sorted order) is diagnosed with
     ``--seed i``, so the built-in study's numbers are those of ``diagnose(PRNGKey(i), ...)``;
-    ``match`` scores only the files whose name contains it, with the same seeds as a full run.
+    ``match`` scores only the files whose name contains it, with the same seeds as a full run;
+    ``keep``: a folder to write each file's whole ``gift diagnose --json`` object to
+    (``FILE.json``), for a later look at what the scorer does not read.
     """
     if not os.path.isdir(folder):
         raise ValueError(f"{folder}: no such folder")
@@ -355,6 +357,10 @@ def score(folder, limit=None, out=sys.stdout, runner="inprocess", match=None):
         shape = _shape(path)
         t0 = time.time()
         res, err = run_diagnose(path, i, runner)
+        if keep and res is not None:
+            os.makedirs(keep, exist_ok=True)
+            with open(os.path.join(keep, f[:-4] + ".json"), "w") as fh:
+                json.dump(res, fh)
         row = {"file": f, "physics": label["physics"], "mechanism_label": label["mechanism"],
                "layers_label": label["layers"], "expressible_by": label["expressible_by"], **shape}
         if labels is None:
@@ -397,12 +403,13 @@ def main(argv=None):
                    help="open study: random networks like the built-in study's, or 8-16-8-4, 160 x 48, s = 0.1")
     p.add_argument("--limit", type=int, default=None)
     p.add_argument("--match", default=None, help="score: only files whose name contains this (same seeds as a full run)")
+    p.add_argument("--keep", default=None, metavar="DIR", help="score: also write each diagnose JSON to DIR")
     p.add_argument("--runner", choices=("inprocess", "subprocess"), default="inprocess",
                    help="score: the gift entry point in this process, or one gift process per file")
     a = p.parse_args(argv)
     try:
         if a.what == "score":
-            score(a.folder, a.limit, runner=a.runner, match=a.match)
+            score(a.folder, a.limit, runner=a.runner, match=a.match, keep=a.keep)
         elif a.physics == "open":
             write_open(a.folder, a.files, a.seed, a.taps, tuple(a.only.split(",")), a.nulls, a.setting)
         else:

@@ -183,7 +183,7 @@ def _layer_vg(ds, W, b, a, noise, physics, t, target, inv_v, inv_e2, arch, layer
     return jax.value_and_grad(loss)(ds)
 
 
-def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: int = 8):
+def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: int = 4):
     """Inputs, draws, times and targets of layer ``layer``'s offset fit (taps)."""
     arch, n, r = meas.arch, meas.n, meas.r
     if layer == 1:

@@ -59,7 +59,8 @@ class Model:
     def describe(self) -> str:
         d = self.physics.describe()
         for name, scale in self.offsets.items():
-            d += f" + {name}(scale={scale:.4g}, fitted offsets)"
+            if name not in self.physics:  # a per-neuron parameter shows in the physics itself
+                d += f" + {name}(scale={scale:.4g}, fitted offsets)"
         return d
 
     def weights(self, meas: Measurement) -> tuple:

@@ -166,3 +166,15 @@ def paired_difference_on_mu(key, params_a, params_b, x, y, physics, arch, K2: in
     mean = float(0.5 * (dA.mean() + dB.mean()))
     se = float(np.sqrt(np.sum((dA - dB) ** 2)) / (2 * n))
     return gt.Estimate(mean, se, n, 0.5 * (dA + dB))
+
+
+def trivial_critical_point(arch: gt.Architecture, y, dtype=jnp.float64):
+    """W_l = 0, b_l = 0 (l < L), b_L = mean of y: a critical point of J_s for every s (tanh):
+    R^(l) = 0 below the last layer, and E[R^(L)] = E[y] - b_L = 0, E[R^(L) A^(L-1)^T] = 0
+    because A^(L-1) is then noise independent of y and of N^w,(L)."""
+    layers = []
+    for l in range(1, arch.depth + 1):
+        W = jnp.zeros((arch.widths[l], arch.widths[l - 1]), dtype)
+        b = jnp.asarray(np.mean(y, axis=0), dtype) if l == arch.depth else jnp.zeros((arch.widths[l],), dtype)
+        layers.append(gt.Layer(W, b))
+    return tuple(layers)

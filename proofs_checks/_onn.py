@@ -14,7 +14,8 @@ from jax.flatten_util import ravel_pytree
 import gift_theory as gt
 
 from . import _mc
-from ._record import ALPHA_CHECK
+from ._family import family, theorem1
+from ._record import ALPHA_CHECK, hypothesis
 
 _CACHE: dict = {}
 
@@ -42,15 +43,13 @@ def onn_family(n: int = 1024, K2: int = 16, s0: float = S0, steps: int = 1500):
     (pathwise in s); w0 trains at s0 on the n teacher points (the data measure mu); wt is the
     trivial critical point (W = 0, hidden b = 0, b_L = mean y) of J_s for every s.
     """
-    from ._theorem1 import trivial_critical_point
-
     with jax.enable_x64(True):
         arch = gt.Architecture((3, 4, 2))
         prob = _mc.teacher_problem(jax.random.PRNGKey(11), arch, n=n, s=s0)
         w0 = _mc.train_critical(jax.random.PRNGKey(12), prob, s0, K2=32, steps=steps)
         draws = _mc.draws(jax.random.PRNGKey(13), arch, prob.physics, n, K2)
         flat, unravel = ravel_pytree(w0)
-        wt = trivial_critical_point(arch, prob.y)
+        wt = _mc.trivial_critical_point(arch, prob.y)
         wt_flat = np.asarray(ravel_pytree(wt)[0])
     x = jnp.asarray(prob.x)[:, None, :]
     y = jnp.asarray(prob.y)[:, None, :]
@@ -65,8 +64,6 @@ def onn_family(n: int = 1024, K2: int = 16, s0: float = S0, steps: int = 1500):
 def setup(precise: bool = False, s0: float = S0, st: float = ST) -> Setup:
     """Arch 3-4-2 tanh, 1024 teacher points (the data measure mu), w0 ~ critical point of J_s0,
     Theorem 1 at (s0, st) at :data:`HYPOTHESIS_CONFIDENCE` (``precise``: K2 = 32 draws)."""
-    from ._family import family, theorem1
-
     k = (precise, s0, st)
     if k not in _CACHE:
         J, w0f, wtf, prob, w0, wt = onn_family(K2=32 if precise else 16, s0=s0, steps=3000 if precise else 1500)
@@ -77,8 +74,6 @@ def setup(precise: bool = False, s0: float = S0, st: float = ST) -> Setup:
 
 def hypotheses_of_theorem1(th1: dict) -> list:
     """Theorem 1's hypotheses on the ONN instance, as verified by :func:`proofs_checks.theorem1`."""
-    from ._record import hypothesis
-
     out = [hypothesis(h["name"], h["statement"], h["verified"], str(h["detail"])) for h in th1["hypotheses"]]
     out.append(hypothesis("corrected_condition", "the corrected condition (||v||_2^2 in the numerator)",
                           th1["corrected_condition"] == "holds", th1["corrected_condition"],

@@ -18,9 +18,18 @@ import sympy as sp
 
 import gift_theory as gt
 
-from . import _mc
+from . import _mc, _onn
 from ._family import family, load_family, render, theorem1
-from ._record import decide, fmt, hypothesis, level, record, sign_verdict, symbolic_verdict
+from ._mc import trivial_critical_point as trivial_critical_point
+from ._record import (
+    decide,
+    fmt,
+    hypothesis,
+    level,
+    record,
+    sign_verdict,
+    symbolic_verdict,
+)
 
 
 # --------------------------------------------------------------------------------------
@@ -215,18 +224,6 @@ def theorem1_condition(key=None, precise: bool = False) -> dict:
 # --------------------------------------------------------------------------------------
 # the conclusion: J_st(w_t) < J_st(w0) for the critical points w_t of J_st
 # --------------------------------------------------------------------------------------
-def trivial_critical_point(arch: gt.Architecture, y, dtype=jnp.float64):
-    """W_l = 0, b_l = 0 (l < L), b_L = mean of y: a critical point of J_s for every s (tanh):
-    R^(l) = 0 below the last layer, and E[R^(L)] = E[y] - b_L = 0, E[R^(L) A^(L-1)^T] = 0
-    because A^(L-1) is then noise independent of y and of N^w,(L)."""
-    layers = []
-    for l in range(1, arch.depth + 1):
-        W = jnp.zeros((arch.widths[l], arch.widths[l - 1]), dtype)
-        b = jnp.asarray(np.mean(y, axis=0), dtype) if l == arch.depth else jnp.zeros((arch.widths[l],), dtype)
-        layers.append(gt.Layer(W, b))
-    return tuple(layers)
-
-
 def descent_confirmation(key, st_, lev, K2: int = 128):
     """Paired test with fresh draws (common random numbers) that J_st(w0 - alpha v) < J_st(w0)
     at alpha = C1/(2 C2) of the ONN's Theorem-1 result. Returns (verdict, mean, se, z)."""
@@ -264,8 +261,6 @@ def _points_text(r) -> str:
 
 
 def theorem1_conclusion(key=None, precise: bool = False) -> dict:
-    from . import _onn
-
     key = jax.random.PRNGKey(8) if key is None else key
     lev = level(4)       # ONN: Theorem-1 intervals, criticality of w_t, J_st(w_t) - J_st(w0), descent step
     quartic = theorem1(load_family(_families_path("quartic")), 1, "1.1")

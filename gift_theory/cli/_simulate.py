@@ -36,6 +36,7 @@ def add_arguments(parser):
 def run(args):
     import gift_theory as gt
     from .._io import atomic_write
+    from .._model import named_subkey
     from ..lab import load_weights, save_csv, save_measurement, simulate_measurement
 
     load_plugins(args)
@@ -62,11 +63,11 @@ def run(args):
     else:
         require(args.arch is not None, "gift simulate: give --arch (e.g. 16-32-16-8) or --weights FILE")
         arch = gt.Architecture.parse(args.arch, activation=activation or "tanh")
-        params = gt.init_params(jax.random.fold_in(key, 11), arch, gain=args.gain)
+        params = gt.init_params(named_subkey(key, "weights"), arch, gain=args.gain)
     activation = activation or "tanh"
     require(activation in gt.ACTIVATIONS, f"--activation {activation!r}: known {', '.join(gt.ACTIVATIONS)}")
-    x = np.asarray(jax.random.uniform(jax.random.fold_in(key, 12), (args.inputs, arch.widths[0])), np.float64)
-    meas = simulate_measurement(jax.random.fold_in(key, 13), params, x, physics, shots=args.shots,
+    x = np.asarray(jax.random.uniform(named_subkey(key, "inputs"), (args.inputs, arch.widths[0])), np.float64)
+    meas = simulate_measurement(named_subkey(key, "shots"), params, x, physics, shots=args.shots,
                                 activation=activation, taps=args.taps, times=args.times)
     if args.csv:
         save_csv(out, meas)

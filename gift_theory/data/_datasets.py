@@ -16,51 +16,15 @@ sets. Targets are one-hot vectors (float32); labels are the class indices.
 from __future__ import annotations
 
 import functools
-from typing import NamedTuple
 
 import numpy as np
 
 from .._errors import GiftInputError
+from ._idx import load_mnist_folder
+from ._teacher import teacher_dataset
+from ._types import Dataset, one_hot
 
 DATASETS = ("digits", "mnist5k", "mnist", "teacher")
-
-
-class Dataset(NamedTuple):
-    """A classification (or teacher-regression) data set with a fixed train/test split.
-
-    Attributes
-    ----------
-    name : str
-    x_train : ndarray of shape (n_train, d_0), float32
-    y_train : ndarray of shape (n_train, n_classes), float32 one-hot targets (teacher: outputs)
-    labels_train : ndarray of shape (n_train,), int
-    x_test, y_test, labels_test : the same for the test split
-    meta : dict with ``source`` and ``scaling``
-    """
-
-    name: str
-    x_train: np.ndarray
-    y_train: np.ndarray
-    labels_train: np.ndarray
-    x_test: np.ndarray
-    y_test: np.ndarray
-    labels_test: np.ndarray
-    meta: dict
-
-    @property
-    def n_inputs(self) -> int:
-        return int(self.x_train.shape[1])
-
-    @property
-    def n_outputs(self) -> int:
-        return int(self.y_train.shape[1])
-
-
-def one_hot(labels, n_classes: int) -> np.ndarray:
-    labels = np.asarray(labels, dtype=np.int64)
-    out = np.zeros((labels.shape[0], n_classes), np.float32)
-    out[np.arange(labels.shape[0]), labels] = 1.0
-    return out
 
 
 def _split(name, x, labels, n_test, meta):
@@ -113,9 +77,7 @@ def load_dataset(name: str = "digits", *, folder: str | None = None, **teacher_o
     if name == "mnist":
         if folder is None:
             raise GiftInputError("dataset mnist: name the folder holding the MNIST IDX files (--data-folder DIR)")
-        from ._idx import load_mnist_folder
         return load_mnist_folder(folder)
     if name == "teacher":
-        from ._teacher import teacher_dataset
         return teacher_dataset(**teacher_options)
     raise GiftInputError(f"unknown dataset {name!r}; known: {', '.join(DATASETS)}")

@@ -8,6 +8,7 @@ import os
 import numpy as np
 
 from .._errors import GiftInputError
+from ._types import Dataset, one_hot
 
 FILES = {
     "train_images": "train-images-idx3-ubyte",
@@ -52,7 +53,6 @@ def _find(folder: str, stem: str) -> str:
 
 def load_mnist_folder(folder: str):
     """The full MNIST (60000 / 10000) from IDX files in ``folder``, scaled to [0, 1]."""
-    from ._datasets import Dataset, one_hot
 
     if not os.path.isdir(folder):
         raise GiftInputError(f"{folder}: no such folder (expected the MNIST IDX files there)")

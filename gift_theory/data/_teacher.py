@@ -15,6 +15,7 @@ import numpy as np
 from .._arch import Architecture
 from .._errors import require
 from .._params import init_params
+from ._types import Dataset
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,7 +78,6 @@ class Teacher:
 
 def teacher_dataset(n_train: int = 2000, n_test: int = 1000, **teacher):
     """A fixed train/test draw from :class:`Teacher` as a :class:`Dataset` (labels: argmax)."""
-    from ._datasets import Dataset
 
     t = Teacher(**teacher)
     xtr, ytr = t.sample(jax.random.PRNGKey(10_000 + t.seed), n_train)

@@ -10,7 +10,10 @@ The walk is the sequence of callee modules of those calls (repeats in a row coll
 classes (the data types' accessors, ``Measurement.layers``) are not counted as entries. A pipeline
 that reads top-down as stages enters each stage once per candidate model it scores; the
 count is printed per module and in total, with ``--candidates`` fixing how many candidate
-effects are fitted (one by default, so loops over candidates do not inflate the count).
+effects are fitted (one by default, so loops over candidates do not inflate the count). Also
+printed: the walk of the pipeline's own calls (those made by ``lab._diagnose``, the stages in
+the order it runs them), and every call against the stage order (a stage calling one that
+runs after it; :data:`ORDER`).
 """
 
 from __future__ import annotations
@@ -19,6 +22,13 @@ import argparse
 import collections
 import json
 import sys
+
+
+#: the pipeline's module and the order of its stages (issue 15's layout; unknown modules are not ranked)
+PIPELINE = "gift_theory.lab._diagnose"
+ORDER = tuple(f"gift_theory.lab.{m}" for m in ("_io", "_shots", "_qtest", "_channels", "_compare", "_fit_moments",
+                                               "_fit_offsets", "_fit", "_localise", "_mechanisms", "_verdict",
+                                               "_diagnose"))
 
 
 def _module(frame) -> str | None:
@@ -43,7 +53,7 @@ def walk(taps: bool = True, candidates=("shot",)) -> dict:
     x = jax.random.uniform(jax.random.PRNGKey(2), (60, 4))
     physics = gt.Physics.create(s=0.1, shot=0.02)
     meas = lab.simulate_measurement(jax.random.PRNGKey(3), params, x, physics, shots=16, taps=taps)
-    seq = []
+    seq, driver, edges = [], [], set()
 
     def prof(frame, event, arg):
         if event != "call":
@@ -52,21 +62,35 @@ def walk(taps: bool = True, candidates=("shot",)) -> dict:
         if callee is None or frame.f_back is None or _is_method(frame.f_code):
             return
         caller = frame.f_back.f_globals.get("__name__", "")
-        if caller != callee and (not seq or seq[-1] != callee):
-            seq.append(callee)
+        if caller != callee:
+            if caller.startswith("gift_theory.lab"):
+                edges.add((caller, callee))
+            if not seq or seq[-1] != callee:
+                seq.append(callee)
+            if caller == PIPELINE and (not driver or driver[-1] != callee):
+                driver.append(callee)
 
     sys.setprofile(prof)
     try:
         lab.diagnose(jax.random.PRNGKey(0), meas, candidates=list(candidates), second=0)
     finally:
         sys.setprofile(None)
-    seen, returns, per = set(), 0, collections.Counter()
-    for m in seq:
-        per[m] += 1
-        if m in seen:
-            returns += 1
-        seen.add(m)
-    return {"walk": seq, "entries": dict(per), "returns": returns, "modules": len(seen)}
+    def count(walk):
+        seen, returns, per = set(), 0, collections.Counter()
+        for m in walk:
+            per[m] += 1
+            returns += m in seen
+            seen.add(m)
+        return dict(per), returns, len(seen)
+
+    per, returns, modules = count(seq)
+    dper, dreturns, _ = count(driver)
+    # a call against the pipeline's order (a stage calling one that runs after it), where an order is known
+    order = {m: i for i, m in enumerate(ORDER)}
+    upward = sorted(f"{a.rsplit('.', 1)[-1]} -> {b.rsplit('.', 1)[-1]}" for a, b in edges
+                    if a in order and b in order and order[b] > order[a])
+    return {"walk": seq, "entries": per, "returns": returns, "modules": modules, "driver_walk": driver,
+            "driver_entries": dper, "driver_returns": dreturns, "upward_calls": upward}
 
 
 def main(argv=None) -> int:
@@ -82,6 +106,8 @@ def main(argv=None) -> int:
         print(" -> ".join(m.rsplit(".", 1)[-1] for m in r["walk"]))
         print(f"entries per module: {r['entries']}")
         print(f"returns to a module already left: {r['returns']} ({r['modules']} modules)")
+        print("the pipeline's own calls: " + " -> ".join(m.rsplit(".", 1)[-1] for m in r["driver_walk"]))
+        print(f"  returns there: {r['driver_returns']}; calls against the stage order: {r['upward_calls'] or 'none'}")
     return 0
 
 

@@ -17,7 +17,14 @@ import numpy as np
 
 from .._measurement import Measurement
 from .._model import named_subkey
-from ._channels import Reference, cell_statistic, channel_values, combine, paired_moment_channels, reference
+from ._channels import (
+    Reference,
+    cell_statistic,
+    channel_values,
+    combine,
+    paired_moment_channels,
+    reference,
+)
 from ._qtest import over_inputs, q_test, replicate_null
 from ._shots import Model, one_step_shots
 
@@ -168,3 +175,10 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
         rows.append({"layer": l, "discrepancy": Q, "se": null_sd, "z": (Q - null_mean) / null_sd if null_sd > 0
                      else float("nan"), "p_value": p, "s": level, "level_z": level_z})
     return rows
+
+
+def failing_layers(rows, alpha: float = 0.01) -> list[int]:
+    """Layers whose one-step check fails at ``alpha`` with Bonferroni over the layers checked."""
+    if not rows:
+        return []
+    return sorted(int(r["layer"]) for r in rows if r["p_value"] < alpha / len(rows))

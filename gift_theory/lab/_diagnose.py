@@ -34,18 +34,33 @@ from .._errors import GiftInputError
 from .._measurement import Measurement
 from ..effects import BUILTIN, REGISTRY
 from ._channels import Reference, channel_values, reference
-from ._compare import Comparison, compare, one_step_check
-from ._fit import fit_model, split_inputs
+from ._compare import Comparison, compare, failing_layers, one_step_check
+from ._fit import fit_model
 from ._fit_moments import MomentProblem
 from ._fit_offsets import effective_dof, fitted_as_offsets, kinds_of, offset_replicates
-from ._fit_offsets import prior_check
-from ._localise import layer_evidence, one_step_residuals, residuals, signatures, where_it_fails
+from ._localise import (
+    layer_evidence,
+    one_step_residuals,
+    residuals,
+    signatures,
+    where_it_fails,
+)
 from ._mechanisms import Context, fit_gains, mechanisms
-from ._verdict import as_json_fields, explanation, failing_layers, verdict_line
 from ._shots import Model
+from ._verdict import as_json_fields, verdict
 
 #: the significance level of the goodness-of-fit test (CONTRACTS §4)
 ALPHA = 0.01
+
+
+def split_inputs(key, n: int, frac: float = 0.5):
+    """Random disjoint (fit, held-out) index arrays over ``n`` inputs."""
+    if n < 4:
+        raise GiftInputError(f"measurement has {n} inputs; fitting and held-out scoring need at least 4")
+    perm = np.asarray(jax.random.permutation(key, n))
+    k = n - int(round(n * (1 - frac)))  # held-out half n // 2 (equal halves share compiled shapes)
+    k = min(max(k, 2), n - 2)
+    return np.sort(perm[:k]), np.sort(perm[k:])
 
 
 def default_candidates(meas: Measurement) -> list[str]:
@@ -295,21 +310,14 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     res = residuals(session.k_step, base, meas, shots)
     local = one_step_residuals(session.k_step, base, meas, {r["layer"]: r["s"] for r in steps}) if taps else res
     evidence = layer_evidence(local)
+    sigs, where = signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res)
     # name mechanisms, then the verdict
     ctx = Context({row["layer"]: row for row in evidence}, meas.arch.depth, taps, failing,
                   fit_gains(ranking, base_cmp), {r["layer"]: (r["s"], r["level_z"]) for r in steps})
     mechs = mechanisms(ctx)
-    top = ranking[0] if ranking else None
-    prior, top_steps = (), None
-    if top is not None and base_cmp.p_value < ALPHA and top.comparison.p_value >= ALPHA:
-        prior = prior_check(top.model, session.fit_meas)
-        top_steps = one_step_check(session.k_step, top.model, meas, own_level=False) if taps else None
-    explained, reasons = explanation(top, base_cmp, top_steps, prior)
-    closest = min(ranking, key=lambda c: c.comparison.discrepancy) if ranking else None
-    line = verdict_line(explained, reasons, top, base_cmp, mechs, failing, closest)
+    explained, reasons, line = verdict(session.k_step, ranking, base_cmp, session.fit_meas, meas, mechs, failing)
     _log(line, verbose)
-    return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps,
-                     signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res),
+    return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),
                      tuple(evidence))
 

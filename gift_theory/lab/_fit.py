@@ -9,25 +9,12 @@ parameters by simulated moment matching over the values it proposes (``search``:
 
 from __future__ import annotations
 
-import jax
-import numpy as np
-
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from ..effects import REGISTRY, Physics, make_effect
 from ._fit_moments import MomentProblem, fit_moments
 from ._fit_offsets import fit_offsets, fitted_as_offsets
 from ._shots import Model
-
-
-def split_inputs(key, n: int, frac: float = 0.5):
-    """Random disjoint (fit, held-out) index arrays over ``n`` inputs."""
-    if n < 4:
-        raise GiftInputError(f"measurement has {n} inputs; fitting and held-out scoring need at least 4")
-    perm = np.asarray(jax.random.permutation(key, n))
-    k = n - int(round(n * (1 - frac)))  # held-out half n // 2 (equal halves share compiled shapes)
-    k = min(max(k, 2), n - 2)
-    return np.sort(perm[:k]), np.sort(perm[k:])
 
 
 def check_addable(name: str, physics, meas: Measurement, where: str = "--add") -> None:

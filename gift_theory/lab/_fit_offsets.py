@@ -35,7 +35,14 @@ import numpy as np
 from scipy import optimize
 
 from .._measurement import Measurement
-from .._model import compiled_draws, forward, layer_step, named_subkey, noisy_input, simulate
+from .._model import (
+    compiled_draws,
+    forward,
+    layer_step,
+    named_subkey,
+    noisy_input,
+    simulate,
+)
 from .._params import Layer
 from ..effects import REGISTRY
 from ._shots import Model, params32, tiled_times

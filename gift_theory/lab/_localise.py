@@ -31,7 +31,14 @@ from .._measurement import Measurement
 from .._model import forward, named_subkey
 from ..effects import REGISTRY
 from ._qtest import over_inputs
-from ._shots import Model, model_shots, noiseless_pre, one_step_pre, one_step_shots, params32
+from ._shots import (
+    Model,
+    model_shots,
+    noiseless_pre,
+    one_step_pre,
+    one_step_shots,
+    params32,
+)
 
 
 def _kurt(A):

@@ -25,16 +25,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._compare import failing_layers, one_step_check
+from ._fit_offsets import prior_check
+
 ALPHA = 0.01
 #: the z beyond which fitted offsets are not the effect's own (a structure the prior excludes)
 PRIOR_Z = 4.0
-
-
-def failing_layers(rows, alpha: float = ALPHA) -> list[int]:
-    """Layers whose one-step check fails at ``alpha`` with Bonferroni over the layers checked."""
-    if not rows:
-        return []
-    return sorted(int(r["layer"]) for r in rows if r["p_value"] < alpha / len(rows))
 
 
 def explanation(top, baseline_cmp, top_steps=None, prior=()) -> tuple[bool, list[str]]:
@@ -96,3 +92,17 @@ def as_json_fields(explained: bool, reasons, line: str, failing, mechanisms) -> 
     return {"explained": bool(explained), "verdict": line, "reasons": list(reasons),
             "failing_layers": None if failing is None else [int(l) for l in failing],
             "mechanisms": [dict(m, score=float(np.round(m["score"], 3))) for m in mechanisms]}
+
+
+def verdict(key, ranking, baseline_cmp, fit_meas, meas, mechanisms, failing) -> tuple[bool, list, str]:
+    """``(explained, reasons, line)`` of a diagnosis: the rule of this module on the top-ranked
+    model (its fitted offsets checked against their prior on the fitting inputs; with taps, its
+    one-step check on every input), and the plain line naming the closest model."""
+    top = ranking[0] if ranking else None
+    prior, top_steps = (), None
+    if top is not None and baseline_cmp.p_value < ALPHA and top.comparison.p_value >= ALPHA:
+        prior = prior_check(top.model, fit_meas)
+        top_steps = one_step_check(key, top.model, meas, own_level=False) if meas.has_taps else None
+    explained, reasons = explanation(top, baseline_cmp, top_steps, prior)
+    closest = min(ranking, key=lambda c: c.comparison.discrepancy) if ranking else None
+    return explained, reasons, verdict_line(explained, reasons, top, baseline_cmp, mechanisms, failing, closest)

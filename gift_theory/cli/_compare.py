@@ -21,6 +21,7 @@ def run(args):
     from ..lab import compare_measurement, where_it_fails
     from ..lab._figures import heatmaps
 
+    meas = load(args)  # plugins first: --effect may name one
     physics = None
     if args.effect:
         specs = list(args.effect)
@@ -31,7 +32,6 @@ def run(args):
         if offsets:
             raise gt.GiftInputError(f"--effect {offsets[0]}: a model cannot know the device's fixed draws; "
                                     f"use gift fit --add {offsets[0]} (fitted offsets)")
-    meas = load(args)
     res = compare_measurement(key(args), meas, physics, shots=args.shots)
     model, c = res["model"], res["comparison"]
     out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": res["fitted"]},

@@ -176,3 +176,49 @@ def test_diagnose_json_says_explained_failing_layers_and_mechanisms(tmp_path, ca
             assert out["mechanisms"][0]["mechanism"] == "activation_mismatch"
         else:
             assert out["failing_layers"] is None
+
+
+PLUGIN = '''
+from gift_theory.effects import Effect, register
+
+
+@register
+class ActShapeCli(Effect):
+    a2: float = 0.0
+    name = "act_shape_cli"
+    params = ("a2",)
+    bounds = {"a2": (-0.5, 0.5)}
+    defaults = {"a2": 0.0}
+    stage = "activation"
+    layers = "hidden"
+    mechanism = "activation_mismatch"
+
+    def activation(self, z, sigma, layer):
+        h = sigma(z)
+        return h + self.a2 * h ** 2
+'''
+
+
+def test_plugin_flag_on_simulate_compare_and_diagnose(tmp_path, capsys):
+    plugin = tmp_path / "act_shape_cli.py"
+    plugin.write_text(PLUGIN)
+    path = tmp_path / "s.npz"
+    try:
+        assert main(["simulate", "--plugin", str(plugin), "--arch", "4-6-3", "--inputs", "40", "--shots", "8",
+                     "--effect", "awgn=0.1", "--effect", "act_shape_cli=-0.2", "--taps", "--out", str(path),
+                     "--json"]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert out["effects"] == ["awgn", "act_shape_cli"] and out["params"]["a2"] == -0.2
+        # the true model, plugin included, passes; the plugin is a name like any other
+        assert main(["compare", str(path), "--plugin", str(plugin), "--effect", "awgn=0.1",
+                     "--effect", "act_shape_cli=-0.2", "--json"]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert out["model"]["effects"] == ["awgn", "act_shape_cli"] and out["p_value"] >= 1e-3
+    finally:
+        unregister("act_shape_cli")
+    # a bad plugin stops diagnose before any work: one line, exit 2
+    bad = tmp_path / "bad.py"
+    bad.write_text("from gift_theory.effects import register\nraise RuntimeError('no laser')\n")
+    assert main(["diagnose", str(path), "--plugin", str(bad), "--json"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(str(bad)) and "no laser" in err[0]

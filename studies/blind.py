@@ -215,6 +215,11 @@ def run_diagnose(path, seed: int, runner: str = "inprocess"):
         buf, ebuf = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(ebuf):
             rc = entry.load()(argv)
+        # every file has its own shapes: drop their compiled programs (tens of thousands of
+        # memory maps pile up over a study and XLA then fails to allocate)
+        import jax
+
+        jax.clear_caches()
         stdout, err = buf.getvalue(), (ebuf.getvalue().strip().splitlines() or [""])[-1]
     if rc != 0:
         return None, f"gift diagnose exit {rc}: {err}"

@@ -61,6 +61,8 @@ class Residuals:
     pre : the model's noiseless pre-activation z_l
     gain_dir : d(noiseless output)/d g of a gain g on the layer's weighted sum at g = 1:
         sigma'(z) u on a hidden layer, u on the output (u = z - b: the weighted sum)
+    slope : d(noiseless output)/dz: sigma'(z) on a hidden layer, 1 on the output (the direction a
+        shift of the bias moves the mean)
     t : (n, r) acquisition times or None
     """
 
@@ -77,6 +79,7 @@ class Residuals:
     vB: list
     pre: list
     gain_dir: list
+    slope: list
     t: np.ndarray | None
 
     @property
@@ -108,22 +111,24 @@ class Residuals:
         return [(p - m) / (2 * h) for p, m in zip(*out)]
 
 
-def _gain_direction(model: Model, meas: Measurement, layer: int, pre):
-    """sigma'(z) u (hidden) or u (output), u = z - b_eff: where a common gain moves the layer."""
+def _directions(model: Model, meas: Measurement, layer: int, pre):
+    """``(gain_dir, slope)`` of :class:`Residuals` for one layer: sigma'(z) u and sigma'(z) (hidden),
+    u and 1 (output), u = z - b_eff the weighted sum."""
     b = np.asarray(model.physics.bias(params32(model.weights(meas))[layer - 1].b, layer, meas.arch.depth), np.float64)
     u = pre - b[None, :]
     if layer == meas.arch.depth:
-        return u
+        return u, np.ones_like(u)
     sigma = meas.arch.sigma
     h = 1e-3
     slope = (np.asarray(sigma(jnp.asarray(pre + h)), np.float64) - np.asarray(sigma(jnp.asarray(pre - h)), np.float64)) / (2 * h)
-    return slope * u
+    return slope * u, slope
 
 
 def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres) -> Residuals:
     r = meas.r
     layers = dict(zip(meas.layer_ids(), meas.layers()))
-    out = {k: [] for k in ("Y", "MA", "MB", "mean_resid", "var_resid", "kurt_resid", "mB", "vB", "pre", "gain_dir")}
+    out = {k: [] for k in ("Y", "MA", "MB", "mean_resid", "var_resid", "kurt_resid", "mB", "vB", "pre", "gain_dir",
+                           "slope")}
     for l, M, pre in zip(layer_ids, Ms, pres):
         Y = layers[l]
         h = M.shape[1] // 2
@@ -143,7 +148,9 @@ def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres) -> Res
         out["mB"].append(mB)
         out["vB"].append(vB)
         out["pre"].append(pre)
-        out["gain_dir"].append(_gain_direction(model, meas, l, pre))
+        g, sl = _directions(model, meas, l, pre)
+        out["gain_dir"].append(g)
+        out["slope"].append(sl)
     return Residuals(meas, model, tuple(layer_ids), t=meas.t, **out)
 
 
@@ -234,11 +241,29 @@ def _mixed_signs(zs, z_min: float = 2.0) -> float:
     return 1.0 if sig.size < 3 else float(1.0 - abs(np.mean(np.sign(sig))))
 
 
+def _bias_fit(e, slope):
+    """Per neuron, the mean residual as a multiple of the layer's slope sigma'(z) (what a bias
+    offset does): the coefficients' z (d,)."""
+    zs = []
+    for j in range(e.shape[1]):
+        x = slope[:, j]
+        xx = float(x @ x)
+        if xx <= 0:
+            zs.append(0.0)
+            continue
+        c = float(x @ e[:, j]) / xx
+        resid = e[:, j] - c * x
+        s2 = float(resid @ resid) / max(e.shape[0] - 1, 1)
+        zs.append(c / np.sqrt(max(s2 / xx, 1e-300)))
+    return np.array(zs)
+
+
 def _beyond_profiles(res: Residuals, li: int, X) -> float:
     """Reproducible mean residual that no per-neuron function of z explains (a linear-map
     error): the two halves of the measured shots give residual means ra, rb against disjoint
     model halves; each is projected off the neuron's profile design; sum of ra . rb over inputs
-    and neurons, self-normalised (zero mean under the model: the halves are independent)."""
+    and neurons per input, tested over inputs (zero mean under the model: the halves are
+    independent; a self-normalised sum would be capped at sqrt(n) and lose to any chi-square)."""
     Y, MA, MB, vB = res.Y[li], res.MA[li], res.MB[li], res.vB[li]
     h = Y.shape[1] // 2
     se = np.sqrt(vB * (1.0 / max(h, 1) + 1.0 / MA.shape[1]) + 1e-300)
@@ -248,7 +273,7 @@ def _beyond_profiles(res: Residuals, li: int, X) -> float:
     for j in range(Y.shape[2]):
         P = X[j] @ np.linalg.pinv(X[j])
         T += (ra[:, j] - P @ ra[:, j]) * (rb[:, j] - P @ rb[:, j])
-    return float(np.sum(T) / np.sqrt(np.sum(T ** 2) + 1e-300))
+    return over_inputs(T)
 
 
 def _excess_covariance(res: Residuals, li: int) -> np.ndarray:
@@ -269,10 +294,14 @@ def layer_evidence(res: Residuals) -> list[dict]:
 
     ``offset_z``        per-neuron constant shifts of the mean (chi-square over neurons);
                         ``offset_mixed`` how mixed their signs are (1 - |mean sign|)
+    ``bias_z``          per-neuron shifts of the mean along sigma'(z) -- what a shifted bias does
+                        (chi-square over neurons; ``bias_mixed`` their signs' mix), and
+                        ``bias_rest_z`` the reproducible residual beyond them
     ``profile_z``       per-neuron slope, curvature and cubic term of the mean residual against
                         the pre-activation z (chi-square over neurons): a distorted transfer
     ``common_offset_z``, ``common_slope_z``, ``common_curve_z``
-                        the same shared by every neuron of the layer (signed; over inputs)
+                        the same shared by every neuron of the layer (signed; over inputs), and
+                        ``slope_mixed``, ``curve_mixed`` how mixed the per-neuron signs are
     ``structure_z``     reproducible mean residual beyond every per-neuron function of z
     ``var_level_z``     excess variance, ``var_abs_z`` excess variance along |z| (signed)
     ``kurt_z``          excess kurtosis at equal sample size (signed)
@@ -286,9 +315,13 @@ def layer_evidence(res: Residuals) -> list[dict]:
         betas, zs = _profiles(e, X)
         zc = X[:, :, 1].T
         absz = np.abs(zc) - np.mean(np.abs(zc), axis=0)
+        bz = _bias_fit(e, res.slope[li])
         row = {"layer": int(l), "neurons": int(e.shape[1]),
                "offset_z": chi_z(zs[:, 0]), "offset_mixed": _mixed_signs(zs[:, 0]),
+               "bias_z": chi_z(bz), "bias_mixed": _mixed_signs(bz),
+               "bias_rest_z": _beyond_profiles(res, li, res.slope[li].T[:, :, None]),
                "profile_z": chi_z(zs[:, 1:].ravel()),
+               "slope_mixed": _mixed_signs(zs[:, 1]), "curve_mixed": _mixed_signs(zs[:, 2]),
                "common_offset_z": over_inputs(np.sum(e, axis=1)),
                "common_slope_z": over_inputs(np.sum(e * zc, axis=1)),
                "common_curve_z": over_inputs(np.sum(e * X[:, :, 2].T, axis=1)),

@@ -73,6 +73,32 @@ def _best(ctx, keys, hidden=None, absolute=True):
     return best, where
 
 
+def _shared(row, keys=None):
+    """The strongest distortion shared by the layer's neurons: each common component, weighed by
+    how consistently the neurons' own coefficients agree in sign (a sum over neurons of
+    random-sign shifts -- what a weight error or a fluctuating gain leaves -- is not shared)."""
+    best, key = 0.0, None
+    for k, mix in (("common_offset_z", "offset_mixed"), ("common_slope_z", "slope_mixed"),
+                   ("common_curve_z", "curve_mixed")):
+        if keys is not None and k not in keys:
+            continue
+        v = abs(row.get(k, 0.0)) * max(0.0, 1.0 - 2.0 * row.get(mix, 0.0))
+        if v > best:
+            best, key = v, k
+    return best, key
+
+
+def _best_shared(ctx, hidden):
+    best, where = 0.0, None
+    for l, row in ctx.evidence.items():
+        if hidden is True and l == ctx.depth or hidden is False and l != ctx.depth:
+            continue
+        v, k = _shared(row)
+        if v > best:
+            best, where = v, (l, k)
+    return best, where
+
+
 def _line(where, score, extra=""):
     return f"{where[1].replace('_z', '')} z = {score:.1f} at layer {where[0]}{extra}" if where else extra
 
@@ -84,22 +110,17 @@ def _with_fit(ctx, cls, score, layers, text):
     return score, layers, text
 
 
-#: a distortion of the transfer shared by the layer's neurons (a per-neuron one, ``profile_z``, is
-#: also what an error of the linear map leaves: it is the weight rule's, not this one's)
-SHAPE = ("common_slope_z", "common_curve_z", "common_offset_z")
-
-
 def rule_activation(ctx):
     """Hidden layers whose mean response is a distorted function of the pre-activation."""
     hidden = list(range(1, ctx.depth))
     if not hidden:
         return None
     if ctx.taps:
-        score, where = _best(ctx, SHAPE, hidden=True)
-        layers = _layers_where(ctx, SHAPE, hidden=True)
+        score, where = _best_shared(ctx, hidden=True)
+        layers = [l for l, row in ctx.evidence.items() if l < ctx.depth and _shared(row)[0] > THRESHOLD]
         return _with_fit(ctx, "activation_mismatch", score, layers,
-                         _line(where, score, " (mean residual against the pre-activation)"))
-    score, where = _best(ctx, SHAPE, hidden=False)
+                         _line(where, score, " (a distortion of the transfer shared by the neurons)"))
+    score, where = _best_shared(ctx, hidden=False)
     return _with_fit(ctx, "activation_mismatch", 0.5 * score, hidden,
                      _line(where, score, " at the output (hidden layers cannot be seen without taps)"))
 
@@ -107,7 +128,7 @@ def rule_activation(ctx):
 def rule_readout(ctx):
     """The output's mean response is a distorted function of its own pre-activation -- with taps,
     while the hidden layers respond as modelled."""
-    score, where = _best(ctx, SHAPE, hidden=False)
+    score, where = _best_shared(ctx, hidden=False)
     if ctx.taps and ctx.failing and any(l < ctx.depth for l in ctx.failing):
         score *= 0.5  # hidden layers fail too: the output's distortion may be inherited
     return _with_fit(ctx, "readout_nonlinearity", score, [ctx.depth] if score > THRESHOLD else [],
@@ -120,11 +141,16 @@ def rule_bias(ctx):
     best, where = 0.0, None
     for l, row in ctx.evidence.items():
         common = max(abs(row.get(k, 0.0)) for k in ("common_slope_z", "common_curve_z", "common_offset_z"))
-        v = (row.get("offset_z", 0.0) - 0.5 * common) * min(1.0, 2.0 * row.get("offset_mixed", 1.0))
+        z = row.get("bias_z", row.get("offset_z", 0.0))
+        mixed = row.get("bias_mixed", row.get("offset_mixed", 1.0))
+        # what a shifted bias leaves is a multiple of sigma'(z) per neuron: a reproducible rest is
+        # the linear map's (a weight error shifts the means too), a shared shape the transfer's
+        v = (z - 0.5 * common - max(row.get("bias_rest_z", 0.0), 0.0)) * min(1.0, 2.0 * mixed)
         if v > best:
-            best, where = v, (l, "offset_z")
-    layers = [l for l, row in ctx.evidence.items() if row.get("offset_z", 0.0) > THRESHOLD]
-    return _with_fit(ctx, "bias_offset", best, layers, _line(where, best, " (per-neuron shifts, no shared shape)"))
+            best, where = v, (l, "bias_z" if "bias_z" in row else "offset_z")
+    layers = [l for l, row in ctx.evidence.items() if row.get("bias_z", row.get("offset_z", 0.0)) > THRESHOLD]
+    return _with_fit(ctx, "bias_offset", best, layers,
+                     _line(where, best, " (per-neuron shifts along sigma'(z), either sign, nothing left over)"))
 
 
 def rule_weight(ctx):
@@ -179,18 +205,23 @@ RULES = {
 assert set(RULES) == set(MECHANISMS), "every CONTRACTS §6 class has a rule"
 
 
-def fit_gains(ranking, base_cmp, alpha: float = 0.01) -> dict:
-    """{class: z}: for each class with a moment-fitted candidate that passes its held-out test,
-    how far (in the baseline's sd of Q) its discrepancy fell below the baseline's. A failing
-    candidate is no evidence for its class (an extra parameter absorbs part of any misfit), and
+def fit_gains(ranking, base_cmp, alpha: float = 0.01, share: float = 0.5) -> dict:
+    """{class: z}: for each class with a moment-fitted candidate that passes its held-out test or
+    removes at least ``share`` of the baseline's excess over the noise floor, how far (in the
+    baseline's sd of Q) its discrepancy fell below the baseline's. A candidate that removes
+    less is no evidence for its class (an extra parameter absorbs part of any misfit), and
     offset families are left out (with hundreds of free values they lower the discrepancy
     whatever the physics)."""
     from ._fit_offsets import fitted_as_offsets
 
     out = {}
     unit = base_cmp.se if base_cmp.se > 0 else 1.0
+    excess = base_cmp.discrepancy - base_cmp.noise_floor
     for c in ranking:
-        if len(c.effects) != 1 or fitted_as_offsets(c.effects[0]) or c.comparison.p_value < alpha:
+        if len(c.effects) != 1 or fitted_as_offsets(c.effects[0]):
+            continue
+        removed = (base_cmp.discrepancy - c.comparison.discrepancy) / excess if excess > 0 else 0.0
+        if c.comparison.p_value < alpha and removed < share:
             continue
         cls = REGISTRY[c.effects[0]].mechanism
         g = (base_cmp.discrepancy - c.comparison.discrepancy) / unit

@@ -166,7 +166,8 @@ def _lab(args, hidden) -> dict:
     out = d.as_json()
     return {"chip": physics.describe(), "file": path, "baseline": out["baseline"],
             "missing_effect_detected": out["missing_effect_detected"], "ranking": out["ranking"][:3],
-            "seconds": time.perf_counter() - t0}
+            "explained": out["explained"], "verdict": out["verdict"], "failing_layers": out["failing_layers"],
+            "mechanisms": out["mechanisms"][:2], "seconds": time.perf_counter() - t0}
 
 
 def _curve(args, rows):
@@ -263,8 +264,12 @@ def render(result) -> str:
                   "  most likely missing (fitted, scored on held-out inputs):"]
         for i, r in enumerate(lab["ranking"], 1):
             name = " + ".join(r.get("with", []) + [r["effect"]])
-            ps = ", ".join(f"{k}={v:.3g}" for k, v in r["params"].items())
+            ps = ", ".join(f"{k}={v:.3g}" for k, v in r["params"].items() if isinstance(v, (int, float)))
             lines.append(f"   {i}. {name:<24s} discrepancy {r['discrepancy_after']:8.4g}  p = {r['p_value_after']:.3g}  ({ps})")
+        if lab.get("failing_layers") is not None:
+            lines.append(f"  layers failing their one-step check: {', '.join(map(str, lab['failing_layers'])) or 'none'}; "
+                         f"mechanism: " + (", ".join(m["mechanism"] for m in lab.get("mechanisms", [])) or "none"))
+        lines.append(f"  {lab['verdict']}")
         if lab.get("file"):
             lines.append(f"  the measurement: {lab['file']} (gift diagnose / gift fit --add NAME on it)")
     lines.append(f"total {result['seconds']:.0f} s")

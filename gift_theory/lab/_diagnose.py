@@ -321,7 +321,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     sigs, where = signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res)
     # name mechanisms, then the verdict
     ctx = Context({row["layer"]: row for row in evidence}, meas.arch.depth, taps, failing,
-                  fit_gains(ranking, base_cmp), {r["layer"]: (r["s"], r["level_z"]) for r in steps})
+                  fit_gains(ranking, base_cmp, session.fit_meas), {r["layer"]: (r["s"], r["level_z"]) for r in steps})
     mechs = mechanisms(ctx)
     explained, reasons, line = verdict(session.k_step, ranking, base_cmp, session.fit_meas, meas, mechs, failing)
     _log(line, verbose)

@@ -32,7 +32,7 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from .._measurement import Measurement
 from .._model import (
@@ -579,9 +579,13 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
 # ---- is the fitted model its own effect? --------------------------------------------------------
 
 def prior_check(model: Model, meas: Measurement) -> list[dict]:
-    """Do the fitted weight offsets look like ``weight_error``'s prior -- E iid N(0, e^2), drawn
-    independently of the programmed W? Two tests per layer, each a z (one-sided where the
-    alternative is one-sided):
+    """Do the fitted offsets look like their effect's prior -- E iid N(0, e^2) drawn
+    independently of the programmed W (``weight_error``), delta iid N(0, sigma^2)
+    (``bias_offset``)? Tests per layer, each a z:
+
+    ``b_mean``         the mean of a layer's fitted bias offsets over their spread (Student t
+                       on the normal scale): offsets all one way are a shifted transfer (an
+                       activation's asymmetry seen through the biases), not draws of either sign;
 
     ``w_correlation``  atanh of the correlation of E_hat with W, times sqrt(P - 3): offsets
                        proportional to W are a gain (an activation slope seen through the
@@ -593,13 +597,20 @@ def prior_check(model: Model, meas: Measurement) -> list[dict]:
 
     Returns one row per layer with offsets: ``{layer, test, z}`` for each test that applies.
     """
-    from scipy import stats
-
-    kinds = [k for k in kinds_of(list(model.offsets), meas.arch) if k.target == "W"]
-    if not kinds:
-        return []
-    deltas = offset_deltas(model, base_model(model, meas), meas, kinds)[kinds[0]]
+    all_kinds = kinds_of(list(model.offsets), meas.arch)
     out = []
+    for kind in (k for k in all_kinds if k.target == "b"):
+        # bias_offset's prior is symmetric: offsets all one way are a shifted transfer, not a draw
+        for l, d in zip(kind.layers, offset_deltas(model, base_model(model, meas), meas, [kind])[kind]):
+            if d.size >= 3 and np.std(d, ddof=1) > 0:
+                t = float(np.mean(d) / (np.std(d, ddof=1) / np.sqrt(d.size)))
+                p = 2.0 * stats.t.sf(abs(t), df=d.size - 1)
+                out.append({"layer": int(l), "test": "b_mean",
+                            "z": float(np.sign(t) * stats.norm.isf(max(p / 2.0, 1e-300)))})
+    kinds = [k for k in all_kinds if k.target == "W"]
+    if not kinds:
+        return out
+    deltas = offset_deltas(model, base_model(model, meas), meas, kinds)[kinds[0]]
     for l, E in zip(kinds[0].layers, deltas):
         W = np.asarray(meas.params[l - 1].W, np.float64)
         P = E.size

@@ -127,8 +127,14 @@ def rule_activation(ctx):
 
 def rule_readout(ctx):
     """The output's mean response is a distorted function of its own pre-activation -- with taps,
-    while the hidden layers respond as modelled."""
+    while the hidden layers respond as modelled. Noise alone does not move the output's mean
+    (nothing nonlinear follows it), so where the output's mean is distorted, the output's noise
+    evidence (variance, kurtosis) counts for the readout's transfer too."""
     score, where = _best_shared(ctx, hidden=False)
+    if score > THRESHOLD and ctx.depth in ctx.evidence:
+        row = ctx.evidence[ctx.depth]
+        noise = max(abs(row.get("kurt_z", 0.0)), row.get("var_abs_z", 0.0), abs(row.get("var_level_z", 0.0)))
+        score = max(score, noise)
     if ctx.taps and ctx.failing and any(l < ctx.depth for l in ctx.failing):
         score *= 0.5  # hidden layers fail too: the output's distortion may be inherited
     return _with_fit(ctx, "readout_nonlinearity", score, [ctx.depth] if score > THRESHOLD else [],
@@ -181,7 +187,9 @@ def rule_level(ctx):
     """A layer whose own noise level differs from the jointly fitted one, and which passes its
     one-step check at its own level (its level is all that is wrong there)."""
     best, layer = 0.0, None
-    ok = {l for l in ctx.levels if not ctx.failing or l not in ctx.failing}
+    if ctx.failing:  # a failing layer's misfit sets the joint level: the levels say nothing then
+        return 0.0, [], ""
+    ok = set(ctx.levels)
     for l, (s_l, z) in ctx.levels.items():
         if l in ok and abs(z) > best:
             best, layer = abs(z), l
@@ -205,23 +213,31 @@ RULES = {
 assert set(RULES) == set(MECHANISMS), "every CONTRACTS §6 class has a rule"
 
 
-def fit_gains(ranking, base_cmp, alpha: float = 0.01, share: float = 0.5) -> dict:
+def fit_gains(ranking, base_cmp, fit_meas=None, alpha: float = 0.01, share: float = 0.5,
+              prior_z: float = 4.0) -> dict:
     """{class: z}: for each class with a moment-fitted candidate that passes its held-out test or
     removes at least ``share`` of the baseline's excess over the noise floor, how far (in the
     baseline's sd of Q) its discrepancy fell below the baseline's. A candidate that removes
-    less is no evidence for its class (an extra parameter absorbs part of any misfit), and
-    offset families are left out (with hundreds of free values they lower the discrepancy
-    whatever the physics)."""
-    from ._fit_offsets import fitted_as_offsets
+    less is no evidence for its class (an extra parameter absorbs part of any misfit); an
+    offset family counts only when it passes, the data identify its values and they look like
+    its own effect (:func:`~gift_theory.lab._fit_offsets.prior_check` on ``fit_meas``): with
+    hundreds of free values it lowers the discrepancy whatever the physics."""
+    from ._fit_offsets import fitted_as_offsets, prior_check
 
     out = {}
     unit = base_cmp.se if base_cmp.se > 0 else 1.0
     excess = base_cmp.discrepancy - base_cmp.noise_floor
     for c in ranking:
-        if len(c.effects) != 1 or fitted_as_offsets(c.effects[0]):
+        if len(c.effects) != 1:
             continue
         removed = (base_cmp.discrepancy - c.comparison.discrepancy) / excess if excess > 0 else 0.0
-        if c.comparison.p_value < alpha and removed < share:
+        if fitted_as_offsets(c.effects[0]):
+            # an offset family counts only when it passes with values the data identify
+            if c.comparison.p_value < alpha or c.n_free < 0.5 * c.nominal:
+                continue
+            if fit_meas is not None and any(abs(r["z"]) > prior_z for r in prior_check(c.model, fit_meas)):
+                continue
+        elif c.comparison.p_value < alpha and removed < share:
             continue
         cls = REGISTRY[c.effects[0]].mechanism
         g = (base_cmp.discrepancy - c.comparison.discrepancy) / unit

@@ -10,10 +10,15 @@
       taps a few hundred weight offsets fitted to a few hundred output means are not: they can
       follow almost any smooth distortion of the network, so their passing says nothing);
    b. its fitted values look like its own effect: fitted weight offsets are neither
-      proportional to the programmed weights nor a fixed linear map of them
-      (:func:`~gift_theory.lab._fit_offsets.prior_check`, |z| < 4 in every layer); and
+      proportional to the programmed weights nor a fixed linear map of them, fitted bias
+      offsets do not all go one way (:func:`~gift_theory.lab._fit_offsets.prior_check`,
+      |z| < 4 in every layer);
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with
-      Bonferroni over the layers): the model is right where it acts, not only on average.
+      Bonferroni over the layers): the model is right where it acts, not only on average; and
+   d. an effect fitted by its scalar parameters buys its keep: its penalised score (held-out
+      discrepancy + 2 sd per parameter, the ranking's) is below the baseline's discrepancy --
+      else the data are only barely inconsistent with awgn and the effect that passes may just
+      absorb noise.
 
 A model that fits anything is not an explanation: (a) and (b) refuse one that passed only
 because it could follow whatever the chip did. When the data are not explained, the verdict
@@ -47,11 +52,18 @@ def explanation(top, baseline_cmp, top_steps=None, prior=()) -> tuple[bool, list
     if top.nominal and top.n_free < 0.5 * top.nominal and any(top.model.offsets):
         why.append(f"{name}'s {top.nominal} fitted values are not identified by the data (effective degrees of "
                    f"freedom {top.n_free:.0f}: the prior, not the data, sets most of them)")
+    if not any(top.model.offsets) and top.score >= baseline_cmp.discrepancy:
+        why.append(f"awgn + {name} lowers the held-out discrepancy by {baseline_cmp.discrepancy - top.comparison.discrepancy:.3g}"
+                   f", less than its {top.n_free:g} parameter(s) cost (2 sd each): the data are barely inconsistent "
+                   f"with awgn and no effect buys its keep")
+    what = {"w_correlation": "weight offsets of layer {l} are proportional to the programmed weights (a gain, not an "
+                             "error drawn apart from them)",
+            "w_structure": "weight offsets of layer {l} are a fixed linear map of the programmed weights (a coupling)",
+            "b_mean": "bias offsets of layer {l} all go one way (a shifted transfer, not per-neuron draws of either "
+                      "sign)"}
     for row in prior or ():
         if abs(row["z"]) > PRIOR_Z:
-            what = ("proportional to the programmed weights (a gain, not an error drawn apart from them)"
-                    if row["test"] == "w_correlation" else "a fixed linear map of the programmed weights (a coupling)")
-            why.append(f"the fitted weight offsets of layer {row['layer']} are {what}: z = {row['z']:.1f}")
+            why.append(f"the fitted {what[row['test']].format(l=row['layer'])}: z = {row['z']:.1f}")
     if top_steps:
         bad = failing_layers(top_steps)
         if bad:

@@ -34,10 +34,11 @@ class _Cand:
     n_free: float = 1.0
     nominal: int = 1
     model: Model = None
+    score: float = 2.0
 
 
-def _cand(p, n_free=1.0, nominal=1, offsets=None):
-    return _Cand(("x",), _Cmp(p), n_free, nominal, Model(gt.Physics.create(s=0.1), None, offsets or {}))
+def _cand(p, n_free=1.0, nominal=1, offsets=None, score=2.0):
+    return _Cand(("x",), _Cmp(p), n_free, nominal, Model(gt.Physics.create(s=0.1), None, offsets or {}), score)
 
 
 def test_explained_rule():
@@ -52,6 +53,12 @@ def test_explained_rule():
     # passes, but its offsets are a fixed linear map of W (a coupling, not weight_error's prior)
     ok, why = explanation(_cand(0.5), base_fails, prior=[{"layer": 1, "test": "w_structure", "z": 9.0}])
     assert not ok and "linear map" in why[0]
+    # bias offsets all one way: a shifted transfer, not bias_offset's draws
+    ok, why = explanation(_cand(0.5), base_fails, prior=[{"layer": 1, "test": "b_mean", "z": 6.0}])
+    assert not ok and "one way" in why[0]
+    # passes, but its improvement does not pay for its parameter (baseline discrepancy 10)
+    ok, why = explanation(_cand(0.5, score=12.0), _Cmp(0.008, discrepancy=10.0))
+    assert not ok and "buys its keep" in why[0]
     # passes on average, but a layer still fails its one-step check
     steps = [{"layer": 1, "p_value": 1e-6}, {"layer": 2, "p_value": 0.4}]
     ok, why = explanation(_cand(0.5), base_fails, top_steps=steps)

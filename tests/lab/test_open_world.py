@@ -65,6 +65,40 @@ def test_explained_rule():
     assert not ok and "layer(s) 1" in why[0]
 
 
+def test_prior_check_tells_offsets_from_their_effect_s_prior():
+    """The prior check computes its z's from the fitted values: bias offsets of either sign pass,
+    offsets all one way fail ``b_mean``; weight offsets drawn apart from W pass, offsets
+    proportional to W fail ``w_correlation``; a coupling W M on an expanding layer fails
+    ``w_structure``."""
+    from gift_theory.lab._fit_offsets import prior_check
+
+    arch = gt.Architecture((4, 12, 3))
+    params = gt.init_params(jax.random.PRNGKey(0), arch)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(1), (20, 4)))
+    meas = simulate_measurement(jax.random.PRNGKey(2), params, x, gt.Physics.create(s=0.1), shots=4, taps=True)
+    rng = np.random.default_rng(0)
+    W = [np.asarray(l.W, np.float64) for l in meas.params]
+    b = [np.asarray(l.b, np.float64) for l in meas.params]
+
+    def check(name, dW=None, db=None):
+        new = tuple(gt.Layer(W[i] + (0 if dW is None else dW[i]), b[i] + (0 if db is None else db[i]))
+                    for i in range(len(W)))
+        rows = prior_check(Model(gt.Physics.create(s=0.1), new, {name: 0.1}), meas)
+        return {(r["test"], r["layer"]): r["z"] for r in rows}
+
+    z = check("bias_offset", db=[rng.normal(0, 0.1, v.shape) for v in b])
+    assert max(abs(v) for k, v in z.items() if k[0] == "b_mean") < 4
+    z = check("bias_offset", db=[np.abs(rng.normal(0, 0.1, v.shape)) + 0.05 for v in b])
+    assert z[("b_mean", 1)] > 4  # twelve offsets, all positive
+    z = check("weight_error", dW=[rng.normal(0, 0.1, v.shape) for v in W])
+    assert max(abs(v) for v in z.values()) < 4
+    z = check("weight_error", dW=[0.2 * v for v in W])
+    assert z[("w_correlation", 1)] > 4 and z[("w_correlation", 2)] > 4
+    M = rng.normal(0, 0.3, (4, 4))
+    z = check("weight_error", dW=[W[0] @ M, rng.normal(0, 0.1, W[1].shape)])
+    assert z[("w_structure", 1)] > 4 and ("w_structure", 2) not in z  # 12 >= 4 + 3; 3 < 12 + 3
+
+
 def test_failing_layers_are_bonferroni_over_the_layers():
     rows = [{"layer": 1, "p_value": 0.004}, {"layer": 2, "p_value": 0.002}, {"layer": 3, "p_value": 0.5}]
     assert failing_layers(rows) == [2]  # 0.004 > 0.01 / 3

@@ -598,10 +598,11 @@ def prior_check(model: Model, meas: Measurement) -> list[dict]:
     Returns one row per layer with offsets: ``{layer, test, z}`` for each test that applies.
     """
     all_kinds = kinds_of(list(model.offsets), meas.arch)
+    deltas_of = offset_deltas(model, base_model(model, meas), meas, all_kinds)
     out = []
     for kind in (k for k in all_kinds if k.target == "b"):
         # bias_offset's prior is symmetric: offsets all one way are a shifted transfer, not a draw
-        for l, d in zip(kind.layers, offset_deltas(model, base_model(model, meas), meas, [kind])[kind]):
+        for l, d in zip(kind.layers, deltas_of[kind]):
             if d.size >= 3 and np.std(d, ddof=1) > 0:
                 t = float(np.mean(d) / (np.std(d, ddof=1) / np.sqrt(d.size)))
                 p = 2.0 * stats.t.sf(abs(t), df=d.size - 1)
@@ -610,8 +611,7 @@ def prior_check(model: Model, meas: Measurement) -> list[dict]:
     kinds = [k for k in all_kinds if k.target == "W"]
     if not kinds:
         return out
-    deltas = offset_deltas(model, base_model(model, meas), meas, kinds)[kinds[0]]
-    for l, E in zip(kinds[0].layers, deltas):
+    for l, E in zip(kinds[0].layers, deltas_of[kinds[0]]):
         W = np.asarray(meas.params[l - 1].W, np.float64)
         P = E.size
         if P > 3 and np.std(E) > 0 and np.std(W) > 0:

@@ -250,23 +250,6 @@ def _mixed_signs(zs, z_min: float = 2.0) -> float:
     return 1.0 if sig.size < 3 else float(1.0 - abs(np.mean(np.sign(sig))))
 
 
-def _bias_fit(e, slope):
-    """Per neuron, the mean residual as a multiple of the layer's slope sigma'(z) (what a bias
-    offset does): the coefficients' z (d,)."""
-    zs = []
-    for j in range(e.shape[1]):
-        x = slope[:, j]
-        xx = float(x @ x)
-        if xx <= 0:
-            zs.append(0.0)
-            continue
-        c = float(x @ e[:, j]) / xx
-        resid = e[:, j] - c * x
-        s2 = float(resid @ resid) / max(e.shape[0] - 1, 1)
-        zs.append(c / np.sqrt(max(s2 / xx, 1e-300)))
-    return np.array(zs)
-
-
 def _beyond_profiles(res: Residuals, li: int, X) -> float:
     """Reproducible mean residual that no per-neuron function of z explains (a linear-map
     error): the two halves of the measured shots give residual means ra, rb against disjoint
@@ -330,11 +313,13 @@ def layer_evidence(res: Residuals) -> list[dict]:
         betas, zs = _profiles(e, X)
         zc = X[:, :, 1].T
         absz = np.abs(zc) - np.mean(np.abs(zc), axis=0)
-        bz = _bias_fit(e, res.slope[li])
+        # per neuron, the mean residual as a multiple of sigma'(z): what a bias offset does
+        bias_design = res.slope[li].T[:, :, None]
+        bz = _profiles(e, bias_design)[1][:, 0]
         row = {"layer": int(l), "neurons": int(e.shape[1]),
                "offset_z": chi_z(zs[:, 0]), "offset_mixed": _mixed_signs(zs[:, 0]),
                "bias_z": chi_z(bz), "bias_mixed": _mixed_signs(bz),
-               "bias_rest_z": _beyond_profiles(res, li, res.slope[li].T[:, :, None]),
+               "bias_rest_z": _beyond_profiles(res, li, bias_design),
                "profile_z": chi_z(zs[:, 1:].ravel()),
                "slope_mixed": _mixed_signs(zs[:, 1]), "curve_mixed": _mixed_signs(zs[:, 2]),
                "common_offset_z": over_inputs(np.sum(e, axis=1)),

@@ -189,11 +189,10 @@ def rule_level(ctx):
     best, layer = 0.0, None
     if ctx.failing:  # a failing layer's misfit sets the joint level: the levels say nothing then
         return 0.0, [], ""
-    ok = set(ctx.levels)
     for l, (s_l, z) in ctx.levels.items():
-        if l in ok and abs(z) > best:
+        if abs(z) > best:
             best, layer = abs(z), l
-    layers = [l for l, (_, z) in ctx.levels.items() if l in ok and abs(z) > THRESHOLD]
+    layers = [l for l, (_, z) in ctx.levels.items() if abs(z) > THRESHOLD]
     text = (f"layer {layer}'s own noise level {ctx.levels[layer][0]:.3g} (variance z = {ctx.levels[layer][1]:.1f} "
             f"at the joint level)" if layer is not None else "")
     return _with_fit(ctx, "noise_level", best, layers, text)

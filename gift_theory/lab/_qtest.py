@@ -21,16 +21,6 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-
-def student_p(T):
-    n = T.shape[0]
-    mean = float(np.mean(T))
-    se = float(np.std(T, ddof=1) / np.sqrt(n)) if n > 1 else float("inf")
-    if not np.isfinite(se) or se <= 0:
-        return mean, se, (1.0 if mean <= 0 else 0.0)
-    return mean, se, float(stats.t.sf(mean / se, df=n - 1))
-
-
 #: Monte Carlo draws of the null distribution of Q (fixed seed: same data, same p-value)
 NULL_DRAWS = 20_000
 

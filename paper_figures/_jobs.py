@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import os
 
 import numpy as np
 
@@ -102,8 +103,14 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     run_finetune = _run_finetune()
     opts = dict(options or {})
     opts.setdefault("predict_s", prediction_level(s_true, st))
+    from gift_theory import _memo
     from gift_theory._phases import PhaseClock
 
+    if _memo.folder() is None:  # share the in-silico part with the other points, on any worker
+        from gift_theory.training import cache_dir
+
+        _memo.use_folder(os.path.join(cache_dir(), "memo"))
+    memo_before = _memo.counters()
     with PhaseClock() as clock:  # where the point's time went: setting (training or loading), method, referee
         res = run_finetune(dataset=dataset, arch=arch, s0=float(s0), st=s_true, true_effects=effects, method=method,
                            seed=int(seed), **opts)
@@ -119,7 +126,22 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
         if "/" not in name:
             out[f"seconds_{name}"] = p["seconds"]
     out["seconds_compiling"] = sum(p["compile_seconds"] for n, p in clock.phases.items() if "/" not in n)
+    out.update(shared_work(memo_before, _memo.counters()))
     return out
+
+
+#: the memo tags of in-silico work at s0 that every point with the same (net, s0, seed, method)
+#: shares, whatever the chip's noise (the slope at the chip's level is not among them)
+SHARED_TAGS = ("direction", "curvature", "pair_se", "slope_s0")
+
+
+def shared_work(before: dict, after: dict) -> dict:
+    """``seconds_shared`` (computing the shared in-silico work this point did not find done),
+    ``shared_hits`` and ``shared_misses``, from two :func:`gift_theory._memo.counters`."""
+    zero = {"hits": 0, "misses": 0, "seconds_computed": 0.0}
+    d = {k: sum(after.get(t, zero)[k] - before.get(t, zero)[k] for t in SHARED_TAGS) for k in zero}
+    return {"seconds_shared": float(d["seconds_computed"]), "shared_hits": int(d["hits"]),
+            "shared_misses": int(d["misses"])}
 
 
 # ----------------------------------------------------------------------------- estimators

@@ -60,6 +60,10 @@ def direction(problem, kind: str, *, K2: int = 16):
         minimiser-path tangent H^-1 d/ds grad J_s0 by conjugate gradients)
     """
     require(kind in DIRECTIONS, f"direction: unknown kind {kind!r}; known: {', '.join(DIRECTIONS)}")
+    return problem.insilico("direction", (kind, int(K2)), lambda: _direction(problem, kind, int(K2)))
+
+
+def _direction(problem, kind: str, K2: int):
     key = jax.random.fold_in(problem.key, 100 + DIRECTIONS.index(kind))
     args = (problem.w0, problem.x, problem.y, problem.model, problem.arch)
     if kind in ("score_paper", "score", "pathwise"):

@@ -74,6 +74,10 @@ def gift_printed(problem, D0, eta: float, *, max_iter: int = 1000):
 
 def pair_se_model(problem, *, seed: int = 0) -> float:
     """In-silico standard error of a paired Eval difference at w0 (two fresh shot sets, same inputs)."""
+    return problem.insilico("pair_se", (int(seed),), lambda: _pair_se(problem, int(seed)))
+
+
+def _pair_se(problem, seed: int) -> float:
     k = jax.random.fold_in(problem.key, 500 + seed)
     la = per_input_loss(jax.random.fold_in(k, 0), problem.w0, problem.x_ft, problem.y_ft, problem.model,
                         problem.arch, problem.K2)
@@ -85,7 +89,8 @@ def pair_se_model(problem, *, seed: int = 0) -> float:
 def curvature_model(problem, u, *, K2: int = 8) -> float:
     """u^T Hess_w J_s0(w0) u in silico."""
     from ._directions import hvp_operator
-    return float(vdot(u, hvp_operator(problem, K2=K2)(u)))
+    return problem.insilico("curvature", (u, int(K2)),
+                            lambda: float(vdot(u, hvp_operator(problem, K2=int(K2))(u))))
 
 
 def fit_quadratic(alphas, means, ses, C2_prior=None):

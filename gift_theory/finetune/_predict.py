@@ -50,14 +50,18 @@ def first_order_prediction(problem, u, step: float, s_model: float, curvature: f
     key = named_subkey(problem.key, "first_order_prediction")  # same draws at s0 and s_model
     slope = {}
     for name, s in (("st", s_model), ("s0", problem.s0)):
-        est = directional_derivative(key, problem.w0, u, problem.x, problem.y, awgn(float(s)), problem.arch, K2=K2)
-        slope[name] = (float(est.mean), float(est.se))
+        slope[name] = problem.insilico(f"slope_{name}", (u, float(s), int(K2), key), lambda s=s: _slope(problem, key, u, s, K2))
     a = float(step)
     pred = a * slope["st"][0]
     return {"step": a, "s_model": float(s_model), "slope_st": slope["st"][0], "slope_st_se": slope["st"][1],
             "slope_s0": slope["s0"][0], "slope_s0_se": slope["s0"][1], "predicted_change": pred,
             "predicted_change_se": abs(a) * slope["st"][1],
             "predicted_change_2nd": pred + 0.5 * a * a * curvature if curvature is not None else math.nan}
+
+
+def _slope(problem, key, u, s: float, K2: int) -> tuple[float, float]:
+    est = directional_derivative(key, problem.w0, u, problem.x, problem.y, awgn(float(s)), problem.arch, K2=K2)
+    return float(est.mean), float(est.se)
 
 
 def realised_change(losses_before, losses_candidate) -> dict:

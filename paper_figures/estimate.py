@@ -13,7 +13,24 @@ grid then gives
     work = sum_sweeps points x median point + trainings x training + workers x compile,
 
 and the wall time is work / workers (the sweeps are independent points; the pool keeps every
-worker busy). The estimator sweep is counted with its measured median too. The numbers are
+worker busy).
+
+Points with the same (net, method, s0, seed) share their in-silico work at s0 (the memo of
+:mod:`gift_theory._memo`: direction, curvature, paired se, slope at s0), whatever the chip's
+noise level and law. A point records the seconds it spent computing shared work it did not
+find done (``seconds_shared``). So a point's steady seconds exclude them, and
+
+    work += groups x shared seconds of a group,
+
+with the groups the distinct (net, method, s0, seed) of the target's sweeps, and a group's
+seconds the median ``seconds_shared`` of the measured points that computed it. The sharing
+between different methods (gift and pathwise use one direction) is not credited, so in this
+respect the estimate errs high, except for one case: a (net, method) whose points all found
+their shared work done (the pathwise rival uses gift's direction, computed by the GIFT sweep
+that ran before it) is charged nothing, which holds when the target scale runs its sweeps in
+the same order; the estimate lists these. The measured run must start with an empty memo
+folder. ``--trainings-from DIR``: the training seconds from another run (one that trained
+its nets; a run on cached weights measures none). The estimator sweep is counted with its measured median too. The numbers are
 this machine's, shared with whatever else ran while they were measured: the estimate says
 which sweep and which method dominate and how the total scales, not a promise to the minute.
 """
@@ -41,10 +58,11 @@ def _median(v):
 
 def measured(data_dir: str, scale: str) -> dict:
     """Per sweep (and rival method): median steady seconds of a point; per net: training seconds;
-    compile seconds of a worker's first point; from the point files of ``scale`` in ``data_dir``."""
+    per (net, method): seconds of the shared in-silico work of one group; compile seconds of a
+    worker's first point; from the point files of ``scale`` in ``data_dir``."""
     sws = sweeps(scale)
-    out = {"points": {}, "training": {}, "compile_first_point": [], "counts": {}}
-    setting = {}
+    out = {"points": {}, "training": {}, "shared": {}, "compile_first_point": [], "counts": {}}
+    setting, shared = {}, {}
     for name, sw in sws.items():
         recs = list(load_points(data_dir, sw).values())
         out["counts"][name] = len(recs)
@@ -57,14 +75,25 @@ def measured(data_dir: str, scale: str) -> dict:
         for r in recs:
             res = r["result"]
             net = sw.fixed.get("net")
+            method = r["point"].get("method", sw.fixed.get("method"))
             key = (net, r["point"]["s0"], r["point"]["seed"])
             setting.setdefault(net, []).append((key, res.get("seconds_setting", np.nan)))
-            steady = r["seconds"] - res.get("seconds_setting", 0.0) - res.get("seconds_compiling", 0.0)
-            label = name if name != "rivals" else f"rivals:{r['point']['method']}"
+            sh = res.get("seconds_shared", 0.0)
+            steady = r["seconds"] - res.get("seconds_setting", 0.0) - res.get("seconds_compiling", 0.0) - sh
+            label = name if name != "rivals" else f"rivals:{method}"
             groups.setdefault(label, []).append(steady)
             out["compile_first_point"].append(res.get("seconds_compiling", np.nan))
+            rows = shared.setdefault(f"{net}:{method}", {"computed": [], "hits": 0})
+            if res.get("shared_misses", 0) > 0:
+                rows["computed"].append(sh)
+            rows["hits"] += int(res.get("shared_hits", 0))
         for label, v in groups.items():
             out["points"][label] = _median(v)
+    for nm, rows in shared.items():
+        # no miss: either nothing to share (0) or all of it done before this run (unmeasured)
+        out["shared"][nm] = _median(rows["computed"]) if rows["computed"] else 0.0
+        if not rows["computed"] and rows["hits"]:
+            out.setdefault("shared_found_done", []).append(nm)
     for net, rows in setting.items():
         load = _median(s for _, s in rows)
         first = {}
@@ -77,12 +106,18 @@ def measured(data_dir: str, scale: str) -> dict:
     return out
 
 
-def estimate(data_dir: str, target: str = "paper", source: str = "paper-subset", workers: int = 2) -> dict:
+def estimate(data_dir: str, target: str = "paper", source: str = "paper-subset", workers: int = 2,
+             trainings_from: str | None = None) -> dict:
     m = measured(data_dir, source)
+    if trainings_from:
+        m["training"] = measured(trainings_from, source)["training"]
     sc = get_scale(target)
     sws = sweeps(sc)
-    rows, work = [], 0.0
+    rows, work, groups = [], 0.0, set()
     for name, sw in sws.items():
+        if name != "estimators":
+            for p in sw.points():
+                groups.add((sw.fixed.get("net"), p.get("method", sw.fixed.get("method")), p["s0"], p["seed"]))
         if name == "rivals":
             per = {meth: m["points"].get(f"rivals:{meth}", float("nan")) for meth in sc.rival_methods}
             n_each = sw.size // len(sc.rival_methods)
@@ -94,14 +129,21 @@ def estimate(data_dir: str, target: str = "paper", source: str = "paper-subset",
             secs = sw.size * v
             rows.append({"sweep": name, "points": sw.size, "seconds_per_point": v, "seconds": secs})
         work += secs
+    per_group = {}
+    for net, method, _, _ in groups:
+        nm = f"{net}:{method}"
+        per_group.setdefault(nm, [0, m["shared"].get(nm, float("nan"))])[0] += 1
+    shared_s = sum(n * v for n, v in per_group.values())
     trainings = {net: len(sc.seeds) * len(set(sc.s0) | (set(sc.rival_s0) if net == "shallow" else set())
                                            | (set(sc.violated_s0) if net == "deep" else set()))
                  for net in sc.nets}
     train_s = sum(trainings[n] * m["training"].get(n, float("nan")) for n in trainings)
     compile_s = workers * m["compile_per_worker"]
-    total = work + train_s + compile_s
+    total = work + shared_s + train_s + compile_s
     return {"target": target, "source": source, "workers": workers, "sweeps": rows, "trainings": trainings,
             "training_seconds_per_net": m["training"], "training_seconds": train_s,
+            "shared_groups": {nm: {"groups": n, "seconds_per_group": v} for nm, (n, v) in sorted(per_group.items())},
+            "shared_seconds": shared_s, "shared_found_done": m.get("shared_found_done", []),
             "compile_seconds_per_worker": m["compile_per_worker"], "work_seconds": total,
             "wall_hours": total / workers / 3600, "measured_points": m["counts"]}
 
@@ -112,6 +154,11 @@ def render(r: dict) -> str:
         lines.append(f"  {s['sweep']:18s} {s['points']:5d} points  {s['seconds'] / 3600:7.2f} h of work")
         for meth, v in s.get("per_method_seconds_per_point", {}).items():
             lines.append(f"      {meth:18s} {v:7.1f} s per point")
+    shared = [f"{nm} {g['groups']} x {g['seconds_per_group']:.1f} s" for nm, g in r["shared_groups"].items()
+              if g["seconds_per_group"] != 0]
+    lines.append(f"  shared in-silico work ({', '.join(shared) or 'none'}): {r['shared_seconds'] / 3600:.2f} h")
+    if r["shared_found_done"]:
+        lines.append(f"      found done by an earlier sweep or method, charged nothing: {', '.join(r['shared_found_done'])}")
     lines.append(f"  trainings {sum(r['trainings'].values())} ({', '.join(f'{k} {v:.0f} s' for k, v in r['training_seconds_per_net'].items())} each): "
                  f"{r['training_seconds'] / 3600:.2f} h")
     lines.append(f"  compiling: {r['compile_seconds_per_worker']:.0f} s per worker")
@@ -125,13 +172,19 @@ def main(argv=None) -> int:
     p.add_argument("--scale", default="paper", help="the scale to estimate (default paper)")
     p.add_argument("--from-scale", default="paper-subset", help="the measured scale (default paper-subset)")
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--trainings-from", default=None, metavar="DIR",
+                   help="take the training seconds from this data folder (a run that trained its nets)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     data = args.data_dir or os.path.join(HERE, "data", args.from_scale)
-    if not os.path.isdir(data) or args.workers < 1:
-        sys.stderr.write(f"{data}: no such folder\n" if not os.path.isdir(data) else "--workers must be >= 1\n")
+    for folder in (data, args.trainings_from):
+        if folder is not None and not os.path.isdir(folder):
+            sys.stderr.write(f"{folder}: no such folder\n")
+            return 2
+    if args.workers < 1:
+        sys.stderr.write("--workers must be >= 1\n")
         return 2
-    r = estimate(data, args.scale, args.from_scale, args.workers)
+    r = estimate(data, args.scale, args.from_scale, args.workers, args.trainings_from)
     sys.stdout.write((json.dumps(r, default=float) if args.json else render(r)) + "\n")
     return 0
 

@@ -21,8 +21,8 @@ import numpy as np
 from scipy import optimize
 
 from .._measurement import Measurement
-from .._model import named_subkey
-from ._shots import draws, layer_outputs, params32, tiled_times
+from .._model import forward, named_subkey
+from ._shots import draws, params32, tiled_times
 
 
 def _moments(A, t):
@@ -67,6 +67,16 @@ def _loss_of_outputs(outs, dat, t, rK):
     return total
 
 
+@functools.partial(jax.jit, static_argnames=("arch", "rK", "free", "positive"))
+def _theta_loss(theta, params, x, noise, physics, t, dat, arch, rK, free, positive):
+    """The moment loss at ``theta`` in one program: the parameters set, every layer's output
+    (the core's forward, as :func:`layer_outputs`), the moments and the loss (the same numbers
+    as those steps one program each, without a dispatch between them)."""
+    vals = {p: (jnp.exp(theta[i]) if positive[i] else theta[i]) for i, p in enumerate(free)}
+    outs = forward(params, x[:, None, :], noise, physics.replace(**vals), arch, t=t, taps=True).taps
+    return _loss_of_outputs(outs, dat, t, rK)
+
+
 class MomentProblem:
     """The fitting data of one measurement (its per-cell moments), shared by every candidate."""
 
@@ -91,10 +101,8 @@ class MomentProblem:
         positive = tuple(_positive(physics, p) for p in free)
 
         def f(theta):
-            theta = jnp.asarray(theta, jnp.float32)
-            vals = {p: (jnp.exp(theta[i]) if positive[i] else theta[i]) for i, p in enumerate(free)}
-            outs = layer_outputs(p32, self.x, noise, physics.replace(**vals), arch, t)
-            return _loss_of_outputs(outs, self.dat, t, (r, K))
+            return _theta_loss(jnp.asarray(theta, jnp.float32), p32, self.x, noise, physics, t, self.dat, arch, (r, K),
+                               tuple(free), positive)
         return f
 
 

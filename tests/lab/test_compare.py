@@ -208,3 +208,29 @@ def test_empirical_bayes_scale_of_unidentified_offsets():
     ml, mom = np.array(ml), np.array(mom)
     assert abs(ml.mean() - np.log(e)) < 4 * ml.std() / np.sqrt(ml.size) + 0.02
     assert ml.std() <= mom.std()
+
+
+@pytest.mark.parametrize("extra", [{}, {"shot": 0.01}, {"multiplicative": 0.05}])
+def test_the_one_program_moment_loss_equals_the_staged_one_bit_for_bit(setup, extra):
+    """The fit's loss in one compiled program (parameters set, forward, moments, loss) gives the
+    numbers of the staged computation (forward and moment loss, one program each)."""
+    from gift_theory.lab._fit_moments import MomentProblem, _loss_of_outputs, _positive, _scalar, theta_of
+    from gift_theory.lab._shots import draws, layer_outputs, params32
+
+    params0, x = setup
+    meas = simulate_measurement(jax.random.PRNGKey(5), params0, x, gt.Physics.create(s=0.1, shot=0.02), shots=24,
+                                taps=True, times=True)
+    prob = MomentProblem(jax.random.PRNGKey(0), meas)
+    phys = gt.Physics.create(s=0.1, **extra)
+    free = tuple(p for p, v in phys.params().items() if _scalar(v))
+    params = Model(phys).weights(meas)
+    f = prob.loss(phys, params, free)
+    noise, p32 = draws(prob.key, phys, meas, prob.K), params32(params)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        theta = theta_of(phys, free) + 0.3 * rng.standard_normal(len(free))
+        th = jnp.asarray(theta, jnp.float32)
+        vals = {p: (jnp.exp(th[i]) if _positive(phys, p) else th[i]) for i, p in enumerate(free)}
+        outs = layer_outputs(p32, prob.x, noise, phys.replace(**vals), meas.arch, prob.t)
+        staged = float(_loss_of_outputs(outs, prob.dat, prob.t, (meas.r, prob.K)))
+        assert float(f(theta)) == staged

@@ -23,7 +23,10 @@ A model with fitted offsets is tested against a refit null (:mod:`._fit_offsets`
 
 from __future__ import annotations
 
+import concurrent.futures
+import contextvars
 import dataclasses
+import os
 import sys
 import time
 
@@ -140,15 +143,19 @@ class Session:
     def fit(self, effects, start: Model | None = None) -> Model:
         return fit_model(self.k_fit, self.fit_meas, effects, start=start, K=self.shots, problem=self.problem)
 
-    def score(self, model: Model) -> Comparison:
+    def score(self, model: Model, plain: Comparison | None = None) -> Comparison:
         """The held-out comparison; a model with fitted offsets against its refit null (made once
         per set of offset effects and reused). With taps, a model whose plain test already
         rejects at :data:`REFIT_SKIP_P` skips the refit null: there the offsets are identified and
         their estimation error shifts the discrepancy by a few of its standard deviations
         (measured: 5.5 on docs/lab.md's weight_error example), far less than such a rejection
-        needs (some 30)."""
+        needs (some 30). ``plain``: the model's plain comparison, if already made.
+
+        The refit nulls are numbered in the order they are first needed, so models must be
+        scored in a fixed order (:meth:`candidates` does); the rest is safe to run in threads."""
         names = tuple(sorted(n for n in model.offsets if fitted_as_offsets(n)))
-        plain = compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref)
+        if plain is None:
+            plain = compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref)
         if not names or (self.meas.has_taps and plain.p_value < REFIT_SKIP_P):
             return plain
         if names not in self._replicates:
@@ -158,9 +165,11 @@ class Session:
         return compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref,
                        null_replicates=self._replicates[names])
 
-    def candidate(self, effects, model: Model, t0: float, added) -> Candidate:
-        """Score ``model`` and count the parameters the effects ``added`` brought."""
-        cmp = self.score(model)
+    def _prepare(self, effects, start, fit_names, added):
+        """The order-free part of a candidate (fit, plain comparison, parameter count): pure."""
+        t0 = time.time()
+        model = self.fit(fit_names, start=start)
+        plain = compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref)
         n_free, nominal = 0.0, 0
         for name in added:
             if fitted_as_offsets(name):
@@ -168,8 +177,31 @@ class Session:
                 n_free, nominal = n_free + dof, nominal + nom
             else:
                 n_free, nominal = n_free + len(REGISTRY[name].params), nominal + len(REGISTRY[name].params)
-        score = penalised_score(cmp, n_free, self.baseline_comparison)
-        return Candidate(tuple(effects), model, cmp, score, time.time() - t0, float(n_free), int(nominal))
+        return model, plain, n_free, nominal, time.time() - t0
+
+    def candidates(self, requests, workers: int = 1) -> list:
+        """Fit and score ``requests`` in order: (effects, start model or None, the effects to fit
+        on top of it, the effects whose parameters the candidate is charged for), ...
+
+        The fits and plain comparisons are independent, so ``workers`` threads run them at once
+        (JAX's programs and numpy's sorts run without the GIL); the refit nulls are then made
+        in the order of ``requests``. Same numbers for any ``workers``."""
+        requests = list(requests)
+        if workers > 1 and len(requests) > 1:
+            with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+                # each task in a copy of this context, so a PhaseClock still sees its compiles
+                futs = [pool.submit(contextvars.copy_context().run, self._prepare, *r) for r in requests]
+                prepared = [f.result() for f in futs]
+        else:
+            prepared = [self._prepare(*r) for r in requests]
+        out = []
+        for (effects, *_), (model, plain, n_free, nominal, seconds) in zip(requests, prepared):
+            t0 = time.time()
+            cmp = self.score(model, plain)
+            score = penalised_score(cmp, n_free, self.baseline_comparison)
+            out.append(Candidate(tuple(effects), model, cmp, score, seconds + time.time() - t0, float(n_free),
+                                 int(nominal)))
+        return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -265,8 +297,20 @@ def _check_candidates(names, meas: Measurement) -> list:
 SECOND = 4
 
 
+def default_workers() -> int:
+    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``)."""
+    env = os.environ.get("GIFT_LAB_THREADS", "").strip()
+    if env.isdigit() and int(env) >= 1:
+        return int(env)
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count() or 1
+    return max(1, min(4, cores))
+
+
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
-             verbose: bool = False) -> Diagnosis:
+             verbose: bool = False, workers: int | None = None) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
     Parameters
@@ -279,6 +323,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     second : when the best single effect still fails (p < 0.01), the best ``second``
         runners-up (default 4; None: all) are each fitted on top of it (a greedy forward step,
         for two missing effects) and ranked with the rest
+    workers : threads fitting the candidates at once (default :func:`default_workers`); the
+        numbers do not depend on it
 
     Returns
     -------
@@ -290,24 +336,19 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     base, base_cmp = session.baseline, session.baseline_comparison
     _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
          f"(floor {session.ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
-    ranking = []
-    for name in names:
-        t1 = time.time()
-        effects = tuple(name.split("+"))
-        cand = session.candidate(effects, session.fit(effects), t1, effects)
-        ranking.append(cand)
+    workers = default_workers() if workers is None else max(1, int(workers))
+    singles = [tuple(n.split("+")) for n in names]
+    ranking = session.candidates([(effects, None, effects, effects) for effects in singles], workers)
+    for name, cand in zip(names, ranking):
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
              f"p = {cand.comparison.p_value:.3g} ({cand.seconds:.1f} s)", verbose)
     ranking.sort(key=rank_key)
     if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
         first = ranking[0]
         rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
-        stage2 = []
-        for name in rest:
-            t1 = time.time()
-            cand = session.candidate(first.effects + (name,), session.fit((name,), start=first.model), t1,
-                                     first.effects + (name,))
-            stage2.append(cand)
+        stage2 = session.candidates([(first.effects + (name,), first.model, (name,), first.effects + (name,))
+                                     for name in rest], workers)
+        for cand in stage2:
             _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
                  f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
         ranking = _merge_second_stage(first, stage2, ranking[1:])

@@ -24,7 +24,7 @@ process -- a Dask worker of a sweep, the next ``gift`` command -- loads the prog
 earlier one compiled instead of compiling them again: :func:`use_compilation_cache`, called
 when gift is imported, points JAX at ``$GIFT_COMPILATION_CACHE`` or, by default, the ``xla``
 folder of gift's cache (``$GIFT_CACHE_DIR`` or ``~/.cache/gift``), and keeps every program
-that took at least :data:`CACHE_MIN_COMPILE_SECONDS` to compile. ``GIFT_COMPILATION_CACHE=off``
+(:data:`CACHE_MIN_COMPILE_SECONDS`). ``GIFT_COMPILATION_CACHE=off``
 turns it off; a folder the user already gave JAX (``jax_compilation_cache_dir``) is kept.
 Processes may share the folder (the workers of a sweep): JAX writes an entry in one piece and
 reads it back whole; without the ``filelock`` package it takes no lock, so a process reading
@@ -45,9 +45,12 @@ CPU_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_REDU
                "xla_cpu_prefer_vector_width": 512}
 
 
-#: programs that compile faster than this are not written to the disk cache (reading one back
-#: costs a few milliseconds; gift's smallest kernels compile in ~0.1 s)
-CACHE_MIN_COMPILE_SECONDS = 0.2
+#: programs that compile faster than this are not written to the disk cache. Every program is
+#: kept: a diagnose compiles some 240, most of them small (one per physics structure and
+#: shape), and reading one back takes ~8 ms against ~27 ms to compile it. Measured on 2 cores
+#: (``python -m studies.calibrate time --taps``, a fresh process): 17.5-20 s with a threshold of
+#: 0.2 s (166 of the 244 programs compiled again), 14.5-15 s with none.
+CACHE_MIN_COMPILE_SECONDS = 0.0
 _OFF = ("0", "off", "none", "false", "no")  # values of GIFT_COMPILATION_CACHE that turn it off
 
 

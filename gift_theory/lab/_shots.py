@@ -9,15 +9,19 @@ subkey, so the draws of a site are common to every candidate model) through
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
+import threading
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _random
 from .._measurement import Measurement
 from .._model import (
+    _additive_names,
     compiled_draws,
     forward,
     layer_step,
@@ -86,9 +90,63 @@ def tiled_times(meas: Measurement, K: int):
     return jnp.asarray(np.tile(meas.t, (1, reps))[:, :K], jnp.float32)
 
 
+#: bytes of standard draws kept between calls (least recently used first out)
+DRAW_CACHE_BYTES = 256 << 20
+_draw_cache: "collections.OrderedDict[tuple, jax.Array]" = collections.OrderedDict()
+_draw_lock = threading.Lock()
+_draw_bytes = [0]
+
+
+@functools.partial(jax.jit, static_argnames=("name", "shape", "law"))
+def _site_draws(key, name, shape, law):
+    """One site's standard draws, as :func:`gift_theory.sample_noise` makes them (its own named
+    subkey; the noise law's unit-variance draws at additive sites, else standard normal)."""
+    k = named_subkey(key, name)
+    return law.standard(k, shape, jnp.float32) if law is not None else _random.normal(k, shape, jnp.float32)
+
+
+def _law_effect(physics):
+    """The physics' noise-law effect, None for Gaussian, or False when it cannot key a cache
+    (a law with parameters: its draws depend on their values)."""
+    law = next((e for e in physics.effects if e.stage == "law"), None)
+    if law is None:
+        return None
+    return law if not law.param_dict() else False
+
+
 def draws(key, physics, meas: Measurement, K: int) -> dict:
-    """Standard draws of ``physics`` for K shots of each input of ``meas`` (the core's sampler)."""
-    return compiled_draws(key, physics, arch=meas.arch, shape=(meas.n, int(K)), dtype=jnp.float32)
+    """Standard draws of ``physics`` for K shots of each input of ``meas`` (the core's sampler).
+
+    A site's draws depend on the key, its name and shape and, at additive sites, the noise
+    law -- not on the other effects -- so every candidate model of a diagnosis reuses the
+    draws of the sites it shares with the others: they are kept per site (up to
+    :data:`DRAW_CACHE_BYTES`), bit for bit what :func:`gift_theory._model.compiled_draws`
+    returns for the whole physics."""
+    shape = (meas.n, int(K))
+    law = _law_effect(physics)
+    if law is False:
+        return compiled_draws(key, physics, arch=meas.arch, shape=shape, dtype=jnp.float32)
+    additive = set(_additive_names(meas.arch)) if "awgn" in physics else set()
+    kd = np.asarray(jax.random.key_data(key)).tobytes()
+    out = {}
+    for name, event in physics.draws(meas.arch).items():
+        site_law = law if name in additive else None
+        full = shape + tuple(event)
+        ck = (kd, name, full, None if site_law is None else site_law.name)
+        with _draw_lock:
+            v = _draw_cache.get(ck)
+            if v is not None:
+                _draw_cache.move_to_end(ck)
+        if v is None:
+            v = _site_draws(key, name, full, site_law)
+            with _draw_lock:
+                if ck not in _draw_cache:
+                    _draw_cache[ck] = v
+                    _draw_bytes[0] += v.nbytes
+                while _draw_bytes[0] > DRAW_CACHE_BYTES and len(_draw_cache) > 1:
+                    _draw_bytes[0] -= _draw_cache.popitem(last=False)[1].nbytes
+        out[name] = v
+    return out
 
 
 @functools.partial(jax.jit, static_argnames=("arch",))

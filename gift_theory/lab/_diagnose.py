@@ -297,6 +297,41 @@ def _check_candidates(names, meas: Measurement) -> list:
 SECOND = 4
 
 
+def _rank(session: Session, names, second, workers: int, verbose: bool) -> list:
+    """Every candidate fitted and scored, ranked; a second stage on top of the best one when it
+    still fails (see :func:`diagnose`)."""
+    singles = [tuple(n.split("+")) for n in names]
+    ranking = session.candidates([(effects, None, effects, effects) for effects in singles], workers)
+    for name, cand in zip(names, ranking):
+        _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
+             f"p = {cand.comparison.p_value:.3g} ({cand.seconds:.1f} s)", verbose)
+    ranking.sort(key=rank_key)
+    if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
+        first = ranking[0]
+        rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
+        stage2 = session.candidates([(first.effects + (name,), first.model, (name,), first.effects + (name,))
+                                     for name in rest], workers)
+        for cand in stage2:
+            _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
+                 f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
+        ranking = _merge_second_stage(first, stage2, ranking[1:])
+    return ranking
+
+
+def _localise(session: Session, base: Model, meas: Measurement, shots):
+    """Where the baseline fails, each layer on its own: the one-step checks (with taps), the
+    failing layers, the layer evidence, the signatures and where-it-fails (pure: keyed by
+    the session's step key)."""
+    taps = meas.has_taps
+    steps = tuple(one_step_check(session.k_step, base, meas)) if taps else ()
+    failing = failing_layers(steps) if taps else None
+    res = residuals(session.k_step, base, meas, shots)
+    local = one_step_residuals(session.k_step, base, meas, {r["layer"]: r["s"] for r in steps}) if taps else res
+    evidence = layer_evidence(local)
+    sigs, where = signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res)
+    return steps, failing, evidence, sigs, where
+
+
 def default_workers() -> int:
     """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``)."""
     env = os.environ.get("GIFT_LAB_THREADS", "").strip()
@@ -337,29 +372,14 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
          f"(floor {session.ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
     workers = default_workers() if workers is None else max(1, int(workers))
-    singles = [tuple(n.split("+")) for n in names]
-    ranking = session.candidates([(effects, None, effects, effects) for effects in singles], workers)
-    for name, cand in zip(names, ranking):
-        _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
-             f"p = {cand.comparison.p_value:.3g} ({cand.seconds:.1f} s)", verbose)
-    ranking.sort(key=rank_key)
-    if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
-        first = ranking[0]
-        rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
-        stage2 = session.candidates([(first.effects + (name,), first.model, (name,), first.effects + (name,))
-                                     for name in rest], workers)
-        for cand in stage2:
-            _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
-                 f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
-        ranking = _merge_second_stage(first, stage2, ranking[1:])
-    # localise: where the baseline fails, each layer on its own
+    # localising needs only the baseline: with threads to spare it runs beside the candidates
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as side:
+        local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
+                 if workers > 1 else None)
+        ranking = _rank(session, names, second, workers, verbose)
+        steps, failing, evidence, sigs, where = (local.result() if local is not None
+                                                 else _localise(session, base, meas, shots))
     taps = meas.has_taps
-    steps = tuple(one_step_check(session.k_step, base, meas)) if taps else ()
-    failing = failing_layers(steps) if taps else None
-    res = residuals(session.k_step, base, meas, shots)
-    local = one_step_residuals(session.k_step, base, meas, {r["layer"]: r["s"] for r in steps}) if taps else res
-    evidence = layer_evidence(local)
-    sigs, where = signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res)
     # name mechanisms, then the verdict
     ctx = Context({row["layer"]: row for row in evidence}, meas.arch.depth, taps, failing,
                   fit_gains(ranking, base_cmp, session.fit_meas), {r["layer"]: (r["s"], r["level_z"]) for r in steps})

@@ -129,8 +129,10 @@ class Session:
     the baseline. Built once by :func:`diagnose`, :func:`fit_effects` and
     :func:`compare_measurement` from the same named subkeys, so their numbers agree."""
 
-    def __init__(self, key, meas: Measurement, shots: int | None = None):
+    def __init__(self, key, meas: Measurement, shots: int | None = None, workers: int | None = None):
         self.meas, self.shots = meas, shots
+        # threads for the refit nulls' replicates and the candidates (the numbers do not depend on it)
+        self.workers = default_workers() if workers is None else max(1, int(workers))
         k_split, self.k_fit, self.k_cmp, k_ref, self.k_step = jax.random.split(key, 5)
         self.train, self.test = split_inputs(k_split, meas.n)
         self.fit_meas, self.test_meas = meas.subset(self.train), meas.subset(self.test)
@@ -161,7 +163,7 @@ class Session:
         if names not in self._replicates:
             self._replicates[names] = offset_replicates(
                 jax.random.fold_in(self.k_cmp, len(self._replicates)), model, self.fit_meas, self.test_meas,
-                self.ref, channel_values=channel_values, shots=self.shots)
+                self.ref, channel_values=channel_values, shots=self.shots, workers=self.workers)
         return compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref,
                        null_replicates=self._replicates[names])
 
@@ -367,11 +369,11 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     """
     t0 = time.time()
     names = default_candidates(meas) if candidates is None else _check_candidates(candidates, meas)
-    session = Session(key, meas, shots)
+    workers = default_workers() if workers is None else max(1, int(workers))
+    session = Session(key, meas, shots, workers)
     base, base_cmp = session.baseline, session.baseline_comparison
     _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
          f"(floor {session.ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
-    workers = default_workers() if workers is None else max(1, int(workers))
     # localising needs only the baseline: with threads to spare it runs beside the candidates
     with concurrent.futures.ThreadPoolExecutor(max_workers=1) as side:
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)

@@ -26,6 +26,8 @@ scored on simulated held-out data.
 
 from __future__ import annotations
 
+import concurrent.futures
+import contextvars
 import dataclasses
 import functools
 
@@ -531,7 +533,8 @@ _mean_output = jax.jit(_mean_out, static_argnames=("arch",))
 
 
 def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measurement, ref, *,
-                      channel_values, shots: int | None = None, B: int = OFFSET_REPLICATES) -> np.ndarray:
+                      channel_values, shots: int | None = None, B: int = OFFSET_REPLICATES,
+                      workers: int = 1) -> np.ndarray:
     """Channel values of a model with fitted offsets under the null *with* its estimation
     error, for :func:`~gift_theory.lab.compare`'s ``null_replicates``: B times, data are
     simulated from the fitted model as the truth on the fitting inputs, the offsets refitted
@@ -541,6 +544,8 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
     With taps every layer's offsets are identified and the fitted model stands for the truth;
     without taps most directions are not, and each replicate's truth is drawn from the
     offsets' posterior (the part the data cannot see, at its full size).
+
+    ``workers`` threads make the replicates at once (the same numbers for any number).
 
     Returns
     -------
@@ -556,8 +561,8 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
     spread = (None if fit_meas.has_taps
               else _posterior_spread(named_subkey(key, "posterior"), model, base, fit_meas, kinds))
     shapes = [k.shape(arch, l) for k in kinds for l in k.layers]
-    out = []
-    for b in range(B):
+
+    def replicate(b):
         kb = jax.random.fold_in(key, b)
         k_tr, k_te, k_fit, k_cmp, k_truth = (named_subkey(kb, s) for s in ("fit_data", "test_data", "refit", "score",
                                                                             "truth"))
@@ -572,7 +577,14 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
         deltas = estimate_offsets(k_fit, sim_tr, base.physics, base.weights(fit_meas), kinds, scales, start=fitted)
         p, ph = apply_all(kinds, deltas, base.weights(fit_meas), base.physics, arch)
         refit = Model(ph, p, model.offsets)
-        out.append(channel_values(k_cmp, refit, resimulate(k_te, truth, test_meas), ref, shots))
+        return channel_values(k_cmp, refit, resimulate(k_te, truth, test_meas), ref, shots)
+
+    # the replicates are independent (each from its own subkey): ``workers`` threads make them at once
+    if workers > 1 and B > 1:
+        with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+            out = [f.result() for f in [pool.submit(contextvars.copy_context().run, replicate, b) for b in range(B)]]
+    else:
+        out = [replicate(b) for b in range(B)]
     return np.stack(out)
 
 

@@ -167,7 +167,7 @@ class Session:
         return compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref,
                        null_replicates=self._replicates[names])
 
-    def _prepare(self, effects, start, fit_names, added):
+    def _prepare(self, start, fit_names, added):
         """The order-free part of a candidate (fit, plain comparison, parameter count): pure."""
         t0 = time.time()
         model = self.fit(fit_names, start=start)
@@ -181,21 +181,21 @@ class Session:
                 n_free, nominal = n_free + len(REGISTRY[name].params), nominal + len(REGISTRY[name].params)
         return model, plain, n_free, nominal, time.time() - t0
 
-    def candidates(self, requests, workers: int = 1) -> list:
+    def candidates(self, requests) -> list:
         """Fit and score ``requests`` in order: (effects, start model or None, the effects to fit
         on top of it, the effects whose parameters the candidate is charged for), ...
 
-        The fits and plain comparisons are independent, so ``workers`` threads run them at once
-        (JAX's programs and numpy's sorts run without the GIL); the refit nulls are then made
-        in the order of ``requests``. Same numbers for any ``workers``."""
+        The fits and plain comparisons are independent, so the session's ``workers`` threads run
+        them at once (JAX's programs and numpy's sorts run without the GIL); the refit nulls are
+        then made in the order of ``requests``. Same numbers for any number of threads."""
         requests = list(requests)
-        if workers > 1 and len(requests) > 1:
-            with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+        if self.workers > 1 and len(requests) > 1:
+            with concurrent.futures.ThreadPoolExecutor(max_workers=self.workers) as pool:
                 # each task in a copy of this context, so a PhaseClock still sees its compiles
-                futs = [pool.submit(contextvars.copy_context().run, self._prepare, *r) for r in requests]
+                futs = [pool.submit(contextvars.copy_context().run, self._prepare, *r[1:]) for r in requests]
                 prepared = [f.result() for f in futs]
         else:
-            prepared = [self._prepare(*r) for r in requests]
+            prepared = [self._prepare(*r[1:]) for r in requests]
         out = []
         for (effects, *_), (model, plain, n_free, nominal, seconds) in zip(requests, prepared):
             t0 = time.time()
@@ -299,11 +299,11 @@ def _check_candidates(names, meas: Measurement) -> list:
 SECOND = 4
 
 
-def _rank(session: Session, names, second, workers: int, verbose: bool) -> list:
+def _rank(session: Session, names, second, verbose: bool) -> list:
     """Every candidate fitted and scored, ranked; a second stage on top of the best one when it
     still fails (see :func:`diagnose`)."""
     singles = [tuple(n.split("+")) for n in names]
-    ranking = session.candidates([(effects, None, effects, effects) for effects in singles], workers)
+    ranking = session.candidates([(effects, None, effects, effects) for effects in singles])
     for name, cand in zip(names, ranking):
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
              f"p = {cand.comparison.p_value:.3g} ({cand.seconds:.1f} s)", verbose)
@@ -312,7 +312,7 @@ def _rank(session: Session, names, second, workers: int, verbose: bool) -> list:
         first = ranking[0]
         rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
         stage2 = session.candidates([(first.effects + (name,), first.model, (name,), first.effects + (name,))
-                                     for name in rest], workers)
+                                     for name in rest])
         for cand in stage2:
             _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
                  f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
@@ -369,7 +369,6 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     """
     t0 = time.time()
     names = default_candidates(meas) if candidates is None else _check_candidates(candidates, meas)
-    workers = default_workers() if workers is None else max(1, int(workers))
     session = Session(key, meas, shots, workers)
     base, base_cmp = session.baseline, session.baseline_comparison
     _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
@@ -377,8 +376,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     # localising needs only the baseline: with threads to spare it runs beside the candidates
     with concurrent.futures.ThreadPoolExecutor(max_workers=1) as side:
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
-                 if workers > 1 else None)
-        ranking = _rank(session, names, second, workers, verbose)
+                 if session.workers > 1 else None)
+        ranking = _rank(session, names, second, verbose)
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))
     taps = meas.has_taps

@@ -32,15 +32,17 @@ POINTS = (("first", "awgn", 0.2), ("steady", "awgn", 0.05), ("new_law", "laplace
 
 def _credited(arch, n_train: int, n_test: int, *, budget: float, K1: int, K2: int, referee_K2: int,
               direction_K2: int = 16, curvature_K2: int = 8, prediction: bool = False,
-              prediction_K2: int = 8) -> dict:
+              prediction_K2: int = 8, moved: bool = True) -> dict:
     """Credited flops of one GIFT point by phase (run_finetune's defaults).
 
-    The referee scores w0 and the fine-tuned weights on training and test data (and, with a
-    prediction, the line search's candidate on training data); the prediction is two
+    The referee scores w0 and, if the method ``moved`` (returned weights other than w0), the
+    fine-tuned weights on training and test data (and, with a prediction, the line search's
+    candidate on training data): each distinct weight set once. The prediction is two
     forward-mode derivatives (4 x weights flops per sample) at s0 and st.
     """
     W = arch.n_weights
-    out = {"referee": 2.0 * W * ((2 + prediction) * n_train + 2 * n_test) * referee_K2,
+    sets = 1 + bool(moved)
+    out = {"referee": 2.0 * W * ((sets + prediction) * n_train + sets * n_test) * referee_K2,
            "method/direction": 6.0 * W * n_train * direction_K2,
            "method/curvature": 6.0 * W * n_train * curvature_K2,
            "method/pair_se": 2.0 * W * K1 * K2 * 2,
@@ -104,7 +106,8 @@ def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
             wall = time.perf_counter() - t0
         c1, n1 = compile_totals()
         credited = _credited(arch, ds.x_train.shape[0], ds.x_test.shape[0], budget=20, K1=ds.x_train.shape[0],
-                             K2=1, referee_K2=32, prediction="prediction" in clock.phases)
+                             K2=1, referee_K2=32, prediction="prediction" in clock.phases,
+                             moved=_memo.digest(res["params"]) != _memo.digest(w0))
         total = sum(credited.values())
         run = {"label": label, "noise_kind": kind, "st": st, "seconds": wall, "compile_seconds": c1 - c0,
                "compiles": n1 - n0, "phases": clock.phases, "credited_flops": credited,

@@ -145,7 +145,7 @@ class Session:
     def fit(self, effects, start: Model | None = None) -> Model:
         return fit_model(self.k_fit, self.fit_meas, effects, start=start, K=self.shots, problem=self.problem)
 
-    def score(self, model: Model, plain: Comparison | None = None) -> Comparison:
+    def score(self, model: Model, plain: Comparison | None = None, held_out: Measurement | None = None) -> Comparison:
         """The held-out comparison; a model with fitted offsets against its refit null (made once
         per set of offset effects and reused). With taps, a model whose plain test already
         rejects at :data:`REFIT_SKIP_P` skips the refit null: there the offsets are identified and
@@ -154,17 +154,21 @@ class Session:
         needs (some 30). ``plain``: the model's plain comparison, if already made.
 
         The refit nulls are numbered in the order they are first needed, so models must be
-        scored in a fixed order (:meth:`candidates` does); the rest is safe to run in threads."""
+        scored in a fixed order (:meth:`candidates` does); the rest is safe to run in threads.
+
+        ``held_out``: a variant of the held-out half with the same data (the verdict's time-free
+        twin holds the acquisition times at their mean), scored against the same reference."""
         names = tuple(sorted(n for n in model.offsets if fitted_as_offsets(n)))
+        test_meas = self.test_meas if held_out is None else held_out
         if plain is None:
-            plain = compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref)
+            plain = compare(self.k_cmp, model, test_meas, shots=self.shots, ref=self.ref)
         if not names or (self.meas.has_taps and plain.p_value < REFIT_SKIP_P):
             return plain
         if names not in self._replicates:
             self._replicates[names] = offset_replicates(
                 jax.random.fold_in(self.k_cmp, len(self._replicates)), model, self.fit_meas, self.test_meas,
                 self.ref, channel_values=channel_values, shots=self.shots, workers=self.workers)
-        return compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref,
+        return compare(self.k_cmp, model, test_meas, shots=self.shots, ref=self.ref,
                        null_replicates=self._replicates[names])
 
     def _prepare(self, start, fit_names, added):
@@ -385,7 +389,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     ctx = Context({row["layer"]: row for row in evidence}, meas.arch.depth, taps, failing,
                   fit_gains(ranking, base_cmp, session.fit_meas), {r["layer"]: (r["s"], r["level_z"]) for r in steps})
     mechs = mechanisms(ctx)
-    explained, reasons, line = verdict(session.k_step, ranking, base_cmp, session.fit_meas, meas, mechs, failing)
+    explained, reasons, line = verdict(session, ranking, meas, mechs, failing)
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),

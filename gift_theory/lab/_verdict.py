@@ -10,9 +10,14 @@
       taps a few hundred weight offsets fitted to a few hundred output means are not: they can
       follow almost any smooth distortion of the network, so their passing says nothing);
    b. its fitted values look like its own effect: fitted weight offsets are neither
-      proportional to the programmed weights nor a fixed linear map of them, fitted bias
-      offsets do not all go one way (:func:`~gift_theory.lab._fit_offsets.prior_check`,
-      |z| < 4 in every layer);
+      proportional to the programmed weights nor a fixed linear map of them, nor are their
+      rows coupled as the rows of the weights are; fitted bias offsets do not all go one way
+      (:func:`~gift_theory.lab._fit_offsets.prior_check`: |z| < 4 in every layer, the coupling
+      test's exact p above 0.01 over the layers);
+   b'. an effect that acts through the acquisition times (``needs_times``: drift) is what the
+      data show only if its time dependence is: the same fitted model with every time held at
+      the file's mean (its time-free twin) must fail the held-out test -- else a constant
+      gain does as well, and the data say nothing of a trend;
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with
       Bonferroni over the layers): the model is right where it acts, not only on average; and
    d. an effect fitted by its scalar parameters buys its keep: its penalised score (held-out
@@ -30,17 +35,19 @@ from __future__ import annotations
 
 import numpy as np
 
+import dataclasses
+
+from ..effects import REGISTRY
 from ._compare import failing_layers, one_step_check
-from ._fit_offsets import prior_check
+from ._fit_offsets import prior_check, refusing
 
 ALPHA = 0.01
-#: the z beyond which fitted offsets are not the effect's own (a structure the prior excludes)
-PRIOR_Z = 4.0
 
 
-def explanation(top, baseline_cmp, top_steps=None, prior=()) -> tuple[bool, list[str]]:
+def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None) -> tuple[bool, list[str]]:
     """``(explained, reasons)`` by the module's rule; reasons say why not (or, when explained,
-    what passed)."""
+    what passed). ``twin``: the top model's held-out comparison with the times held at their
+    mean (rule b'), when it acts through them."""
     if baseline_cmp.p_value >= ALPHA:
         return True, [f"the awgn model passes (p = {baseline_cmp.p_value:.3g}): nothing is missing"]
     if top is None:
@@ -59,11 +66,16 @@ def explanation(top, baseline_cmp, top_steps=None, prior=()) -> tuple[bool, list
     what = {"w_correlation": "weight offsets of layer {l} are proportional to the programmed weights (a gain, not an "
                              "error drawn apart from them)",
             "w_structure": "weight offsets of layer {l} are a fixed linear map of the programmed weights (a coupling)",
+            "w_coupling": "weight offsets of layer {l} have rows coupled as the programmed weights' rows are (a "
+                          "coupling between the inputs, not errors drawn per weight)",
             "b_mean": "bias offsets of layer {l} all go one way (a shifted transfer, not per-neuron draws of either "
                       "sign)"}
-    for row in prior or ():
-        if abs(row["z"]) > PRIOR_Z:
-            why.append(f"the fitted {what[row['test']].format(l=row['layer'])}: z = {row['z']:.1f}")
+    for row in refusing(prior):
+        why.append(f"the fitted {what[row['test']].format(l=row['layer'])}: z = {row['z']:.1f}"
+                   + (f" (p = {row['p']:.2g})" if "p" in row else ""))
+    if twin is not None and twin.p_value >= ALPHA:
+        why.append(f"with every acquisition time held at its mean, awgn + {name} passes as well (p = "
+                   f"{twin.p_value:.3g}): a constant gain does what its trend in time does, so the data show no trend")
     if top_steps:
         bad = failing_layers(top_steps)
         if bad:
@@ -106,15 +118,25 @@ def as_json_fields(explained: bool, reasons, line: str, failing, mechanisms) -> 
             "mechanisms": [dict(m, score=float(np.round(m["score"], 3))) for m in mechanisms]}
 
 
-def verdict(key, ranking, baseline_cmp, fit_meas, meas, mechanisms, failing) -> tuple[bool, list, str]:
+def time_free(meas):
+    """``meas`` with every acquisition time at the mean of its times (rule b')."""
+    return dataclasses.replace(meas, t=np.full_like(meas.t, float(np.mean(meas.t))))
+
+
+def verdict(session, ranking, meas, mechanisms, failing) -> tuple[bool, list, str]:
     """``(explained, reasons, line)`` of a diagnosis: the rule of this module on the top-ranked
     model (its fitted offsets checked against their prior on the fitting inputs; with taps, its
-    one-step check on every input), and the plain line naming the closest model."""
+    one-step check on every input; an effect acting through the times, its time-free twin on
+    the held-out half), and the plain line naming the closest model. ``session``: the
+    diagnosis's :class:`~gift_theory.lab._diagnose.Session`."""
     top = ranking[0] if ranking else None
-    prior, top_steps = (), None
+    baseline_cmp = session.baseline_comparison
+    prior, top_steps, twin = (), None, None
     if top is not None and baseline_cmp.p_value < ALPHA and top.comparison.p_value >= ALPHA:
-        prior = prior_check(top.model, fit_meas)
-        top_steps = one_step_check(key, top.model, meas, own_level=False) if meas.has_taps else None
-    explained, reasons = explanation(top, baseline_cmp, top_steps, prior)
+        prior = prior_check(top.model, session.fit_meas)
+        top_steps = one_step_check(session.k_step, top.model, meas, own_level=False) if meas.has_taps else None
+        if meas.t is not None and any(REGISTRY[e].needs_times for e in top.effects):
+            twin = session.score(top.model, held_out=time_free(session.test_meas))
+    explained, reasons = explanation(top, baseline_cmp, top_steps, prior, twin)
     closest = min(ranking, key=lambda c: c.comparison.discrepancy) if ranking else None
     return explained, reasons, verdict_line(explained, reasons, top, baseline_cmp, mechanisms, failing, closest)

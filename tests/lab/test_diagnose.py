@@ -92,6 +92,20 @@ def test_weight_error_is_named_first_and_passes_against_its_refit_null():
     assert all(c.comparison.replicates == 0 for c in d.ranking[1:])
 
 
+def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
+    """Rule b' of the verdict: drift explains a drifting chip only because its trend in time
+    does -- the same model with every time at the mean fails the held-out test."""
+    from gift_theory.lab._diagnose import Session
+    from gift_theory.lab._verdict import time_free
+
+    meas = _chip(HIDDEN["drift"])
+    d = diagnose(jax.random.PRNGKey(11), meas, candidates=["drift"], second=0)
+    assert d.ranking[0].effects == ("drift",) and d.explained, d.reasons
+    session = Session(jax.random.PRNGKey(11), meas)
+    twin = session.score(d.ranking[0].model, held_out=time_free(session.test_meas))
+    assert twin.p_value < 0.01 < d.ranking[0].comparison.p_value
+
+
 def test_two_hidden_effects_both_in_top_three():
     meas = _chip({"shot": 0.05, "crosstalk": 0.3})
     d = diagnose(jax.random.PRNGKey(12), meas)

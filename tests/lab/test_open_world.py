@@ -53,6 +53,16 @@ def test_explained_rule():
     # passes, but its offsets are a fixed linear map of W (a coupling, not weight_error's prior)
     ok, why = explanation(_cand(0.5), base_fails, prior=[{"layer": 1, "test": "w_structure", "z": 9.0}])
     assert not ok and "linear map" in why[0]
+    # ... or their rows are coupled as W's rows are: exact p below 0.01 over the layers tested
+    coupled = [{"layer": 1, "test": "w_coupling", "z": 3.5, "p": 2e-4}, {"layer": 2, "test": "w_coupling", "z": 0.1, "p": 0.4}]
+    ok, why = explanation(_cand(0.5), base_fails, prior=coupled)
+    assert not ok and "coupled" in why[0] and "layer 1" in why[0]
+    coupled[0]["p"] = 6e-3  # above 0.01 / 2
+    assert explanation(_cand(0.5), base_fails, prior=coupled)[0]
+    # an effect acting through the times whose time-free twin passes as well shows no trend
+    ok, why = explanation(_cand(0.5), base_fails, twin=_Cmp(0.2))
+    assert not ok and "acquisition time" in why[0]
+    assert explanation(_cand(0.5), base_fails, twin=_Cmp(1e-5))[0]
     # bias offsets all one way: a shifted transfer, not bias_offset's draws
     ok, why = explanation(_cand(0.5), base_fails, prior=[{"layer": 1, "test": "b_mean", "z": 6.0}])
     assert not ok and "one way" in why[0]
@@ -97,6 +107,27 @@ def test_prior_check_tells_offsets_from_their_effect_s_prior():
     M = rng.normal(0, 0.3, (4, 4))
     z = check("weight_error", dW=[W[0] @ M, rng.normal(0, 0.1, W[1].shape)])
     assert z[("w_structure", 1)] > 4 and ("w_structure", 2) not in z  # 12 >= 4 + 3; 3 < 12 + 3
+
+
+def test_coupling_test_is_exact_under_the_prior_and_finds_a_coupling():
+    """Rows of E iid N(0, V) -- any V, here a random one -- whatever W: the rotation test's p is
+    uniform, so P(p < 0.1) = 0.1 (200 draws: 99.9 % binomial bounds 0.04-0.18). A coupling
+    E = W M (dense crosstalk on a contracting layer, where the F test ``w_structure`` cannot
+    apply) is found; the normal law beyond 64 rows does too, and is centred under the prior."""
+    from gift_theory.lab._fit_offsets import coupling_test
+
+    rng = np.random.default_rng(5)
+    d_out, d_in = 8, 14
+    W = rng.normal(0, 1, (d_out, d_in)) * rng.uniform(0.2, 2.0, (d_out, 1))  # rows of unequal norm
+    V = rng.normal(0, 1, (d_in, d_in))
+    ps = np.array([coupling_test(rng.normal(0, 1, (d_out, d_in)) @ V, W, seed=i)[1] for i in range(200)])
+    assert 0.04 <= np.mean(ps < 0.1) <= 0.18, np.mean(ps < 0.1)
+    C = rng.normal(0, 1, (d_in, d_in)) / np.sqrt(d_in)
+    z, p = coupling_test(0.15 * W @ C + 0.01 * rng.normal(0, 1, W.shape), W)
+    assert p < 1e-3 and z > 3
+    Wb = rng.normal(0, 1, (100, 30)) * rng.uniform(0.2, 2.0, (100, 1))
+    zs = [coupling_test(rng.normal(0, 1, (100, 30)), Wb)[0] for _ in range(50)]
+    assert abs(np.mean(zs)) < 4 / np.sqrt(50) * 1.5 and coupling_test(Wb @ rng.normal(0, 1, (30, 30)), Wb)[0] > 10
 
 
 def test_failing_layers_are_bonferroni_over_the_layers():

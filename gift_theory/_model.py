@@ -40,6 +40,28 @@ def named_subkey(key: jax.Array, name: str) -> jax.Array:
     return jax.random.fold_in(key, zlib.crc32(name.encode()) & 0x7FFFFFFF)
 
 
+def noise_law(physics: Physics):
+    """The physics' noise-law effect (stage ``law``), None for the Gaussian law."""
+    return next((e for e in physics.effects if e.stage == "law"), None)
+
+
+def site_laws(arch: Architecture, physics: Physics) -> dict:
+    """``{site name: (event shape, law)}``: every draw site of ``physics`` and how it is drawn --
+    ``law`` the noise-law effect at an additive site (``a0``, ``w{l}``, ``a{l}``), None (standard
+    normal) everywhere else."""
+    additive = set(_additive_names(arch)) if "awgn" in physics else set()
+    law = noise_law(physics)
+    return {name: (tuple(event), law if name in additive else None) for name, event in physics.draws(arch).items()}
+
+
+def site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype=jnp.float32) -> jax.Array:
+    """One site's standard draws: from the site's own named subkey, the law's unit-variance
+    draws (``law``: a noise-law effect) or standard normal (None). The one per-site sampler:
+    :func:`sample_noise` and the lab's per-site draw cache both draw through it."""
+    k = named_subkey(key, name)  # a site's draws are named by the site
+    return law.standard(k, shape, dtype) if law is not None else _random.normal(k, shape, dtype)
+
+
 def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_shape=(), dtype=jnp.float32) -> dict:
     """Standard draws for ``batch_shape`` shots: ``{name: array of shape batch_shape + event}``.
 
@@ -48,13 +70,8 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
     draws of a site do not change when other effects are added (common random numbers).
     """
     batch_shape = tuple(batch_shape)
-    out = {}
-    additive = set(_additive_names(arch)) if "awgn" in physics else set()
-    for name, event in physics.draws(arch).items():
-        k = named_subkey(key, name)  # a site's draws are named by the site
-        shape = batch_shape + tuple(event)
-        out[name] = physics.standard(k, shape, dtype) if name in additive else _random.normal(k, shape, dtype)
-    return out
+    return {name: site_draws(key, name, batch_shape + event, law, dtype)
+            for name, (event, law) in site_laws(arch, physics).items()}
 
 
 @partial(_xla.jit, static_argnames=("arch", "shape", "dtype"))

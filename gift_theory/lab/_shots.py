@@ -18,16 +18,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _random
 from .._measurement import Measurement
 from .._model import (
-    _additive_names,
     compiled_draws,
     forward,
     layer_step,
     named_subkey,
+    noise_law,
     noisy_input,
     sample_noise,
+    site_draws,
+    site_laws,
 )
 from .._params import Layer
 
@@ -97,21 +98,8 @@ _draw_lock = threading.Lock()
 _draw_bytes = [0]
 
 
-@functools.partial(jax.jit, static_argnames=("name", "shape", "law"))
-def _site_draws(key, name, shape, law):
-    """One site's standard draws, as :func:`gift_theory.sample_noise` makes them (its own named
-    subkey; the noise law's unit-variance draws at additive sites, else standard normal)."""
-    k = named_subkey(key, name)
-    return law.standard(k, shape, jnp.float32) if law is not None else _random.normal(k, shape, jnp.float32)
-
-
-def _law_effect(physics):
-    """The physics' noise-law effect, None for Gaussian, or False when it cannot key a cache
-    (a law with parameters: its draws depend on their values)."""
-    law = next((e for e in physics.effects if e.stage == "law"), None)
-    if law is None:
-        return None
-    return law if not law.param_dict() else False
+#: :func:`gift_theory._model.site_draws`, one compiled program per site name, shape and law
+_site_draws = jax.jit(site_draws, static_argnames=("name", "shape", "law", "dtype"))
 
 
 def draws(key, physics, meas: Measurement, K: int) -> dict:
@@ -121,24 +109,24 @@ def draws(key, physics, meas: Measurement, K: int) -> dict:
     law -- not on the other effects -- so every candidate model of a diagnosis reuses the
     draws of the sites it shares with the others: they are kept per site (up to
     :data:`DRAW_CACHE_BYTES`), bit for bit what :func:`gift_theory._model.compiled_draws`
-    returns for the whole physics."""
+    returns for the whole physics (both draw through :func:`gift_theory._model.site_draws`).
+    A law with parameters cannot key the cache (its draws depend on their values): such a
+    physics is drawn whole."""
     shape = (meas.n, int(K))
-    law = _law_effect(physics)
-    if law is False:
+    law = noise_law(physics)
+    if law is not None and law.param_dict():
         return compiled_draws(key, physics, arch=meas.arch, shape=shape, dtype=jnp.float32)
-    additive = set(_additive_names(meas.arch)) if "awgn" in physics else set()
     kd = np.asarray(jax.random.key_data(key)).tobytes()
     out = {}
-    for name, event in physics.draws(meas.arch).items():
-        site_law = law if name in additive else None
-        full = shape + tuple(event)
+    for name, (event, site_law) in site_laws(meas.arch, physics).items():
+        full = shape + event
         ck = (kd, name, full, None if site_law is None else site_law.name)
         with _draw_lock:
             v = _draw_cache.get(ck)
             if v is not None:
                 _draw_cache.move_to_end(ck)
         if v is None:
-            v = _site_draws(key, name, full, site_law)
+            v = _site_draws(key, name, full, site_law, jnp.float32)
             with _draw_lock:
                 if ck not in _draw_cache:
                     _draw_cache[ck] = v

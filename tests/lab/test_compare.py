@@ -234,3 +234,34 @@ def test_the_one_program_moment_loss_equals_the_staged_one_bit_for_bit(setup, ex
         outs = layer_outputs(p32, prob.x, noise, phys.replace(**vals), meas.arch, prob.t)
         staged = float(_loss_of_outputs(outs, prob.dat, prob.t, (meas.r, prob.K)))
         assert float(f(theta)) == staged
+
+
+@pytest.mark.parametrize("spec", [{}, {"shot": 0.05, "crosstalk": 0.2}, {"laplace": True, "shot": 0.05},
+                                  {"uniform": True, "multiplicative": 0.2}, {"common_mode": 0.1, "drift": 0.1}])
+def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
+    """``lab._shots.draws`` keeps draws per site and shares them between candidate models; each
+    site must be bit for bit what the core's compiled whole-physics sampler draws, whether it
+    comes from the cache or not (both draw through ``_model.site_draws``); the eager sampler
+    and a plain gift_theory._random reference guard the site's subkey and law."""
+    from gift_theory import _random
+    from gift_theory._model import compiled_draws, named_subkey, sample_noise
+    from gift_theory.lab._shots import draws
+
+    phys = gt.Physics.create(s=0.1, **spec)
+    params = gt.init_params(jax.random.PRNGKey(0), ARCH)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(1), (6, 4)))
+    meas = simulate_measurement(jax.random.PRNGKey(2), params, x, phys, shots=3)
+    key = jax.random.PRNGKey(9)
+    want = compiled_draws(key, phys, arch=ARCH, shape=(6, 5), dtype=jnp.float32)
+    eager = sample_noise(key, ARCH, phys, (6, 5), jnp.float32)
+    for _ in range(2):  # drawn, then served from the cache
+        got = draws(key, phys, meas, 5)
+        assert set(got) == set(want) == set(eager)
+        for name in want:
+            np.testing.assert_array_equal(np.asarray(got[name]), np.asarray(want[name]))
+            # eager and compiled differ in the last bits (XLA fuses the transforms differently)
+            np.testing.assert_allclose(np.asarray(eager[name]), np.asarray(want[name]), rtol=1e-5, atol=1e-6)
+    if not spec:  # Gaussian: every site is a standard normal from its own named subkey
+        for name, v in want.items():
+            ref = _random.normal(named_subkey(key, name), v.shape, jnp.float32)
+            np.testing.assert_allclose(np.asarray(v), np.asarray(ref), rtol=1e-5, atol=1e-6)

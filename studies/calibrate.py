@@ -10,7 +10,9 @@ s is fitted on half the inputs and the p-value taken on the other half, exactly 
 ``gift diagnose`` does (the realistic case); without, the true model is scored. With
 ``--fitted --effect NAME`` the data have the hidden effect NAME and the model fits it too
 (the p-value after ``fit --add NAME`` when NAME is the right answer; weight_error: with its
-refit null).
+refit null); for an effect fitted as offsets each row also says which checks of the fitted
+values refused them (``prior_refused``: the verdict's rule b, so a refusal here is a false
+one) and the coupling test's p per layer, and the summary the refusal rate.
 
 ``ident``: for every effect of CONTRACTS §2 (and a two-effect case and the null), data
 with that hidden effect on a random network per seed; records whether ``diagnose`` flags a
@@ -72,8 +74,9 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
     import gift_theory as gt
     from gift_theory.lab import Model, compare, simulate_measurement
     from gift_theory.lab._diagnose import Session
+    from gift_theory.lab._fit_offsets import prior_check, refusing
 
-    ps = []
+    ps, refused = [], []
     t0 = time.time()
     for i in range(sets):
         arch, params = _network(1000 + i, widths)
@@ -82,15 +85,22 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
         meas = simulate_measurement(jax.random.PRNGKey(3000 + i), params, x, phys, shots=r, taps=taps,
                                     times=effect == "drift")
         key = jax.random.PRNGKey(4000 + i)
+        prior = None
         if fitted:  # exactly as diagnose scores a candidate
             session = Session(key, meas)
-            c = (session.baseline_comparison if effect is None
-                 else session.score(session.fit(tuple(HIDDEN[effect]), start=session.baseline)))
+            model = None if effect is None else session.fit(tuple(HIDDEN[effect]), start=session.baseline)
+            c = session.baseline_comparison if effect is None else session.score(model)
+            if model is not None and model.offsets:  # the verdict's check of the fitted values (rule b)
+                prior = prior_check(model, session.fit_meas)
         else:
             c = compare(key, Model(phys), meas)
         ps.append(c.p_value)
         row = {"study": "null", "set": i, "p_value": c.p_value, "discrepancy": c.discrepancy, "se": c.se,
                "noise_floor": c.noise_floor, "taps": taps, "fitted": fitted, "effect": effect}
+        if prior is not None:
+            row["prior_refused"] = [f"{r['test']}@{r['layer']}" for r in refusing(prior)]
+            row["coupling_p"] = [r["p"] for r in prior if r["test"] == "w_coupling"]
+            refused.append(bool(row["prior_refused"]))
         out.write(json.dumps(row) + "\n")
         out.flush()
         if (i + 1) % 10 == 0:
@@ -101,7 +111,10 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
     return {"study": "null", "summary": True, "sets": sets, "taps": taps, "fitted": fitted, "effect": effect,
             "arch": list(widths), "inputs": n, "shots": r, "s": s,
             "false_alarm_rate_0.01": float(np.mean(ps < 0.01)), "false_alarm_rate_0.05": float(np.mean(ps < 0.05)),
-            "ks_uniform_p": float(stats.kstest(ps, "uniform").pvalue), "seconds": time.time() - t0}
+            "ks_uniform_p": float(stats.kstest(ps, "uniform").pvalue),
+            # fitted offsets of the true effect refused as not its own (the verdict's rule b): a false refusal
+            **({"prior_refusal_rate": float(np.mean(refused))} if refused else {}),
+            "seconds": time.time() - t0}
 
 
 def ident_study(seeds, widths, n, r, s, taps, effects, out):

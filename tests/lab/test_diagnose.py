@@ -106,6 +106,21 @@ def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     assert twin.p_value < 0.01 < d.ranking[0].comparison.p_value
 
 
+def test_weight_offsets_are_fitted_at_the_data_s_noise_level_not_the_default():
+    """A candidate fitted from scratch (as diagnose fits every single effect) fits its offsets
+    after s: at s = 0.03 the mean response tanh(z + n) of the default s = 0.1 is compressed,
+    and offsets fitted to it came out 20-40 % off, failing the true model's own one-step check.
+    Fitted on the fitting inputs, awgn + weight_error passes it there in every layer."""
+    from gift_theory.lab._compare import one_step_check
+    from gift_theory.lab._fit import fit_model
+
+    meas = _chip({"weight_error": {"e": 0.06, "seed": 5}}, seed=6, s=0.03, r=32)
+    model = fit_model(jax.random.PRNGKey(1), meas, ["weight_error"])
+    assert abs(float(model.physics.params()["s"]) - 0.03) < 0.003
+    steps = one_step_check(jax.random.PRNGKey(2), model, meas, own_level=False)
+    assert min(r["p_value"] for r in steps) > 0.01 / len(steps), steps
+
+
 def test_two_hidden_effects_both_in_top_three():
     meas = _chip({"shot": 0.05, "crosstalk": 0.3})
     d = diagnose(jax.random.PRNGKey(12), meas)

@@ -33,9 +33,9 @@ says what remains against the noise floor and which mechanism classes and layers
 
 from __future__ import annotations
 
-import numpy as np
-
 import dataclasses
+
+import numpy as np
 
 from ..effects import REGISTRY
 from ._compare import failing_layers, one_step_check

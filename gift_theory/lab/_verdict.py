@@ -16,8 +16,9 @@
       test's exact p above 0.01 over the layers);
    b'. an effect that acts through the acquisition times (``needs_times``: drift) is what the
       data show only if its time dependence is: the same fitted model with every time held at
-      the file's mean (its time-free twin) must fail the held-out test -- else a constant
-      gain does as well, and the data say nothing of a trend;
+      the file's mean (its time-free twin) must do worse on the held-out half by at least 2 sd
+      (the ranking's cost of one parameter, here the trend's) -- else a constant gain does as
+      well, and the data say nothing of a trend;
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with
       Bonferroni over the layers): the model is right where it acts, not only on average; and
    d. an effect fitted by its scalar parameters buys its keep: its penalised score (held-out
@@ -73,9 +74,13 @@ def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None) -> tuple
     for row in refusing(prior):
         why.append(f"the fitted {what[row['test']].format(l=row['layer'])}: z = {row['z']:.1f}"
                    + (f" (p = {row['p']:.2g})" if "p" in row else ""))
-    if twin is not None and twin.p_value >= ALPHA:
-        why.append(f"with every acquisition time held at its mean, awgn + {name} passes as well (p = "
-                   f"{twin.p_value:.3g}): a constant gain does what its trend in time does, so the data show no trend")
+    unit = baseline_cmp.se if baseline_cmp.se > 0 else 1.0
+    if twin is not None and twin.discrepancy - top.comparison.discrepancy < 2.0 * unit:
+        why.append(f"with every acquisition time held at its mean, awgn + {name} does nearly as well (held-out "
+                   f"discrepancy {twin.discrepancy:.3g} against {top.comparison.discrepancy:.3g}, "
+                   f"{(twin.discrepancy - top.comparison.discrepancy) / unit:.1f} sd apart, less than the 2 sd a "
+                   f"parameter must buy; p = {twin.p_value:.3g}): a constant gain does what its trend in time does, "
+                   f"so the data show no trend")
     if top_steps:
         bad = failing_layers(top_steps)
         if bad:

@@ -25,6 +25,7 @@ class _Cmp:
     discrepancy: float = 10.0
     noise_floor: float = 5.0
     floor_se: float = 3.0
+    se: float = 3.0
 
 
 @dataclasses.dataclass
@@ -59,10 +60,11 @@ def test_explained_rule():
     assert not ok and "coupled" in why[0] and "layer 1" in why[0]
     coupled[0]["p"] = 6e-3  # above 0.01 / 2
     assert explanation(_cand(0.5), base_fails, prior=coupled)[0]
-    # an effect acting through the times whose time-free twin passes as well shows no trend
-    ok, why = explanation(_cand(0.5), base_fails, twin=_Cmp(0.2))
-    assert not ok and "acquisition time" in why[0]
-    assert explanation(_cand(0.5), base_fails, twin=_Cmp(1e-5))[0]
+    # an effect acting through the times whose time-free twin does within 2 sd as well shows no
+    # trend (stand-ins: the candidate's held-out discrepancy 10, the baseline's sd 3)
+    ok, why = explanation(_cand(0.5), base_fails, twin=_Cmp(0.2, discrepancy=15.0))
+    assert not ok and "acquisition time" in why[0] and "1.7 sd" in why[0]
+    assert explanation(_cand(0.5), base_fails, twin=_Cmp(0.2, discrepancy=16.5))[0]  # 2.2 sd: the trend buys its keep
     # bias offsets all one way: a shifted transfer, not bias_offset's draws
     ok, why = explanation(_cand(0.5), base_fails, prior=[{"layer": 1, "test": "b_mean", "z": 6.0}])
     assert not ok and "one way" in why[0]

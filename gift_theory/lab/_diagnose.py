@@ -143,7 +143,8 @@ class Session:
         self.baseline_comparison = self.score(self.baseline)
 
     def fit(self, effects, start: Model | None = None) -> Model:
-        return fit_model(self.k_fit, self.fit_meas, effects, start=start, K=self.shots, problem=self.problem)
+        return fit_model(self.k_fit, self.fit_meas, effects, start=start, K=self.shots, problem=self.problem,
+                         baseline=getattr(self, "baseline", None))
 
     def score(self, model: Model, plain: Comparison | None = None, held_out: Measurement | None = None) -> Comparison:
         """The held-out comparison; a model with fitted offsets against its refit null (made once

@@ -28,8 +28,13 @@ def check_addable(name: str, physics, meas: Measurement, where: str = "--add") -
         raise GiftInputError(f"{where} {name}: the measurement has no acquisition times t, {name} is silent without them")
 
 
+def baseline_physics() -> Physics:
+    """The physics every fit from scratch starts from: awgn at s = 0.1."""
+    return Physics.create(s=0.1)
+
+
 def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None, K: int | None = None,
-              problem: MomentProblem | None = None) -> Model:
+              problem: MomentProblem | None = None, baseline: Model | None = None) -> Model:
     """Fit awgn's ``s`` and the parameters of ``effects`` (registered effect names) to ``meas``.
 
     Parameters
@@ -40,13 +45,15 @@ def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None,
     start : a model whose physics and values start the fit (default: awgn only)
     K : model shots per input of the moment fit (default 2 r)
     problem : the measurement's :class:`MomentProblem` if already made (same key and K)
+    baseline : ``fit_model(key, meas)`` with the same ``problem``, if already made: the awgn fit
+        that offsets fitted from scratch start from (else it is made here)
 
     Returns
     -------
     Model with fitted parameters
     """
     problem = problem or MomentProblem(key, meas, K)
-    model = start if start is not None else Model(Physics.create(s=0.1))
+    model = start if start is not None else Model(baseline_physics())
     new = [e for e in effects if e != "awgn" and e not in model.effects]
     physics = model.physics
     for name in new:
@@ -62,8 +69,9 @@ def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None,
             # is compressed by n): fit s first, as the baseline does, not at the default s = 0.1
             # (measured: at s = 0.033 the weight offsets came out 20-40 % off, and the true
             # weight_error model failed its one-step check on the very inputs it was fitted to)
-            model = Model(fit_moments(problem, model.physics, model.weights(meas), ["s"]), model.params,
-                          model.offsets)
+            noise = (baseline.physics if baseline is not None and model.physics == baseline_physics()
+                     else fit_moments(problem, model.physics, model.weights(meas), ["s"]))
+            model = Model(noise, model.params, model.offsets)
         model = fit_offsets(key, meas, model, offsets)
     scan = ["s"] if start is None else [p for n in new if not fitted_as_offsets(n) for p in REGISTRY[n].params]
     physics = fit_moments(problem, model.physics, model.weights(meas), scan, rescan_s=start is not None and bool(new))

@@ -40,7 +40,7 @@ from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, failing_layers, one_step_check
 from ._fit import fit_model
 from ._fit_moments import MomentProblem
-from ._fit_offsets import effective_dof, fitted_as_offsets, kinds_of, offset_replicates
+from ._fit_offsets import effective_dof, fitted_as_offsets, kinds_of, offset_replicates, prior_check
 from ._localise import (
     layer_evidence,
     one_step_residuals,
@@ -138,13 +138,21 @@ class Session:
         self.fit_meas, self.test_meas = meas.subset(self.train), meas.subset(self.test)
         self.ref: Reference = reference(k_ref, self.test_meas)
         self.problem = MomentProblem(self.k_fit, self.fit_meas, shots)
-        self._replicates = {}
+        self._replicates, self._priors = {}, {}
+        self.baseline: Model | None = None  # fit() reads it: offsets fitted from scratch start from it
         self.baseline = self.fit(())
         self.baseline_comparison = self.score(self.baseline)
 
     def fit(self, effects, start: Model | None = None) -> Model:
         return fit_model(self.k_fit, self.fit_meas, effects, start=start, K=self.shots, problem=self.problem,
-                         baseline=getattr(self, "baseline", None))
+                         baseline=self.baseline)
+
+    def prior(self, model: Model) -> list:
+        """:func:`~gift_theory.lab._fit_offsets.prior_check` of a fitted model on the fitting
+        half, made once per model (the mechanisms' fit gains and the verdict both read it)."""
+        if id(model) not in self._priors:
+            self._priors[id(model)] = (model, prior_check(model, self.fit_meas))
+        return self._priors[id(model)][1]
 
     def score(self, model: Model, plain: Comparison | None = None, held_out: Measurement | None = None) -> Comparison:
         """The held-out comparison; a model with fitted offsets against its refit null (made once
@@ -388,7 +396,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     taps = meas.has_taps
     # name mechanisms, then the verdict
     ctx = Context({row["layer"]: row for row in evidence}, meas.arch.depth, taps, failing,
-                  fit_gains(ranking, base_cmp, session.fit_meas), {r["layer"]: (r["s"], r["level_z"]) for r in steps})
+                  fit_gains(ranking, base_cmp, session.prior), {r["layer"]: (r["s"], r["level_z"]) for r in steps})
     mechs = mechanisms(ctx)
     explained, reasons, line = verdict(session, ranking, meas, mechs, failing)
     _log(line, verbose)

@@ -212,17 +212,18 @@ RULES = {
 assert set(RULES) == set(MECHANISMS), "every CONTRACTS §6 class has a rule"
 
 
-def fit_gains(ranking, base_cmp, fit_meas=None, alpha: float = 0.01, share: float = 0.5) -> dict:
+def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float = 0.5) -> dict:
     """{class: z}: for each class with a moment-fitted candidate that passes its held-out test or
     removes at least ``share`` of the baseline's excess over the noise floor, how far (in the
     baseline's sd of Q) its discrepancy fell below the baseline's. A candidate that removes
     less is no evidence for its class (an extra parameter absorbs part of any misfit); an
     offset family counts only when it passes, the data identify its values and they look like
-    its own effect (:func:`~gift_theory.lab._fit_offsets.prior_check` on ``fit_meas``): with
+    its own effect (``prior``: model -> :func:`~gift_theory.lab._fit_offsets.prior_check` rows on
+    the fitting half; None skips that check): with
     hundreds of free values it lowers the discrepancy whatever the physics. Weight offsets that
     pass but are refused only as coupled to the programmed weights (``w_structure``,
     ``w_coupling``) are a structured weight error: they count for ``weight_error``."""
-    from ._fit_offsets import fitted_as_offsets, prior_check, refusing
+    from ._fit_offsets import fitted_as_offsets, refusing
 
     out = {}
     unit = base_cmp.se if base_cmp.se > 0 else 1.0
@@ -235,7 +236,7 @@ def fit_gains(ranking, base_cmp, fit_meas=None, alpha: float = 0.01, share: floa
             # an offset family counts only when it passes with values the data identify
             if c.comparison.p_value < alpha or c.n_free < 0.5 * c.nominal:
                 continue
-            refused = refusing(prior_check(c.model, fit_meas)) if fit_meas is not None else []
+            refused = refusing(prior(c.model)) if prior is not None else []
             coupled = {"w_structure", "w_coupling"}
             if refused and not (REGISTRY[c.effects[0]].mechanism == "weight_error"
                                 and all(r["test"] in coupled for r in refused)):

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..effects import REGISTRY
 from ._compare import failing_layers, one_step_check
-from ._fit_offsets import prior_check, refusing
+from ._fit_offsets import refusing
 
 ALPHA = 0.01
 
@@ -138,7 +138,7 @@ def verdict(session, ranking, meas, mechanisms, failing) -> tuple[bool, list, st
     baseline_cmp = session.baseline_comparison
     prior, top_steps, twin = (), None, None
     if top is not None and baseline_cmp.p_value < ALPHA and top.comparison.p_value >= ALPHA:
-        prior = prior_check(top.model, session.fit_meas)
+        prior = session.prior(top.model)
         top_steps = one_step_check(session.k_step, top.model, meas, own_level=False) if meas.has_taps else None
         if meas.t is not None and any(REGISTRY[e].needs_times for e in top.effects):
             twin = session.score(top.model, held_out=time_free(session.test_meas))

@@ -40,6 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _xla
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
@@ -67,7 +68,7 @@ def _pairsum(Z):
     return np.sort(np.moveaxis(Z, 1, -1), axis=-1) @ (2.0 * k - N - 1.0)
 
 
-@functools.partial(jax.jit, static_argnames=("paired",))
+@functools.partial(_xla.jit, static_argnames=("paired",))  # gift's XLA:CPU options: 0.8 of the time
 def _vector_energy(M, Y, paired: bool):
     c = jnp.mean(Y, axis=1, keepdims=True)  # centring keeps float32 distances accurate
     M = M - c

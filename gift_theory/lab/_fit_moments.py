@@ -101,7 +101,7 @@ class MomentProblem:
         positive = tuple(_positive(physics, p) for p in free)
 
         def f(theta):
-            return _theta_loss(jnp.asarray(theta, jnp.float32), p32, self.x, noise, physics, t, self.dat, arch, (r, K),
+            return _theta_loss(np.asarray(theta, np.float32), p32, self.x, noise, physics, t, self.dat, arch, (r, K),
                                tuple(free), positive)
         return f
 
@@ -154,8 +154,8 @@ def optimise(f, theta0, grids):
     res = optimize.minimize(lambda th: float(f(th)), theta, method="Nelder-Mead",
                             options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 80 * len(theta),
                                      "initial_simplex": _simplex(theta)})
-    th = res.x if res.fun <= float(f(theta)) else theta
-    return th, float(f(th))
+    f0 = float(f(theta))
+    return (res.x, float(res.fun)) if res.fun <= f0 else (theta, f0)
 
 
 def fit_moments(problem: MomentProblem, physics, params, scan, rescan_s: bool = False):

@@ -3,8 +3,10 @@
 A model cannot know a device's fixed draws -- the weight errors E of ``weight_error``, the bias
 offsets delta of ``bias_offset``, the values of a per-neuron parameter of a plugin effect
 (``shape = {"p": "neurons"}``). They are estimated as fixed offsets with a Gaussian prior
-(ridge; the scale re-estimated once from the first pass), by L-BFGS through the core's
-differentiable layer map:
+(ridge; the scale re-estimated once from the first pass) through the core's differentiable
+layer map -- by L-BFGS, or, on a layer (taps) whose offsets are all one value per neuron, by
+a Levenberg-Marquardt step per neuron (:func:`_neuron_lm`: a few steps instead of some 30
+gradient evaluations):
 
 * with taps, layer by layer: each layer's measured output shot by shot against the model's
   mean response to the *measured* output of the layer before (layer 1: means over shots
@@ -159,7 +161,7 @@ def _lbfgs(value_and_grad, shapes, iters: int = 300, start=None):
     ``value_and_grad(list of float32 arrays) -> (value, list of gradients)``, from ``start``
     (default zero); returns the minimising arrays (float64)."""
     def unflat(v):
-        return [jnp.asarray(a, jnp.float32) for a in unflat_vector(v, shapes)]
+        return [np.asarray(a, np.float32) for a in unflat_vector(v, shapes)]
 
     def f(v):
         val, g = value_and_grad(unflat(v))
@@ -181,12 +183,18 @@ def unflat_vector(v, shapes):
     return out
 
 
+def _layer_mean(ds, W, b, a, noise, physics, t, arch, layer, axis, kinds):
+    """Layer ``layer``'s mean prediction with the offsets ``ds``: its model fed ``a`` (the
+    measured layer before; layer 1: x through the input noise), averaged over the draws."""
+    Wd, bd, ph = apply_layer(kinds, ds, W, b, physics, layer, arch)
+    a_in = noisy_input(a, noise, ph) if layer == 1 else a
+    return jnp.mean(layer_step(Wd, bd, a_in, noise, ph, arch, layer, t=t)[0], axis=axis)
+
+
 @functools.partial(jax.jit, static_argnames=("arch", "layer", "axis", "kinds"))
 def _layer_vg(ds, W, b, a, noise, physics, t, target, inv_v, inv_e2, arch, layer, axis, kinds):
     def loss(ds):
-        Wd, bd, ph = apply_layer(kinds, ds, W, b, physics, layer, arch)
-        a_in = noisy_input(a, noise, ph) if layer == 1 else a
-        pred = jnp.mean(layer_step(Wd, bd, a_in, noise, ph, arch, layer, t=t)[0], axis=axis)
+        pred = _layer_mean(ds, W, b, a, noise, physics, t, arch, layer, axis, kinds)
         prior = sum(ie * jnp.sum(d ** 2) for ie, d in zip(inv_e2, ds))
         return 0.5 * jnp.sum((target - pred) ** 2) * inv_v + 0.5 * prior
     return jax.value_and_grad(loss)(ds)
@@ -215,8 +223,67 @@ def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: in
     return noise, a, t, target, resid_var, axis
 
 
+@functools.partial(jax.jit, static_argnames=("arch", "layer", "axis", "kinds"))
+def _layer_linearised(ds, W, b, a, noise, physics, t, arch, layer, axis, kinds):
+    """Layer ``layer``'s mean prediction at the offsets ``ds`` (samples..., d_l) and, per kind,
+    its derivative in that kind's value of every neuron at once (kinds, samples..., d_l): the
+    columns of each neuron's Jacobian when a neuron's values move that neuron only."""
+    def pred(ds):
+        return _layer_mean(ds, W, b, a, noise, physics, t, arch, layer, axis, kinds)
+
+    basis = tuple(jnp.eye(len(kinds), dtype=jnp.float32)[:, i, None] * jnp.ones_like(d)[None] for i, d in enumerate(ds))
+    p0 = pred(ds)
+    return p0, jax.vmap(lambda v: jax.jvp(pred, (ds,), (v,))[1])(basis)
+
+
+def _neuron_lm(linearised, ds, target, inv_v: float, inv_e2, iters: int = 50, atol: float = 1e-4, rtol: float = 1e-7):
+    """Per-neuron values (a few per neuron: every kind at a layer of that form) by
+    Levenberg-Marquardt on all neurons at once: the loss separates over neurons, each a problem
+    in its own few values, so each takes its own damped Gauss-Newton steps; a step that does
+    not lower a neuron's loss is refused and that neuron's damping raised. A neuron is done when
+    its undamped step would lower its loss -- half a chi-square, in units of the measured
+    variance -- by less than ``atol`` (its values then within ~0.014 standard errors of the
+    optimum) or ``rtol`` of it (float32 predictions resolve no finer); all done, or ``iters``
+    steps, ends the fit.
+
+    ``linearised(ds) -> (mean prediction, its derivative per kind)`` as :func:`_layer_linearised`.
+    Returns float64 arrays, one per kind."""
+    d = np.stack([np.asarray(x, np.float64) for x in ds])  # (P, d_l)
+    P, n_l = d.shape
+    lam = np.asarray(inv_e2, np.float64)[:, None]  # (P, 1) prior precisions
+    tg = np.asarray(target, np.float64).reshape(-1, n_l)
+    eye = np.eye(P)[None]
+
+    def evaluate(d):
+        p0, cols = linearised(tuple(np.asarray(x, np.float32) for x in d))
+        r = tg - np.asarray(p0, np.float64).reshape(-1, n_l)
+        loss = 0.5 * inv_v * np.sum(r * r, axis=0) + 0.5 * np.sum(lam * d * d, axis=0)
+        return loss, r, np.asarray(cols, np.float64).reshape(P, -1, n_l)
+
+    loss, r, J = evaluate(d)
+    mu = np.full(n_l, 1e-3)
+    for _ in range(iters):
+        H = inv_v * np.einsum("psi,qsi->ipq", J, J) + eye * lam.T[:, :, None]  # (d_l, P, P)
+        g = -inv_v * np.einsum("psi,si->ip", J, r) + (lam * d).T  # (d_l, P)
+        # what the undamped step would gain on the quadratic model: 0.5 g^T H^-1 g
+        gain = 0.5 * np.einsum("ip,ip->i", g, np.linalg.solve(H, g[:, :, None])[:, :, 0])
+        if np.all(gain <= np.maximum(atol, rtol * np.abs(loss))):
+            break
+        Hd = H + mu[:, None, None] * eye * np.diagonal(H, axis1=1, axis2=2)[:, :, None]
+        step = -np.linalg.solve(Hd, g[:, :, None])[:, :, 0].T  # (P, d_l)
+        new_loss, new_r, new_J = evaluate(d + step)
+        better = new_loss < loss
+        d = np.where(better[None], d + step, d)
+        loss, r = np.where(better, new_loss, loss), np.where(better[None], new_r, r)
+        J = np.where(better[None, None], new_J, J)
+        mu = np.where(better, mu / 3.0, mu * 4.0)
+    return list(d)
+
+
 def _layer_offsets(key, meas: Measurement, physics, p32, kinds, layer: int, scales, start=None):
-    """The offsets of every kind at ``layer`` from the measured layer before (taps)."""
+    """The offsets of every kind at ``layer`` from the measured layer before (taps): by
+    :func:`_neuron_lm` when every kind there has one value per neuron (biases, per-neuron
+    parameters), else by L-BFGS."""
     arch = meas.arch
     here = tuple(k for k in kinds if layer in k.layers)
     if not here:
@@ -225,6 +292,10 @@ def _layer_offsets(key, meas: Measurement, physics, p32, kinds, layer: int, scal
     noise, a, t, target, resid_var, axis = _layer_setup(jax.random.fold_in(key, layer), meas, physics, layer)
     inv_v = jnp.float32(1.0 / max(resid_var, 1e-12))
     inv_e2 = tuple(jnp.float32(1.0 / max(scales[k], 1e-6) ** 2) for k in here)
+    if all(k.target != "W" for k in here):
+        d0 = [np.zeros(k.shape(arch, layer)) for k in here] if start is None else start
+        return _neuron_lm(lambda ds: _layer_linearised(ds, W, b, a, noise, physics, t, arch, layer, axis, here), d0,
+                          target, float(inv_v), [float(x) for x in inv_e2])
 
     def vg(ds):
         return _layer_vg(tuple(ds), W, b, a, noise, physics, t, target, inv_v, inv_e2, arch, layer, axis, here)
@@ -378,9 +449,7 @@ def _layer_jvp_columns(W, b, a, noise, physics, t, basis, arch, layer, kinds, ax
     """Per direction of ``basis`` (one offset per output neuron), the change of the layer's mean
     prediction: (B, n..., d_l)."""
     def pred(ds):
-        Wd, bd, ph = apply_layer(kinds, ds, W, b, physics, layer, arch)
-        a_in = noisy_input(a, noise, ph) if layer == 1 else a
-        return jnp.mean(layer_step(Wd, bd, a_in, noise, ph, arch, layer, t=t)[0], axis=axis)
+        return _layer_mean(ds, W, b, a, noise, physics, t, arch, layer, axis, kinds)
 
     zero = tuple(jnp.zeros_like(b[0]) for b in basis)
     return jax.vmap(lambda v: jax.jvp(pred, (zero,), (v,))[1])(basis)
@@ -421,18 +490,21 @@ def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, i
         for ki, k in enumerate(here):
             cols = d_in if k.target == "W" else 1
             for j in range(cols):
-                v = [jnp.zeros(kk.shape(arch, l), jnp.float32) for kk in here]
-                v[ki] = (jnp.zeros((d_l, d_in), jnp.float32).at[:, j].set(1.0) if k.target == "W"
-                         else jnp.ones((d_l,), jnp.float32))
-                dirs.append((tuple(v), e[k]))
-        basis = tuple(jnp.stack([d[0][i] for d in dirs]) for i in range(len(here)))
+                v = [np.zeros(kk.shape(arch, l), np.float32) for kk in here]
+                if k.target == "W":
+                    v[ki][:, j] = 1.0
+                else:
+                    v[ki][:] = 1.0
+                dirs.append((v, e[k]))
+        basis = tuple(np.stack([d[0][i] for d in dirs]) for i in range(len(here)))
         cols = np.asarray(_layer_jvp_columns(W, b, a, noise, model.physics, t, basis, arch, l, here, axis), np.float64)
         cols = cols.reshape(len(dirs), -1, d_l)  # (P_i, samples, neurons)
         prior = np.array([d[1] ** 2 for d in dirs])
-        for i in range(d_l):
-            Ji = cols[:, :, i].T * np.sqrt(prior)[None, :] / np.sqrt(resid_var)
-            lam = np.linalg.svd(Ji, compute_uv=False) ** 2
-            total += float(np.sum(lam / (lam + 1.0)))
+        # per neuron i, J_i (samples, P_i) scaled by the prior and the noise; the eigenvalues of
+        # J_i^T J_i (a P_i x P_i Gram matrix per neuron: the squared singular values of J_i)
+        Js = np.ascontiguousarray(np.transpose(cols * (np.sqrt(prior) / np.sqrt(resid_var))[:, None, None], (2, 1, 0)))
+        lam = np.clip(np.linalg.eigvalsh(np.swapaxes(Js, 1, 2) @ Js), 0.0, None)
+        total += float(np.sum(lam / (lam + 1.0)))
     return total, nominal
 
 

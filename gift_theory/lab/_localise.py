@@ -43,8 +43,9 @@ from ._shots import (
 
 def _kurt(A):
     c = A - A.mean(1, keepdims=True)
-    v = np.mean(c ** 2, 1)
-    return np.mean(c ** 4, 1) / np.maximum(v ** 2, 1e-300) - 3.0
+    c2 = c * c  # squares, not pow: ~5 times faster
+    v = np.mean(c2, 1)
+    return np.mean(c2 * c2, 1) / np.maximum(v * v, 1e-300) - 3.0
 
 
 @dataclasses.dataclass

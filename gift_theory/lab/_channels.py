@@ -183,9 +183,10 @@ def _features(S, eps):
     ``eps`` (a variance floor of the layer, a data constant) keeps quantised cells finite."""
     c = S - S.mean(axis=1, keepdims=True)
     h = S.shape[1]
-    v = np.sum(c * c, axis=1) / (h - 1)
+    c2 = c * c
+    v = np.sum(c2, axis=1) / (h - 1)
     lmax = _top_eigenvalue(c) / (h - 1) if S.shape[2] > 1 else v[:, 0]
-    z2 = c * c / (v + eps)[:, None, :]
+    z2 = c2 / (v + eps)[:, None, :]
     return (np.log(v + eps), np.log(np.maximum(lmax, 0.0) + eps)[:, None], np.mean(z2 * z2, axis=(1, 2))[:, None])
 
 
@@ -202,7 +203,10 @@ def _product_channels(YA, YB, MA, MB, eps):
 
 
 def _take(Y, idx):
-    return np.take_along_axis(Y, idx[:, :, None], axis=1)
+    """``Y[i, idx[i, k], :]`` (n, k, d): shots of each input by index, one gather of rows."""
+    n, r, d = Y.shape
+    rows = idx + (np.arange(n) * r)[:, None]
+    return np.asarray(Y).reshape(n * r, d)[rows]
 
 
 def moment_channels(M, Y, split, rng):
@@ -226,8 +230,9 @@ def moment_channels(M, Y, split, rng):
     eps = _variance_floor(Y)
     reps = K // (2 * h)
     perm = rng.permuted(np.tile(np.arange(K), (n, 1)), axis=1)
-    MA = [_take(M, perm[:, 2 * q * h:(2 * q + 1) * h]) for q in range(reps)]
-    MB = [_take(M, perm[:, (2 * q + 1) * h:(2 * q + 2) * h]) for q in range(reps)]
+    Mp = _take(M, perm[:, :2 * reps * h])  # the model's shots in the permuted order, sets of h in a row
+    MA = [Mp[:, 2 * q * h:(2 * q + 1) * h] for q in range(reps)]
+    MB = [Mp[:, (2 * q + 1) * h:(2 * q + 2) * h] for q in range(reps)]
     return _product_channels(_take(Y, split[:, :h]), _take(Y, split[:, h:2 * h]), MA, MB, eps)
 
 

@@ -18,6 +18,8 @@ allows for their estimation error (:func:`replicate_null`).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import stats
 
@@ -60,6 +62,14 @@ def replicate_null(T_reps):
     return shift, extra
 
 
+@functools.lru_cache(maxsize=16)
+def _null_normals(C: int) -> np.ndarray:
+    """The standard normal draws (NULL_DRAWS, C) of the null simulation: seed 0, made once per C."""
+    G = np.random.default_rng(0).standard_normal((NULL_DRAWS, C))
+    G.flags.writeable = False
+    return G
+
+
 def q_test(T, shift=None, extra_var=None):
     """The discrepancy test on per-input channel values T (n, C).
 
@@ -79,7 +89,7 @@ def q_test(T, shift=None, extra_var=None):
     R = np.atleast_2d(np.corrcoef(Tk, rowvar=False))
     lam, V = np.linalg.eigh(R)
     lam = np.clip(lam, 0.0, None)
-    G = np.random.default_rng(0).standard_normal((NULL_DRAWS, len(lam))) @ (V * np.sqrt(lam)).T
+    G = _null_normals(len(lam)) @ (V * np.sqrt(lam)).T
     Qs = np.sum(np.maximum(G, 0.0) ** 2, axis=1)
     exceed = int(np.sum(Qs >= Q))
     if exceed > 0:

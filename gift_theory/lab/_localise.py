@@ -43,7 +43,7 @@ from ._shots import (
 
 def _kurt(A):
     c = A - A.mean(1, keepdims=True)
-    c2 = c * c  # squares, not pow: ~5 times faster
+    c2 = c * c  # squares, not pow (c ** 4): a tenth of the time
     v = np.mean(c2, 1)
     return np.mean(c2 * c2, 1) / np.maximum(v * v, 1e-300) - 3.0
 

@@ -172,6 +172,31 @@ def test_one_step_locates_the_layer(setup):
     assert abs(rows[0]["discrepancy"]) < 4.5 * rows[0]["se"]
 
 
+def test_each_layer_s_own_level_is_the_true_s_from_a_wrong_joint_one(setup):
+    """The one-step check's per-layer level (a root in log s) recovers the chip's s from a model
+    whose s is twice it, within a few standard errors: those of the measured mean log variance
+    over the slope of the model's mean log variance in log s (small at a layer whose shots
+    vary mostly through the measured layer before)."""
+    from gift_theory.lab._compare import layer_level
+    from gift_theory.lab._shots import one_step_shots
+
+    params, x = setup
+    meas = simulate_measurement(jax.random.PRNGKey(7), params, x, gt.Physics.create(s=0.1), shots=16, taps=True)
+    wrong = Model(gt.Physics.create(s=0.2))
+    for layer, Y in zip(meas.layer_ids(), meas.layers()):
+        key = jax.random.fold_in(jax.random.PRNGKey(8), layer)
+
+        def mean_log_var(s):
+            M = np.asarray(one_step_shots(key, Model(gt.Physics.create(s=s)), meas, layer), np.float64)
+            return np.mean(np.log(np.var(M, axis=1, ddof=1)))
+
+        slope = (mean_log_var(0.1 * 1.1) - mean_log_var(0.1 / 1.1)) / (2 * np.log(1.1))
+        lv = np.log(np.var(Y, axis=1, ddof=1)).ravel()
+        se_log_s = np.sqrt(2.0) * lv.std(ddof=1) / np.sqrt(lv.size) / slope  # data and model draws alike
+        got = layer_level(key, wrong, meas, layer)
+        assert abs(np.log(got / 0.1)) < 5.0 * se_log_s, (layer, got, se_log_s)
+
+
 def test_null_false_alarms_cheap(setup):
     """Cheap calibration: on 16 data sets from the model itself (true parameters), p < 0.01
     at most twice (P(X >= 3 | Bin(16, 0.01)) < 6e-4); the full study is

@@ -141,6 +141,7 @@ def _simplex(theta, step=0.25):
 def optimise(f, theta0, grids):
     """Scan each coordinate listed in ``grids`` (index -> theta values), then Nelder-Mead on all."""
     theta = np.array(theta0, dtype=np.float64)
+    f0 = None  # f(theta), once a scan has evaluated it (f is deterministic)
     for i, values in grids.items():
         best, bv = None, np.inf
         for v in values:
@@ -150,11 +151,11 @@ def optimise(f, theta0, grids):
             if np.isfinite(val) and val < bv:
                 best, bv = v, val
         if best is not None:
-            theta[i] = best
+            theta[i], f0 = best, bv
     res = optimize.minimize(lambda th: float(f(th)), theta, method="Nelder-Mead",
                             options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 80 * len(theta),
                                      "initial_simplex": _simplex(theta)})
-    f0 = float(f(theta))
+    f0 = float(f(theta)) if f0 is None else f0
     return (res.x, float(res.fun)) if res.fun <= f0 else (theta, f0)
 
 

@@ -17,6 +17,7 @@ results arrive, so workers need no shared file system. Progress goes to stderr.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import importlib
 import json
@@ -127,13 +128,22 @@ def load_points(folder: str, sweep: Sweep) -> dict[str, dict]:
     return out
 
 
+@functools.lru_cache(maxsize=None)
+def _worker_commit() -> str:
+    """HEAD of the checkout when this worker process imported its job (the code it runs; a
+    sweep that outlives a commit has points from both), or ''."""
+    return _git_commit()
+
+
 def _call(job: str, point: dict, fixed: dict) -> dict:
     """Run one job (on a worker) and time it."""
     module, func = job.split(":")
+    commit = _worker_commit()
     fn = getattr(importlib.import_module(module), func)
     t0 = time.perf_counter()
     result = fn(**point, **fixed)
-    return {"result": result, "seconds": time.perf_counter() - t0, "host": socket.gethostname(), "pid": os.getpid()}
+    return {"result": result, "seconds": time.perf_counter() - t0, "host": socket.gethostname(), "pid": os.getpid(),
+            "code_commit": commit}
 
 
 def _persist(folder: str, sweep: Sweep, point: dict, out: dict) -> None:

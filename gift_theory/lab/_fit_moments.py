@@ -8,7 +8,9 @@ layer sum (cross-neuron correlation: common mode), slope against acquisition tim
 of the standardised squared moment differences over every measured cell (taps and output).
 It is minimised by a one-dimensional scan over each new parameter -- the values come from
 the effect itself (:meth:`gift_theory.effects.Effect.search`: its bounds and defaults, or a
-scale read off the data) -- followed by Nelder-Mead on all of them (no gradient needed).
+scale read off the data) -- followed by a local search on all of them (Brent's method for
+one, Nelder-Mead for several; no gradient needed: a reverse-mode gradient of the loss costs
+~6 evaluations).
 """
 
 from __future__ import annotations
@@ -138,8 +140,28 @@ def _simplex(theta, step=0.25):
     return np.array(pts)
 
 
+#: the local search's resolution in theta (log scale: relative) and in the loss
+XATOL, FATOL = 1e-3, 1e-4
+
+
+def _brent(f, theta):
+    """One coordinate by Brent's method from ``theta`` (1-vector), to ``XATOL`` in theta; None
+    when no bracket of a minimum is found (a loss still falling at the bracket's limit)."""
+    t0 = float(theta[0])
+    try:
+        res = optimize.minimize_scalar(lambda v: float(f(np.array([v]))), bracket=(t0 - 0.25, t0), method="brent",
+                                       options={"xtol": XATOL / max(abs(t0), XATOL), "maxiter": 200})
+    except (RuntimeError, ValueError):  # scipy's BracketError: no minimum in reach
+        return None
+    if not np.isfinite(res.fun):
+        return None
+    return np.array([float(res.x)]), float(res.fun)
+
+
 def optimise(f, theta0, grids):
-    """Scan each coordinate listed in ``grids`` (index -> theta values), then Nelder-Mead on all."""
+    """Scan each coordinate listed in ``grids`` (index -> theta values), then a local search on
+    all: Brent's method for a single coordinate (~8 evaluations where Nelder-Mead takes 22-31,
+    to the same loss within 1e-4), Nelder-Mead for several."""
     theta = np.array(theta0, dtype=np.float64)
     f0 = None  # f(theta), once a scan has evaluated it (f is deterministic)
     for i, values in grids.items():
@@ -152,11 +174,14 @@ def optimise(f, theta0, grids):
                 best, bv = v, val
         if best is not None:
             theta[i], f0 = best, bv
-    res = optimize.minimize(lambda th: float(f(th)), theta, method="Nelder-Mead",
-                            options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 80 * len(theta),
-                                     "initial_simplex": _simplex(theta)})
+    found = _brent(f, theta) if len(theta) == 1 else None
+    if found is None:
+        res = optimize.minimize(lambda th: float(f(th)), theta, method="Nelder-Mead",
+                                options={"xatol": XATOL, "fatol": FATOL, "maxiter": 80 * len(theta),
+                                         "initial_simplex": _simplex(theta)})
+        found = res.x, float(res.fun)
     f0 = float(f(theta)) if f0 is None else f0
-    return (res.x, float(res.fun)) if res.fun <= f0 else (theta, f0)
+    return found if found[1] <= f0 else (theta, f0)
 
 
 def fit_moments(problem: MomentProblem, physics, params, scan, rescan_s: bool = False):

@@ -224,16 +224,24 @@ def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: in
 
 
 @functools.partial(jax.jit, static_argnames=("arch", "layer", "axis", "kinds"))
-def _layer_linearised(ds, W, b, a, noise, physics, t, arch, layer, axis, kinds):
-    """Layer ``layer``'s mean prediction at the offsets ``ds`` (samples..., d_l) and, per kind,
-    its derivative in that kind's value of every neuron at once (kinds, samples..., d_l): the
-    columns of each neuron's Jacobian when a neuron's values move that neuron only."""
+def _layer_jvps(ds, W, b, a, noise, physics, t, basis, arch, layer, axis, kinds):
+    """Layer ``layer``'s mean prediction at the offsets ``ds`` (samples..., d_l) and its change
+    along each direction of ``basis`` (a tuple, per kind, of (B, shape) arrays): (B, samples...,
+    d_l). The Levenberg-Marquardt fit and the effective degrees of freedom both read a
+    neuron's Jacobian off these columns."""
     def pred(ds):
         return _layer_mean(ds, W, b, a, noise, physics, t, arch, layer, axis, kinds)
 
-    basis = tuple(jnp.eye(len(kinds), dtype=jnp.float32)[:, i, None] * jnp.ones_like(d)[None] for i, d in enumerate(ds))
-    p0 = pred(ds)
-    return p0, jax.vmap(lambda v: jax.jvp(pred, (ds,), (v,))[1])(basis)
+    p0, lin = jax.linearize(pred, ds)
+    return p0, jax.vmap(lin)(basis)
+
+
+def _kind_basis(ds):
+    """Per kind, a direction moving that kind's value of every neuron at once (the columns of
+    each neuron's Jacobian when a neuron's values move that neuron only)."""
+    P = len(ds)
+    return tuple(np.eye(P, dtype=np.float32)[:, i, None] * np.ones_like(np.asarray(d, np.float32))[None]
+                 for i, d in enumerate(ds))
 
 
 def _neuron_lm(linearised, ds, target, inv_v: float, inv_e2, iters: int = 50, atol: float = 1e-4, rtol: float = 1e-7):
@@ -246,7 +254,8 @@ def _neuron_lm(linearised, ds, target, inv_v: float, inv_e2, iters: int = 50, at
     optimum) or ``rtol`` of it (float32 predictions resolve no finer); all done, or ``iters``
     steps, ends the fit.
 
-    ``linearised(ds) -> (mean prediction, its derivative per kind)`` as :func:`_layer_linearised`.
+    ``linearised(ds) -> (mean prediction, its derivative per kind)`` as :func:`_layer_jvps` along
+    :func:`_kind_basis`.
     Returns float64 arrays, one per kind."""
     d = np.stack([np.asarray(x, np.float64) for x in ds])  # (P, d_l)
     P, n_l = d.shape
@@ -294,7 +303,8 @@ def _layer_offsets(key, meas: Measurement, physics, p32, kinds, layer: int, scal
     inv_e2 = tuple(jnp.float32(1.0 / max(scales[k], 1e-6) ** 2) for k in here)
     if all(k.target != "W" for k in here):
         d0 = [np.zeros(k.shape(arch, layer)) for k in here] if start is None else start
-        return _neuron_lm(lambda ds: _layer_linearised(ds, W, b, a, noise, physics, t, arch, layer, axis, here), d0,
+        basis = _kind_basis(d0)
+        return _neuron_lm(lambda ds: _layer_jvps(ds, W, b, a, noise, physics, t, basis, arch, layer, axis, here), d0,
                           target, float(inv_v), [float(x) for x in inv_e2])
 
     def vg(ds):
@@ -444,17 +454,6 @@ def offset_deltas(model: Model, base: Model, meas: Measurement, kinds) -> dict:
 
 # ---- effective degrees of freedom -------------------------------------------------------------
 
-@functools.partial(jax.jit, static_argnames=("arch", "layer", "kinds", "axis"))
-def _layer_jvp_columns(W, b, a, noise, physics, t, basis, arch, layer, kinds, axis):
-    """Per direction of ``basis`` (one offset per output neuron), the change of the layer's mean
-    prediction: (B, n..., d_l)."""
-    def pred(ds):
-        return _layer_mean(ds, W, b, a, noise, physics, t, arch, layer, axis, kinds)
-
-    zero = tuple(jnp.zeros_like(b[0]) for b in basis)
-    return jax.vmap(lambda v: jax.jvp(pred, (zero,), (v,))[1])(basis)
-
-
 def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, int]:
     """``(effective, nominal)`` degrees of freedom of the offsets of ``model`` (module docstring).
 
@@ -497,7 +496,9 @@ def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, i
                     v[ki][:] = 1.0
                 dirs.append((v, e[k]))
         basis = tuple(np.stack([d[0][i] for d in dirs]) for i in range(len(here)))
-        cols = np.asarray(_layer_jvp_columns(W, b, a, noise, model.physics, t, basis, arch, l, here, axis), np.float64)
+        zero = tuple(np.zeros(k.shape(arch, l), np.float32) for k in here)
+        cols = np.asarray(_layer_jvps(zero, W, b, a, noise, model.physics, t, basis, arch, l, axis, here)[1],
+                          np.float64)
         cols = cols.reshape(len(dirs), -1, d_l)  # (P_i, samples, neurons)
         prior = np.array([d[1] ** 2 for d in dirs])
         # per neuron i, J_i (samples, P_i) scaled by the prior and the noise; the eigenvalues of

@@ -149,8 +149,11 @@ def _brent(f, theta):
     when no bracket of a minimum is found (a loss still falling at the bracket's limit)."""
     t0 = float(theta[0])
     try:
-        res = optimize.minimize_scalar(lambda v: float(f(np.array([v]))), bracket=(t0 - 0.25, t0), method="brent",
-                                       options={"xtol": XATOL / max(abs(t0), XATOL), "maxiter": 200})
+        # a loss still falling far out sends scipy's bracket search to overflow: that is its
+        # "no minimum in reach", answered by the non-finite value below, not a warning
+        with np.errstate(over="ignore", invalid="ignore"):
+            res = optimize.minimize_scalar(lambda v: float(f(np.array([v]))), bracket=(t0 - 0.25, t0),
+                                           method="brent", options={"xtol": XATOL / max(abs(t0), XATOL), "maxiter": 200})
     except (RuntimeError, ValueError):  # scipy's BracketError: no minimum in reach
         return None
     if not np.isfinite(res.fun):

@@ -164,7 +164,7 @@ def _brent(f, theta):
 def optimise(f, theta0, grids):
     """Scan each coordinate listed in ``grids`` (index -> theta values), then a local search on
     all: Brent's method for a single coordinate (~8 evaluations where Nelder-Mead takes 22-31,
-    to the same loss within 1e-4), Nelder-Mead for several."""
+    to its loss within 1.3e-4 on the six such fits of a diagnose), Nelder-Mead for several."""
     theta = np.array(theta0, dtype=np.float64)
     f0 = None  # f(theta), once a scan has evaluated it (f is deterministic)
     for i, values in grids.items():

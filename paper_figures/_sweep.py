@@ -130,8 +130,10 @@ def load_points(folder: str, sweep: Sweep) -> dict[str, dict]:
 
 @functools.lru_cache(maxsize=None)
 def _worker_commit() -> str:
-    """HEAD of the checkout when this worker process imported its job (the code it runs; a
-    sweep that outlives a commit has points from both), or ''."""
+    """HEAD of the checkout at this worker process's first job, or '': which code a sweep that
+    outlives a commit ran for each point. Not marked: modules a job imports only later (the
+    rivals' identify-retrain imports the lab when it first runs) and uncommitted edits -- keep
+    the checkout a sweep runs from at a commit."""
     return _git_commit()
 
 

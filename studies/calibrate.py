@@ -175,7 +175,7 @@ def time_study(taps, out, warm: int = 1):
     diagnose(jax.random.PRNGKey(3), meas)
     first = time.time() - t0
     seconds, explained = [], []
-    for k in range(4, 4 + max(int(warm), 1)):
+    for k in range(4, 4 + int(warm)):
         t0 = time.time()
         d = diagnose(jax.random.PRNGKey(k), meas)
         seconds.append(time.time() - t0)
@@ -205,6 +205,8 @@ def main(argv=None):
     p.add_argument("--effect", default=None, choices=[k for k in HIDDEN if "+" not in k and k != "none"],
                    help="null: the data have this hidden effect and the model fits it (with --fitted)")
     a = p.parse_args(argv)
+    if a.warm < 1:
+        p.error(f"--warm {a.warm}: the time study makes at least one warm call")
     widths = tuple(int(w) for w in a.arch.split("-"))
     out = sys.stdout
     if a.study == "null":

@@ -4,6 +4,10 @@ The paper's ONN model M_s with the physical effects of CONTRACTS §2, Monte-Carl
 objectives with standard errors, in-silico training and data sets. Subpackages hold the
 larger parts: :mod:`gift_theory.effects`, :mod:`gift_theory.data`,
 :mod:`gift_theory.training`.
+
+Importing the package changes no process-wide setting. :func:`use_compilation_cache` is the
+explicit opt-in to JAX's persistent compilation cache (the ``gift`` command and the sweep
+workers call it): compiled programs then persist on disk across processes.
 """
 
 from ._arch import ACTIVATIONS as ACTIVATIONS
@@ -37,9 +41,7 @@ from .effects import awgn as awgn
 from .effects import make_effect as make_effect
 from .effects import parse_effect as parse_effect
 
-from . import _xla
-
-_xla.use_compilation_cache()  # compiled programs persist on disk across processes (see gift_theory._xla)
+from ._xla import use_compilation_cache as use_compilation_cache
 
 __version__ = "0.1.0"
 

@@ -20,6 +20,7 @@ from ._closed import noise_term as noise_term
 from ._closed import product as product
 from ._closed import product_minimiser as product_minimiser
 from ._closed import theorem1_bounds as theorem1_bounds
+from ._plots import bound_rhs as bound_rhs
 from ._plots import plot_bound_regions as plot_bound_regions
 from ._plots import plot_example_curves as plot_example_curves
 from ._symbolic import all_noise_critical_points as all_noise_critical_points

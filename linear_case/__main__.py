@@ -4,8 +4,14 @@
 import os
 import sys
 
-from ._plots import plot_bound_regions, plot_example_curves
+import matplotlib
+
+matplotlib.use("agg")  # a script that writes files: no display needed
+
+from gift_theory._io import save_figure  # noqa: E402
+
+from ._plots import plot_bound_regions, plot_example_curves  # noqa: E402
 
 folder = sys.argv[1] if len(sys.argv) > 1 else os.path.join("gift-out", "linear_case")
-print(plot_bound_regions(os.path.join(folder, "bound_regions.png")))
-print(plot_example_curves(os.path.join(folder, "example_curves.png")))
+print(save_figure(plot_bound_regions(), os.path.join(folder, "bound_regions.png"), bbox_inches=None))
+print(save_figure(plot_example_curves(), os.path.join(folder, "example_curves.png"), bbox_inches=None))

@@ -139,6 +139,9 @@ def _worker_commit() -> str:
 
 def _call(job: str, point: dict, fixed: dict) -> dict:
     """Run one job (on a worker) and time it."""
+    from gift_theory import use_compilation_cache
+
+    use_compilation_cache()  # workers share compiled programs through the disk cache
     module, func = job.split(":")
     commit = _worker_commit()
     fn = getattr(importlib.import_module(module), func)

@@ -33,6 +33,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "compare": ("_compare", "compare a model with a measurement file"),
     "diagnose": ("_diagnose", "find the physical effect the model is missing"),
     "fit": ("_fit", "add effects to the model, fit them, report the error before and after"),
+    "import": ("_import", "convert a measurement file (npz, long or wide CSV, netCDF/HDF5) to npz, netCDF or CSV"),
+    "export": ("_import", "the same as import: write a measurement file as netCDF (.nc), wide CSV or npz"),
     "figures": ("_figures", "regenerate the paper's figures (sweeps, then drawing)"),
 }
 
@@ -91,6 +93,9 @@ def main(argv=None) -> int:
         sys.stdout.write(f"gift {__version__}\n")
         return 0
     name = argv[0]
+    from .._xla import use_compilation_cache
+
+    use_compilation_cache()  # compiled programs persist on disk across gift runs (GIFT_COMPILATION_CACHE=off: not)
     try:
         if name not in COMMANDS:
             raise GiftInputError(f"gift: unknown command {name!r}; commands: {', '.join(COMMANDS)}")

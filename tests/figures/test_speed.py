@@ -34,6 +34,7 @@ from jax import monitoring
 hits = []
 monitoring.register_event_listener(lambda name, **kw: hits.append(name) if name.endswith("cache_hits") else None)
 import gift_theory as gt
+gt.use_compilation_cache()  # the explicit opt-in (importing gift_theory changes no setting)
 from gift_theory._model import compiled_draws
 arch = gt.Architecture((64, 48, 32, 10))
 jax.block_until_ready(compiled_draws(jax.random.PRNGKey(0), gt.awgn(0.1), arch=arch, shape=(64, 8), dtype=jnp.float32))

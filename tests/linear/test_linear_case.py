@@ -5,6 +5,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 import sympy as sp
 from hypothesis import given
 from hypothesis import strategies as st
@@ -73,11 +74,34 @@ def test_symbolic_example_depths():
         assert all(sp.simplify(r) == 0 for r in e["critical_residual"])
 
 
-def test_plots(tmp_path):
-    p1 = lc.plot_bound_regions(str(tmp_path / "regions.png"), depths=(1, 2), V_norms=(0.5,), n=41)
-    p2 = lc.plot_example_curves(str(tmp_path / "curves.png"))
-    assert (tmp_path / "regions.png").stat().st_size > 1000 and (tmp_path / "curves.png").stat().st_size > 1000
-    assert p1.endswith("regions.png") and p2.endswith("curves.png")
+def test_plots_return_figures_on_given_axes_and_leave_the_backend_alone(tmp_path):
+    import matplotlib
+    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+
+    backend = matplotlib.get_backend()
+    fig = lc.plot_bound_regions(depths=(1, 2), V_norms=(0.5,), n=41)
+    assert isinstance(fig, Figure) and len(fig.axes) == 2
+    fig.savefig(tmp_path / "regions.png")               # the caller saves
+    assert (tmp_path / "regions.png").stat().st_size > 1000
+    own, ax = plt.subplots()
+    assert lc.plot_bound_regions(depths=(2,), V_norms=(1.0,), n=41, ax=ax) is own
+    assert lc.plot_example_curves(ax=ax) is own
+    assert isinstance(lc.plot_example_curves(), Figure)
+    with pytest.raises(ValueError, match="2 x 1"):
+        lc.plot_bound_regions(depths=(2,), V_norms=(1.0, 2.0), ax=ax)
+    assert matplotlib.get_backend() == backend
+    plt.close("all")
+
+
+def test_bound_rhs_admits_exactly_the_band_of_each_printed_and_corrected_bound():
+    s0 = np.linspace(0.05, 2.0, 40)
+    r = lc.bound_rhs(s0, 2, 1.0)
+    assert np.allclose(r["corrected"], 2 * s0)
+    assert np.allclose(r["example"], lc.example_rhs(s0, 1.0, 1.0))
+    assert np.allclose(r["printed"], lc.chain_printed_rhs(s0, 2, 1.0))
+    r1 = lc.bound_rhs(s0, 1, 1.5)
+    assert np.allclose(r1["printed"], r1["example"])     # at depth 1 the two printed bounds agree
 
 
 def test_all_noise_chain_has_only_trivial_critical_points_for_L_ge_2():

@@ -71,26 +71,39 @@ def record(id: str, claim: str, verdict: str, evidence: str, correction: str | N
            counterexample: Any = None, hypotheses: list | None = None) -> dict:
     """One CONTRACTS §4 record ``{id, claim, verdict, evidence, correction, counterexample}``
     plus ``hypotheses``: the statement's hypotheses, each ``{"name", "statement", "verified",
-    "detail"}`` on the check's instance(s) (``verified`` True/False, or None when not
-    decidable), and the finding an out-of-hypothesis instance supports.
+    "detail", "needed_for_refutation", "assumed"}`` on the check's instance(s) (``verified``
+    True/False computed on the instance, or None when undecided or assumed), and the findings an
+    out-of-hypothesis instance supports.
 
     A "fails" verdict must carry a counterexample or a computed difference (in
-    ``counterexample``) and a correction that the same check verified; a refutation needs
-    every hypothesis it rests on (``needed_for_refutation``) verified -- True, not None -- and
-    its evidence then names them.
+    ``counterexample``). It stands only when every hypothesis it rests on
+    (``needed_for_refutation``) is verified -- True, computed, not None and not assumed; otherwise
+    the record says "inconclusive" and its evidence names the hypotheses that are false (the
+    instance is outside the statement) or not verified (undecided or assumed), so no check can
+    emit a refutation that rests on an unverified hypothesis.
     """
     if verdict not in VERDICTS:
         raise ValueError(f"verdict must be one of {VERDICTS}, got {verdict!r}")
     if verdict == "fails" and counterexample is None:
         raise ValueError(f"{id}: a 'fails' verdict needs a counterexample or a computed difference")
-    hypotheses = list(hypotheses or [])
+    hypotheses = [dict(h, assumed=bool(h.get("assumed", False))) for h in (hypotheses or [])]
+    for h in hypotheses:
+        if h["assumed"] and h.get("verified") is not None:
+            raise ValueError(f"{id}: hypothesis {h['name']!r} is assumed, so its 'verified' must be None")
     needed = [h for h in hypotheses if h.get("needed_for_refutation", True)]
     if verdict == "fails":
-        unverified = [h["name"] for h in needed if h.get("verified") is not True]
-        if unverified:
-            raise ValueError(f"{id}: a refutation on an instance whose hypotheses are not all verified "
-                             f"({', '.join(unverified)})")
-        if needed:
+        false = [h["name"] for h in needed if h.get("verified") is False]
+        unverified = [h["name"] for h in needed if h.get("verified") is None]
+        if false or unverified:
+            verdict = VERDICTS[2]
+            why = []
+            if false:
+                why.append(f"outside the statement's hypotheses: {', '.join(false)} computed false on its instance")
+            if unverified:
+                why.append(f"hypotheses not verified on its instance (undecided or assumed): {', '.join(unverified)}")
+            evidence = (f"{evidence.rstrip()} [A refutation was computed but is not reported as one: "
+                        f"{'; '.join(why)}.]")
+        elif needed:
             evidence = (f"{evidence.rstrip()} [The refutation is inside the statement's hypotheses: "
                         f"{', '.join(h['name'] for h in needed)} verified on its instance(s).]")
     return {"id": id, "claim": claim, "verdict": verdict, "evidence": evidence,
@@ -98,12 +111,31 @@ def record(id: str, claim: str, verdict: str, evidence: str, correction: str | N
 
 
 def hypothesis(name: str, statement: str, verified, detail: str = "", *, needed_for_refutation: bool = True) -> dict:
-    """One hypothesis of a statement and whether it was verified on the check's instance.
+    """One hypothesis of a statement and whether it was verified on the check's instance:
+    ``verified`` is the outcome of a computation on the instance (True, False) or None when the
+    computation could not decide.
 
     ``needed_for_refutation=False`` marks an instance reported only as a finding outside the
     statement (it does not block a refutation made on another instance)."""
     return {"name": name, "statement": statement, "verified": None if verified is None else bool(verified),
-            "detail": detail, "needed_for_refutation": needed_for_refutation}
+            "detail": detail, "needed_for_refutation": needed_for_refutation, "assumed": False}
+
+
+def assumed(name: str, statement: str, why: str, *, needed_for_refutation: bool = True) -> dict:
+    """A hypothesis taken without computation on the instance: ``verified`` None, ``assumed`` True,
+    its detail starts with "assumed". It can never carry a refutation (see :func:`record`)."""
+    return {"name": name, "statement": statement, "verified": None, "detail": f"assumed (not computed): {why}",
+            "needed_for_refutation": needed_for_refutation, "assumed": True}
+
+
+def hypothesis_counts(rec) -> dict:
+    """Counts of a record's hypotheses: verified (computed True), false (computed False),
+    undecided (computed, None) and assumed."""
+    hs = rec.get("hypotheses") or []
+    return {"verified": sum(h.get("verified") is True for h in hs),
+            "false": sum(h.get("verified") is False for h in hs),
+            "undecided": sum(h.get("verified") is None and not h.get("assumed") for h in hs),
+            "assumed": sum(bool(h.get("assumed")) for h in hs), "total": len(hs)}
 
 
 def decide(*, fails: bool = False, holds: bool = False) -> str:

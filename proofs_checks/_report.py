@@ -13,23 +13,28 @@ def one_line(text: str, width: int = 110) -> str:
 
 
 def hypotheses_status(rec) -> str:
-    """'k/n' hypotheses verified on the instances the verdict rests on, plus the count of
-    out-of-hypothesis instances reported as findings."""
+    """'k/n' hypotheses the verdict rests on verified by computation, then the counts of assumed
+    hypotheses (never carrying a refutation) and of out-of-hypothesis instances reported as
+    findings."""
     hs = rec.get("hypotheses") or []
-    need = [h for h in hs if h.get("needed_for_refutation", True)]
-    ok = sum(1 for h in need if h.get("verified"))
-    out = sum(1 for h in hs if not h.get("needed_for_refutation", True) and h.get("verified") is False)
     if not hs:
         return "-"
-    return f"{ok}/{len(need)}" + (f" +{out} outside" if out else "")
+    need = [h for h in hs if h.get("needed_for_refutation", True)]
+    ok = sum(1 for h in need if h.get("verified") is True)
+    assumed = sum(1 for h in hs if h.get("assumed"))
+    out = sum(1 for h in hs if not h.get("needed_for_refutation", True) and h.get("verified") is False)
+    return (f"{ok}/{len(need)}" + (f" {assumed} assumed" if assumed else "")
+            + (f" +{out} outside" if out else ""))
 
 
 def render_table(records) -> str:
     """Plain-text table: id, verdict, hypotheses verified, one-line evidence."""
     w = max(len(r["id"]) for r in records)
-    lines = [f"{'id':<{w}}  {'verdict':<12}  {'hypotheses':<12}  evidence", "-" * (w + 100)]
-    lines += [f"{r['id']:<{w}}  {r['verdict']:<12}  {hypotheses_status(r):<12}  {one_line(r['evidence'], 90)}"
+    lines = [f"{'id':<{w}}  {'verdict':<12}  {'hypotheses':<22}  evidence", "-" * (w + 110)]
+    lines += [f"{r['id']:<{w}}  {r['verdict']:<12}  {hypotheses_status(r):<22}  {one_line(r['evidence'], 90)}"
               for r in records]
+    lines.append("hypotheses: computed-true / needed for a refutation; 'assumed' ones are not computed and never "
+                 "carry a refutation; '+k outside': instances outside the statement, reported as findings")
     return "\n".join(lines)
 
 
@@ -52,7 +57,7 @@ def render_markdown(records, *, seconds: float | None = None, precise: bool = Fa
         if r.get("hypotheses"):
             lines += ["**Hypotheses.**", ""]
             lines += [f"- {h['name']}: {h['statement']} -- "
-                      f"{'verified' if h['verified'] else ('not verified' if h['verified'] is None else 'FALSE')}"
+                      f"{'verified' if h['verified'] else (('ASSUMED' if h.get('assumed') else 'not verified') if h['verified'] is None else 'FALSE')}"
                       f"{'' if h.get('needed_for_refutation', True) else ' (an instance reported as a finding)'}"
                       f"{': ' + h['detail'] if h.get('detail') else ''}".replace("\n", " ") for h in r["hypotheses"]]
             lines.append("")

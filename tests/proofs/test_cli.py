@@ -35,7 +35,10 @@ def test_theorem1_subcommand_quartic_json(capsys):
 
     rc = main(["check", "theorem1", "--family", path("quartic"), "--s0", "1", "--st", "1.1", "--json"])
     obj = json.loads(capsys.readouterr().out)
-    assert rc == 0 and set(obj) == {"printed_condition", "corrected_condition", "C1", "conclusion", "evidence"}
+    assert rc == 0 and set(obj) == {"printed_condition", "corrected_condition", "C1", "conclusion", "evidence",
+                                    "hypotheses", "inside_hypotheses", "counterexample"}
+    assert obj["inside_hypotheses"] is True and obj["counterexample"] is True
+    assert all(h["verified"] is True for h in obj["hypotheses"])
     assert obj["printed_condition"] is True and obj["corrected_condition"] is False
     assert obj["C1"] == 0.0 and obj["conclusion"] == "fails" and "counterexample to Theorem 1" in obj["evidence"]
 

@@ -17,7 +17,8 @@ from proofs_checks.families import path
 def test_quartic_exact():
     r = theorem1(load_family(path("quartic")), 1, "1.1")
     assert contract_json(r) == {"printed_condition": True, "corrected_condition": False, "C1": 0.0,
-                                "conclusion": "fails", "evidence": r["evidence"]}
+                                "conclusion": "fails", "evidence": r["evidence"], "hypotheses": r["hypotheses"],
+                                "inside_hypotheses": True, "counterexample": True}
     assert math.isclose(r["printed_rhs"]["value"], 2 / 10.1) and math.isclose(r["corrected_rhs"]["value"], 0.84 / 10.1)
     assert r["critical_points_st"] == [["0"]] and r["J_st_wt_minus_J_st_w0"] == [0.0]
     assert all(h["verified"] for h in r["hypotheses"])
@@ -95,7 +96,8 @@ def test_small_onn_numeric_family(x64):
         assert abs(T) + r["z"] * se <= sup["hi"] * (1 + 1e-9), (z, T, se, sup)
     assert r["wt"] and r["wt"][0]["consistent_with_critical"]
     j = contract_json(r)
-    assert set(j) == {"printed_condition", "corrected_condition", "C1", "conclusion", "evidence"}
+    assert set(j) == {"printed_condition", "corrected_condition", "C1", "conclusion", "evidence", "hypotheses",
+                      "inside_hypotheses", "counterexample"}
     if r["conclusion"] == "fails" and r["printed_condition"] != "holds":
         assert "no counterexample" in r["evidence"]
 

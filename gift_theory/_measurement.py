@@ -2,7 +2,8 @@
 
 The one type for both: :meth:`gift_theory.chips.Chip.measure` returns it (``params`` are the
 weights the chip was programmed with), :mod:`gift_theory.lab` reads it from and writes it to
-``.npz`` / ``.csv`` files.
+``.npz``, long or wide ``.csv`` and netCDF / HDF5 files; :meth:`Measurement.to_xarray` and
+:meth:`Measurement.from_xarray` convert it to and from an ``xarray.Dataset`` (CONTRACTS §3).
 """
 
 from __future__ import annotations
@@ -81,3 +82,46 @@ class Measurement:
         if self.t is not None:
             out["t"] = self.t
         return out
+
+    def to_xarray(self):
+        """This campaign as an ``xarray.Dataset`` with the CONTRACTS §3 names.
+
+        Variables ``x (input, d0)``, ``y (input, shot, d{L})``, taps ``a{l} (input, shot, d{l})``,
+        ``t (input, shot)``, weights ``W{l} (d{l}, d{l-1})`` and ``b{l} (d{l})``; the attribute
+        ``activation``. The dimensions ``d0..dL`` are the layer widths of the paper.
+        """
+        import xarray as xr
+
+        L = len(self.params)
+        data = {"x": (("input", "d0"), np.asarray(self.x)), "y": (("input", "shot", f"d{L}"), np.asarray(self.y))}
+        for l, (W, b) in enumerate(self.params, start=1):
+            data[f"W{l}"] = ((f"d{l}", f"d{l - 1}"), np.asarray(W))
+            data[f"b{l}"] = ((f"d{l}",), np.asarray(b))
+        if self.taps is not None:
+            for l, a in enumerate(self.taps, start=1):
+                data[f"a{l}"] = (("input", "shot", f"d{l}"), np.asarray(a))
+        if self.t is not None:
+            data["t"] = (("input", "shot"), np.asarray(self.t))
+        return xr.Dataset(data, attrs={"activation": self.activation})
+
+    @classmethod
+    def from_xarray(cls, ds, *, weights=None, where: str = "dataset") -> "Measurement":
+        """The campaign held by an ``xarray.Dataset`` (the inverse of :meth:`to_xarray`), validated.
+
+        ``x`` is read as ``(input, ·)``, ``y``, the taps ``a{l}`` as ``(input, shot, ·)`` and ``t``
+        as ``(input, shot)``: dimensions named ``input`` and ``shot`` are moved into place,
+        the others are free (a file without those names is read in the order stored).
+        ``weights``: a mapping or a ``.npz`` path with ``W1..WL, b1..bL`` (and ``activation``),
+        used when the dataset holds no weights. Anything else in the dataset is ignored.
+
+        Raises
+        ------
+        GiftInputError
+            One line naming ``where`` and the problem.
+        """
+        from .lab._io import dataset_arrays, validate_arrays, weights_arrays
+
+        arrays = dataset_arrays(ds, where)
+        if "W1" not in arrays and weights is not None:
+            arrays = {**weights_arrays(weights), **arrays}
+        return validate_arrays(arrays, where=where)

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 
 from . import _random, _xla
 from ._arch import Architecture
+from ._errors import GiftInputError
 from .effects import Physics
 
 
@@ -45,13 +46,29 @@ def noise_law(physics: Physics):
     return next((e for e in physics.effects if e.stage == "law"), None)
 
 
+def site_layer(name: str) -> int:
+    """The layer an additive site belongs to: ``w{l}`` and ``a{l}`` layer l, the input ``a0`` 0."""
+    return int(name[1:])
+
+
+def _law_at(law, name: str, depth: int) -> bool:
+    """Whether the noise law ``law`` draws the additive site ``name``: every site under the scope
+    ``"all"``; else the sites ``w_l``, ``a_l`` of the layers in its scope (never the input's)."""
+    if law.layers == "all":
+        return True
+    layer = site_layer(name)
+    return layer >= 1 and law.acts_on(layer, depth)
+
+
 def site_laws(arch: Architecture, physics: Physics) -> dict:
     """``{site name: (event shape, law)}``: every draw site of ``physics`` and how it is drawn --
-    ``law`` the noise-law effect at an additive site (``a0``, ``w{l}``, ``a{l}``), None (standard
-    normal) everywhere else."""
+    ``law`` the noise-law effect at an additive site (``a0``, ``w{l}``, ``a{l}``) in its scope
+    (``layers``), None (standard normal) everywhere else."""
     additive = set(_additive_names(arch)) if "awgn" in physics else set()
     law = noise_law(physics)
-    return {name: (tuple(event), law if name in additive else None) for name, event in physics.draws(arch).items()}
+    return {name: (tuple(event), law if name in additive and law is not None and _law_at(law, name, arch.depth)
+                   else None)
+            for name, event in physics.draws(arch).items()}
 
 
 def site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype=jnp.float32) -> jax.Array:
@@ -59,7 +76,24 @@ def site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype=jnp.floa
     draws (``law``: a noise-law effect) or standard normal (None). The one per-site sampler:
     :func:`sample_noise` and the lab's per-site draw cache both draw through it."""
     k = named_subkey(key, name)  # a site's draws are named by the site
-    return law.standard(k, shape, dtype) if law is not None else _random.normal(k, shape, dtype)
+    if law is None:
+        return _random.normal(k, shape, dtype)
+    return _law_draws(law, k, shape, dtype)
+
+
+def _law_draws(law, k, shape, dtype):
+    """A noise law's unit-variance draws; a plugin law that raises is a bad input (one line)."""
+    from .effects._base import _is_builtin
+    from .effects._physics import plugin_failure_line
+
+    if _is_builtin(type(law)):
+        return law.standard(k, shape, dtype)
+    try:
+        return law.standard(k, shape, dtype)
+    except GiftInputError:
+        raise
+    except Exception as exc:
+        raise GiftInputError(plugin_failure_line(type(law), "standard", exc)) from None
 
 
 def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_shape=(), dtype=jnp.float32) -> dict:
@@ -152,19 +186,20 @@ def layer_step(W, b, a, noise: dict, physics: Physics, arch: Architecture, layer
     """
     s = physics.s
     depth = arch.depth
-    W = physics.effective_weights(W, layer, depth)
-    u = a @ W.T
+    W = physics.effective_weights(W, layer, depth, t=t)
+    # a time-dependent W_eff carries the shots' batch axes in front: one matrix per shot
+    u = a @ W.T if W.ndim == 2 else jnp.matmul(W, a[..., None])[..., 0]
     g = physics.gain(noise, layer, t, u.shape, depth)
-    z = (u if g is None else g * u) + physics.bias(b, layer, depth)
+    z = (u if g is None else g * u) + physics.bias(b, layer, depth, t=t)
     if f"w{layer}" in noise:
         z = z + s * noise[f"w{layer}"]
     if layer < depth:
-        out = physics.activation(z, arch.sigma, layer, depth)
+        out = physics.activation(z, arch.sigma, layer, depth, t=t)
         if f"a{layer}" in noise:
             out = out + s * noise[f"a{layer}"]
     else:
         out = z
-    return physics.readout(out, noise, layer, depth), z
+    return physics.readout(out, noise, layer, depth, t=t), z
 
 
 def simulate(key: jax.Array, params, x, physics: Physics, arch: Architecture, shots: int = 1, *, t=None,

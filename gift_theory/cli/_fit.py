@@ -17,32 +17,90 @@ def add_arguments(parser):
     parser.add_argument("--add", action="append", required=True, metavar="NAME",
                         help="a registered effect (CONTRACTS §2 or a plugin) to add to the model (repeatable, in order)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--replicates", type=int, default=None, metavar="B",
+                        help="parametric replicates behind the 95 %% intervals of the moment-fitted parameters "
+                             "(default 30)")
 
 
 def run(args):
+    import sys
+
     from ..lab import fit_effects
     from ..lab._figures import fit_figures
+    from ..lab._fit import fit_uncertainty
 
     meas = load(args)
     res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
+
+    def progress(done, total):
+        if not args.quiet and (done == total or done % 10 == 0):
+            sys.stderr.write(f"intervals: {done}/{total} parametric replicates\n")
+            sys.stderr.flush()
+
+    out.update(fit_uncertainty(key(args), meas, res.after, shots=args.shots, B=args.replicates, progress=progress))
     folder = figure_dir(args)
     if folder:
-        out["figures"] = fit_figures(res, folder)
+        out["figures"] = fit_figures(res, folder, meas=meas, key=key(args))
     return out
 
 
+#: a neuron stands out when its value is this many robust standard errors from the median
+STANDOUT_K = 4.0
+
+
+def standouts(per_neuron: dict, per_neuron_se: dict, k: float = STANDOUT_K) -> list[str]:
+    """Lines naming the neurons whose value stands out: ``|value - median| > k sqrt(se^2 +
+    spread^2)``, the median and the spread (1.4826 MAD) over every neuron of that parameter,
+    se the neuron's own standard error. ``"neuron 2:5 alive 0.0179 +- 0.0052 (others 0.98-1.02)"``
+    (layer:neuron, 1-based)."""
+    import numpy as np
+
+    lines = []
+    for name, layers in per_neuron.items():
+        cells = [(int(l), j + 1, float(v), (per_neuron_se.get(name, {}).get(l) or [None] * len(vals))[j])
+                 for l, vals in layers.items() for j, v in enumerate(vals)]
+        if len(cells) < 3:
+            continue
+        vals = np.array([c[2] for c in cells])
+        med = float(np.median(vals))
+        spread = 1.4826 * float(np.median(np.abs(vals - med)))
+        out = [c for c in cells if abs(c[2] - med) > k * float(np.hypot(c[3] or 0.0, spread)) and
+               (c[3] is not None or spread > 0)]
+        rest = [c[2] for c in cells if c not in out]
+        others = f"others {min(rest):.3g}-{max(rest):.3g}" if rest else "no others"
+        for l, j, v, se in out:
+            pm = f" +- {se:.2g}" if se is not None else ""
+            lines.append(f"neuron {l}:{j} {name} {v:.4g}{pm} ({others})")
+    return lines
+
+
+def _param(name, value, intervals) -> str:
+    if isinstance(value, list):
+        return f"{name}=[{len(value)} values per neuron]"
+    iv = intervals.get(name)
+    return f"{name}={value:.4g}" + (f" [{iv[0]:.4g}, {iv[1]:.4g}]" if iv else "")
+
+
 def render(out) -> str:
-    ps = ", ".join(f"{k}={v:.4g}" for k, v in out["params"].items())
-    lines = [f"model: {' + '.join(out['effects'])} ({ps})",
+    intervals = out.get("intervals", {})
+    ps = ", ".join(_param(k, v, intervals) for k, v in out["params"].items())
+    lines = [f"model: {' + '.join(out['effects'])} ({ps})" + ("  [95 % intervals]" if intervals else ""),
              f"held-out discrepancy: before {out['discrepancy_before']:.4g} (p = {out['p_value_before']:.3g}) -> "
              f"after {out['discrepancy_after']:.4g} +- {out['se_after']:.2g} (p = {out['p_value_after']:.3g}); "
              f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}"]
     if "net_discrepancy_after" in out:
-        lines.append(f"fitted weight offsets: p against the refit null ({out['refit_null_replicates']} replicates); "
+        lines.append(f"fitted offsets: p against the refit null ({out['refit_null_replicates']} replicates); "
                      f"discrepancy net of their estimation error {out['net_discrepancy_after']:.4g}")
         if not out.get("refit_null_calibrated", True):
             lines.append(NO_TAPS_CAVEAT)
+    for name, layers in out.get("per_neuron", {}).items():
+        n = sum(len(v) for v in layers.values())
+        found = [l for l in standouts({name: layers}, out.get("per_neuron_se", {}))]
+        lines.append(f"per-neuron {name}: {n} values on layer(s) {', '.join(layers)}; "
+                     + (f"{len(found)} stand out (beyond {STANDOUT_K:g} robust standard errors of the median):"
+                        if found else f"none stands out (beyond {STANDOUT_K:g} robust standard errors of the median)"))
+        lines += ["  " + f for f in found]
     lines.append("error ladder:")
     for r in out["ladder"]:
         lines.append(f"  {r['model']:<40s} {r['discrepancy']:10.4g} +- {r['se']:.2g}  p = {r['p_value']:.3g}")

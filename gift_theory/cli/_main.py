@@ -123,6 +123,12 @@ def main(argv=None) -> int:
         sys.stderr.write("gift: interrupted\n")
         return 130
     except Exception as exc:  # the work failed: one line unless debugging
+        from ._plugins import plugin_failure
+
+        line = plugin_failure(exc)  # a plugin's own code raised: a bad input (CONTRACTS §2b)
+        if line is not None and not debug:
+            sys.stderr.write(line + "\n")
+            return 2
         if debug:
             raise
         sys.stderr.write(f"gift {name}: failed: {type(exc).__name__}: {exc} (GIFT_DEBUG=1 shows the traceback)\n")

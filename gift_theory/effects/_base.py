@@ -41,8 +41,9 @@ REGISTRY: dict[str, type["Effect"]] = {}
 STAGES = ("level", "law", "weights", "bias", "gain", "activation", "readout")
 
 #: the mechanism classes of CONTRACTS §6, in the table's order.
-MECHANISMS = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "weight_error",
-              "bias_offset", "activation_mismatch", "readout_nonlinearity")
+MECHANISMS = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "time_drift",
+              "correlated_noise", "gain_error", "weight_error", "bias_offset", "activation_mismatch",
+              "readout_nonlinearity")
 
 #: the hook a stage's effect must define: (method name, signature shown in error messages)
 _HOOKS = {
@@ -54,8 +55,34 @@ _HOOKS = {
     "law": ("standard", "standard(key, shape, dtype)"),
 }
 
-#: the one value a ``shape`` entry may take
+#: the values a ``shape`` entry may take: one value per neuron, or one per layer
 NEURONS = "neurons"
+LAYERS = "layers"
+
+#: the hooks that may take the shot's acquisition time as a keyword ``t`` (``gain`` gets it
+#: positionally, as it always has)
+TIME_HOOKS = ("weights", "bias", "activation", "readout", "gain")
+
+
+def hook_time(cls, hook: str) -> str | None:
+    """How the ``hook`` method of ``cls`` takes the acquisition time: ``"required"`` (a
+    parameter ``t`` without default), ``"optional"`` (``t`` with a default, or ``**kwargs``)
+    or None (it takes none). ``gain`` always takes it (its fixed signature)."""
+    import inspect
+
+    fn = getattr(cls, hook, None)
+    if not callable(fn) or fn is getattr(Effect, hook, None):
+        return None
+    if hook == "gain":
+        return "optional"
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):
+        return None
+    par = sig.parameters.get("t")
+    if par is not None and par.kind not in (par.VAR_POSITIONAL, par.VAR_KEYWORD):
+        return "required" if par.default is par.empty else "optional"
+    return None
 
 _BUILTIN_MODULE = __name__.rpartition(".")[0] + "."  # "gift_theory.effects."
 
@@ -124,8 +151,8 @@ def _check_class(cls) -> None:
     if err:
         raise GiftInputError(f"{label}: {err}")
     layers = cls.layers
-    if stage in ("level", "law") and layers != "all":
-        raise GiftInputError(f"{label}: stage {stage!r} acts on every additive noise site; layers must be 'all'")
+    if stage == "level" and layers != "all":
+        raise GiftInputError(f"{label}: stage 'level' acts on every additive noise site; layers must be 'all'")
     if stage == "activation" and layers == "output":
         raise GiftInputError(f"{label}: stage 'activation' acts on hidden layers only (the last layer has "
                              f"no activation); layers='output' leaves it nothing")
@@ -158,8 +185,8 @@ def _check_class(cls) -> None:
         if not lo <= v <= hi:
             raise GiftInputError(f"{label}: defaults[{p!r}]={v:g} is outside bounds [{lo:g}, {hi:g}]")
     for p, kind in cls.shape.items():
-        if kind != NEURONS:
-            raise GiftInputError(f"{label}: shape[{p!r}]={kind!r}; the only per-parameter shape is 'neurons'")
+        if kind not in (NEURONS, LAYERS):
+            raise GiftInputError(f"{label}: shape[{p!r}]={kind!r}; a parameter's shape is 'neurons' or 'layers'")
     static = getattr(cls, "static_fields", ())
     if isinstance(static, str) or not isinstance(static, (tuple, list)):
         raise GiftInputError(f"{label}: static_fields={static!r} must be a tuple of field names")
@@ -220,6 +247,9 @@ def register(cls):
         cls.layers = tuple(cls.layers)
     cls.params = tuple(cls.params)
     cls.static_fields = tuple(cls.static_fields)
+    # a hook that takes the time t without a default cannot run on a file without times
+    if "needs_times" not in cls.__dict__ and any(hook_time(cls, h) == "required" for h in TIME_HOOKS):
+        cls.needs_times = True
     _fill_defaults(cls)
     try:
         cls = dataclasses.dataclass(frozen=True)(cls)
@@ -303,7 +333,8 @@ class Effect:
         ``{param: "neurons"}`` for per-neuron parameters (default ``{}``). Such a parameter
         holds a scalar (every neuron of every layer in scope) or a tuple with one 1-D array
         per layer 1..L; the arrays of layers outside the scope are ignored (:meth:`expand`
-        makes them zero-length). Read it with :meth:`value`.
+        makes them zero-length). Read it with :meth:`value`. ``{param: "layers"}``: one value
+        per layer (a (1,)-array per layer, e.g. ``layer_gain``'s g), fixed per device.
     order : int
         Position inside the stage.
     static_fields : tuple of str
@@ -318,6 +349,17 @@ class Effect:
     noise; ``readout(v, noise, layer)`` -> one link of D; a ``law`` effect defines
     ``standard(key, shape, dtype)`` (unit-variance draws); ``draws(arch)`` lists the
     standard-normal draws an effect needs per shot.
+
+    Any of ``weights``, ``bias``, ``activation``, ``readout`` may also take a keyword ``t``:
+    the shot's normalised acquisition time (CONTRACTS §3), shaped to broadcast against the
+    hook's first argument ((..., 1, 1) for W, (..., 1) for the others, ``...`` the shots'
+    batch axes); ``gain`` receives t positionally, of the batch shape. A hook whose ``t`` has
+    no default makes the effect ``needs_times``; without times the forward pass gives it
+    ``t = 0`` and the commands refuse such an effect on a file without ``t``. A hook runs
+    on :meth:`at_layer`: ``self.p`` of a per-neuron ``p`` is the layer's (d_l,) values.
+    A noise ``law`` restricted by ``layers`` draws the sites ``w_l``, ``a_l`` of its layers
+    from its law and the others Gaussian (the input site ``a0`` follows it only under
+    ``"all"``).
     """
 
     name: ClassVar[str]
@@ -375,12 +417,59 @@ class Effect:
         return int(layer) < depth if layers == "hidden" else int(layer) == depth
 
     def value(self, param: str, layer: int):
-        """Parameter ``param`` on layer ``layer`` (1-based): the scalar, or for a per-neuron
-        parameter held as arrays that layer's 1-D array (one value per neuron)."""
+        """Parameter ``param`` on layer ``layer`` (1-based): what a hook computes with.
+
+        A scalar parameter is returned as it is. A per-neuron parameter (``shape = {param:
+        "neurons"}``) is held as a scalar (every neuron the same, e.g. before a fit) or as one
+        1-D array per layer; this returns that layer's array, shape (d_l,), which broadcasts
+        against the hook's (..., d_l) values -- or the scalar. Public API (CONTRACTS §2b)::
+
+            @register
+            class Transmission(Effect):
+                alive: float = 1.0
+                name = "transmission"
+                params = ("alive",)
+                shape = {"alive": "neurons"}      # one value per neuron, fixed per device
+                bounds = {"alive": (0.0, 2.0)}
+                defaults = {"alive": 1.0}
+                stage = "activation"
+                layers = "hidden"
+                mechanism = "activation_mismatch"
+
+                def activation(self, z, sigma, layer):
+                    return self.value("alive", layer) * sigma(z)
+
+        Inside a hook, ``self.alive`` is already that layer's value (the hook runs on
+        :meth:`at_layer`), so ``self.alive * sigma(z)`` means the same.
+
+        Parameters
+        ----------
+        param : str
+            One of ``params``.
+        layer : int
+            1-based layer number.
+
+        Returns
+        -------
+        float or array of shape (d_l,)
+        """
+        if param not in self.params:
+            raise GiftInputError(f"effect {self.name}: value({param!r}, {layer}): no parameter {param!r}; "
+                                 f"it has {', '.join(self.params) or 'none'}")
         v = getattr(self, param)
         if param in self.shape and is_per_neuron(v):
             return v[int(layer) - 1]
         return v
+
+    def at_layer(self, layer: int) -> "Effect":
+        """A copy whose per-neuron parameters are layer ``layer``'s values (:meth:`value`): the
+        effect a hook of that layer runs on, so ``self.p`` in a hook is the layer's (d_l,) array."""
+        new = {p: self.value(p, layer) for p in self.shape if is_per_neuron(getattr(self, p))}
+        return dataclasses.replace(self, **new) if new else self
+
+    def _width(self, param: str, arch, layer: int) -> int:
+        """Values of a per-neuron (d_l) or per-layer (1) parameter on layer ``layer``."""
+        return 1 if self.shape.get(param) == LAYERS else arch.widths[layer]
 
     def expand(self, arch, dtype=None) -> "Effect":
         """A copy whose per-neuron parameters are arrays: one per layer, of width d_l on the
@@ -392,7 +481,7 @@ class Effect:
             if is_per_neuron(v):
                 continue
             dt = jnp.result_type(float) if dtype is None else dtype
-            new[p] = tuple(jnp.full((arch.widths[l] if self.acts_on(l, arch.depth) else 0,), v, dt)
+            new[p] = tuple(jnp.full((self._width(p, arch, l) if self.acts_on(l, arch.depth) else 0,), v, dt)
                            for l in range(1, arch.depth + 1))
         return dataclasses.replace(self, **new) if new else self
 
@@ -440,9 +529,10 @@ class Effect:
             if a.ndim != 1:
                 raise GiftInputError(f"{where}: {self.name} parameter {p} layer {l}: must be 1-D (one value per "
                                      f"neuron), got shape {a.shape}")
-            if arch is not None and self.acts_on(l, arch.depth) and a.shape[0] != arch.widths[l]:
+            if arch is not None and self.acts_on(l, arch.depth) and a.shape[0] != self._width(p, arch, l):
                 raise GiftInputError(f"{where}: {self.name} parameter {p} layer {l}: {a.shape[0]} values for "
-                                     f"{arch.widths[l]} neurons")
+                                     f"{self._width(p, arch, l)} " + ("value (one per layer)" if self.shape[p] == LAYERS
+                                                                      else "neurons"))
             bad = ~((a >= lo) & (a <= hi))
             if bad.any():
                 i = int(np.argmax(bad))
@@ -455,7 +545,8 @@ class Effect:
     #: with its (single) parameter the prior scale of those offsets (weight_error,
     #: bias_offset); None: its parameters are fitted by moment matching
     offsets_of: ClassVar[str | None] = None
-    #: silent without acquisition times (a diagnosis tries it only on files that have them)
+    #: silent without acquisition times (a diagnosis tries it only on files that have them);
+    #: set by :func:`register` when a hook takes ``t`` without a default
     needs_times: ClassVar[bool] = False
 
     @classmethod

@@ -25,7 +25,19 @@ import jax.numpy as jnp
 
 from .. import _random
 from .._errors import GiftInputError
-from ._base import REGISTRY, STAGES, Effect, as_per_neuron, is_per_neuron, json_value, make_effect, parse_effect
+from ._base import (
+    _HOOKS,
+    REGISTRY,
+    STAGES,
+    Effect,
+    _is_builtin,
+    as_per_neuron,
+    hook_time,
+    is_per_neuron,
+    json_value,
+    make_effect,
+    parse_effect,
+)
 from .awgn import Awgn
 
 
@@ -192,7 +204,15 @@ class Physics:
         """Every standard draw one shot needs: ``{key: event_shape}``."""
         out: dict[str, tuple[int, ...]] = {}
         for e in self.effects:
-            out.update(e.draws(arch))
+            if _is_builtin(type(e)):
+                out.update(e.draws(arch))
+                continue
+            try:
+                out.update(e.draws(arch))
+            except GiftInputError:
+                raise
+            except Exception as exc:  # a plugin's own failure
+                raise GiftInputError(plugin_failure_line(type(e), "draws", exc)) from None
         return out
 
     def standard(self, key, shape, dtype):
@@ -202,18 +222,21 @@ class Physics:
                 return e.standard(key, shape, dtype)
         return _random.normal(key, shape, dtype)
 
-    def effective_weights(self, W: jax.Array, layer: int, depth: int | None = None) -> jax.Array:
-        """W_eff of layer ``layer`` (1-based) of a ``depth``-layer network: the weights hooks in order."""
+    def effective_weights(self, W: jax.Array, layer: int, depth: int | None = None, t=None) -> jax.Array:
+        """W_eff of layer ``layer`` (1-based) of a ``depth``-layer network: the weights hooks in
+        order. ``t``: the shots' acquisition times (batch shape) or None; a hook that takes t
+        gets it as (..., 1, 1), and W_eff then has the batch axes in front."""
         for e in self.effects:
             if e.stage == "weights" and e.acts_on(layer, depth):
-                W = e.weights(W, layer)
+                W = _call(e, "weights", layer, t, 2, W, layer)
         return W
 
-    def bias(self, b: jax.Array, layer: int, depth: int | None = None) -> jax.Array:
-        """b_eff of layer ``layer``: the bias hooks in order (``b`` itself without any)."""
+    def bias(self, b: jax.Array, layer: int, depth: int | None = None, t=None) -> jax.Array:
+        """b_eff of layer ``layer``: the bias hooks in order (``b`` itself without any); a hook
+        that takes t gets it as (..., 1)."""
         for e in self.effects:
             if e.stage == "bias" and e.acts_on(layer, depth):
-                b = e.bias(b, layer)
+                b = _call(e, "bias", layer, t, 1, b, layer)
         return b
 
     def gain(self, noise, layer, t, shape, depth: int | None = None):
@@ -221,11 +244,11 @@ class Physics:
         g = None
         for e in self.effects:
             if e.stage == "gain" and e.acts_on(layer, depth):
-                gi = e.gain(noise, layer, t, shape)
+                gi = _call(e, "gain", layer, None, 0, noise, layer, t, shape)
                 g = gi if g is None else g * gi
         return g
 
-    def activation(self, z: jax.Array, sigma, layer: int, depth: int | None = None) -> jax.Array:
+    def activation(self, z: jax.Array, sigma, layer: int, depth: int | None = None, t=None) -> jax.Array:
         """act_l(z) of hidden layer ``layer``, the value before its activation noise.
 
         The activation hooks acting on ``layer`` are composed in the canonical order: the
@@ -234,15 +257,19 @@ class Physics:
         """
         for e in self.effects:
             if e.stage == "activation" and e.acts_on(layer, depth):
-                sigma = _Composed(e, sigma, layer)
+                sigma = _Composed(e, sigma, layer, t)
         return sigma(z)
 
-    def readout(self, v, noise, layer, depth: int | None = None):
+    def readout(self, v, noise, layer, depth: int | None = None, t=None):
         """One pass through the readout chain D of layer ``layer``: the readout hooks in order."""
         for e in self.effects:
             if e.stage == "readout" and e.acts_on(layer, depth):
-                v = e.readout(v, noise, layer)
+                v = _call(e, "readout", layer, t, 1, v, noise, layer)
         return v
+
+    def needs_times(self) -> tuple[str, ...]:
+        """The names of the effects that need acquisition times (``needs_times``)."""
+        return tuple(e.name for e in self.effects if getattr(e, "needs_times", False))
 
     def validate(self, where: str = "effects", arch=None) -> "Physics":
         """Check every effect's parameters (:meth:`Effect.validate`); ``arch`` also checks
@@ -253,15 +280,65 @@ class Physics:
 
 
 class _Composed:
-    """``z -> effect.activation(z, sigma, layer)``: one activation hook wrapped around ``sigma``."""
+    """``z -> effect.activation(z, sigma, layer[, t])``: one activation hook wrapped around ``sigma``."""
 
-    __slots__ = ("effect", "sigma", "layer")
+    __slots__ = ("effect", "sigma", "layer", "t")
 
-    def __init__(self, effect, sigma, layer):
-        self.effect, self.sigma, self.layer = effect, sigma, layer
+    def __init__(self, effect, sigma, layer, t=None):
+        self.effect, self.sigma, self.layer, self.t = effect, sigma, layer, t
 
     def __call__(self, z):
-        return self.effect.activation(z, self.sigma, self.layer)
+        return _call(self.effect, "activation", self.layer, self.t, 1, z, self.sigma, self.layer)
+
+
+def _shaped_time(t, trailing: int):
+    """The times (batch shape) with ``trailing`` unit axes, to broadcast against a hook's value."""
+    t = jnp.asarray(t)
+    return t.reshape(t.shape + (1,) * trailing)
+
+
+def _call(effect: Effect, hook: str, layer: int, t, trailing: int, *args):
+    """``effect.<hook>(*args)`` on :meth:`Effect.at_layer`, with ``t=`` when the hook takes it
+    (0 without times). A plugin's hook that raises is a bad input: a one-line
+    :class:`GiftInputError` naming the plugin file, the effect, the hook and the exception
+    (a built-in effect's error is the package's own and propagates as it is)."""
+    eff = effect.at_layer(layer)
+    fn = getattr(eff, hook)
+    kwargs = {}
+    if hook != "gain":
+        mode = hook_time(type(effect), hook)
+        if mode is not None and (t is not None or mode == "required"):
+            kwargs["t"] = _shaped_time(0.0 if t is None else t, trailing)
+    if _is_builtin(type(effect)):
+        return fn(*args, **kwargs)
+    try:
+        return fn(*args, **kwargs)
+    except GiftInputError:
+        raise
+    except Exception as exc:  # a plugin's own failure while running
+        raise GiftInputError(plugin_failure_line(type(effect), hook, exc)) from None
+
+
+def plugin_file(cls) -> str:
+    """The file a plugin effect class was defined in (its module's file, else the module name)."""
+    import sys
+
+    mod = sys.modules.get(getattr(cls, "__module__", ""))
+    path = getattr(mod, "__file__", None)
+    if path:
+        import os
+
+        rel = os.path.relpath(path)
+        return rel if not rel.startswith("..") else path
+    return getattr(cls, "__module__", "?")
+
+
+def plugin_failure_line(cls, hook: str, exc: BaseException) -> str:
+    """``FILE: effect NAME (class C), hook HOOK(...): raised TYPE: message`` (one line)."""
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    sig = _HOOKS.get(cls.stage, (hook, hook))[1] if hook == _HOOKS.get(cls.stage, ("",))[0] else hook
+    return (f"{plugin_file(cls)}: effect {cls.name} (class {cls.__name__}), hook {sig}: raised "
+            f"{type(exc).__name__}{': ' + msg if msg else ''}")
 
 
 def _brief(v) -> str:

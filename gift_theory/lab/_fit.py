@@ -14,6 +14,7 @@ from .._measurement import Measurement
 from ..effects import REGISTRY, Physics, make_effect
 from ._fit_moments import MomentProblem, fit_moments
 from ._fit_offsets import fit_offsets, fitted_as_offsets
+from ._intervals import attach_uncertainty, offset_uncertainty
 from ._shots import Model
 
 
@@ -75,4 +76,49 @@ def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None,
         model = fit_offsets(key, meas, model, offsets)
     scan = ["s"] if start is None else [p for n in new if not fitted_as_offsets(n) for p in REGISTRY[n].params]
     physics = fit_moments(problem, model.physics, model.weights(meas), scan, rescan_s=start is not None and bool(new))
-    return Model(physics, model.params, model.offsets)
+    model = Model(physics, model.params, model.offsets)
+    if any(fitted_as_offsets(n) for n in model.offsets):
+        # per-neuron values are results: their standard errors (and the offset scales' intervals)
+        # from the fit's own Jacobian, kept with the model for the JSON of fit and diagnose
+        attach_uncertainty(model, offset_uncertainty(key, meas, model, weights=False))
+    return model
+
+
+def fit_uncertainty(key, meas: Measurement, after: Model, *, shots: int | None = None, B: int | None = None,
+                    progress=None) -> dict:
+    """The uncertainty of a :func:`~gift_theory.lab.fit_effects` result (CONTRACTS §2b, §4):
+    95 % intervals on every fitted scalar parameter and the per-neuron values with their
+    standard errors, on the fitting half of ``meas`` that ``fit_effects(key, meas, ...)`` used
+    (the same split and keys; methods: :mod:`._intervals`).
+
+    Parameters
+    ----------
+    key : the key given to ``fit_effects``
+    meas : the whole measurement given to ``fit_effects``
+    after : its fitted model (``FitResult.after``)
+    shots : its ``shots`` (model shots per input of the moment fit)
+    B : parametric replicates of the moment loss's gradient (default
+        :data:`~gift_theory.lab._intervals.REPLICATES`)
+
+    Returns
+    -------
+    {"intervals": {param: [lo, hi]}, "interval_method": {param: str}, "per_neuron": {...},
+     "per_neuron_se": {...}}
+    """
+    import jax
+
+    from ._diagnose import split_inputs
+    from ._intervals import REPLICATES, moment_intervals, per_neuron_json
+
+    k_split, k_fit = jax.random.split(key, 5)[:2]
+    train, _ = split_inputs(k_split, meas.n)
+    fit_meas = meas.subset(train)
+    mom = moment_intervals(k_fit, fit_meas, after, shots, B=REPLICATES if B is None else int(B), progress=progress)
+    intervals = {p: [float(lo), float(hi)] for p, (lo, hi) in mom["intervals"].items()}
+    method = {p: f"sandwich of the moment loss, {mom['replicates']} parametric replicates" for p in intervals}
+    if any(fitted_as_offsets(n) for n in after.offsets):
+        info = offset_uncertainty(k_fit, fit_meas, after, weights=True)
+        for name, (lo, hi) in info["intervals"].items():
+            intervals[name] = [float(lo), float(hi)]
+            method[name] = "profile of the offsets' marginal likelihood (Gauss-Newton at the fit)"
+    return {"intervals": intervals, "interval_method": method, **per_neuron_json(after, meas.arch)}

@@ -31,8 +31,8 @@ def test_no_refutation_outside_the_hypotheses():
     from proofs_checks._record import hypothesis
 
     outside = hypothesis("B2", "...", False, "the box binds")
-    with pytest.raises(ValueError):
-        record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [outside])
+    r = record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [outside])
+    assert r["verdict"] == "inconclusive" and "outside the statement's hypotheses: B2" in r["evidence"]
     finding = hypothesis("B2 (other instance)", "...", False, "reported", needed_for_refutation=False)
     assert record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [finding])["verdict"] == "fails"
 
@@ -47,15 +47,70 @@ def test_levels_split_the_family_wise_error():
 
 
 def test_refutation_needs_every_hypothesis_verified_and_says_so():
-    from proofs_checks._record import hypothesis
+    from proofs_checks._record import assumed, hypothesis
 
     undecided = hypothesis("w0_critical", "...", None, "not resolved")
-    with pytest.raises(ValueError):
-        record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [undecided])
+    r = record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [undecided])
+    assert r["verdict"] == "inconclusive" and "not verified" in r["evidence"] and "w0_critical" in r["evidence"]
     ok = hypothesis("w0_critical", "...", True, "exact")
     r = record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [ok])
-    assert "inside the statement's hypotheses: w0_critical verified" in r["evidence"]
+    assert r["verdict"] == "fails" and "inside the statement's hypotheses: w0_critical verified" in r["evidence"]
     assert record("x", "c", "inconclusive", "e", hypotheses=[undecided])["evidence"] == "e"
+    # an assumed hypothesis is null, says so, and cannot carry a refutation
+    a = assumed("A3", "fresh draws", "by construction of the sampler")
+    assert a["verified"] is None and a["assumed"] is True and a["detail"].startswith("assumed")
+    r = record("x", "c", "fails", "e", "fix", {"diff": 1.0}, [ok, a])
+    assert r["verdict"] == "inconclusive" and "A3" in r["evidence"]
+    with pytest.raises(ValueError):                                  # assumed and "verified" contradict
+        record("x", "c", "holds", "e", hypotheses=[dict(a, verified=True)])
+
+
+def test_property_no_fails_with_an_unverified_needed_hypothesis():
+    """Whatever the hypotheses (verified True / False / None, assumed or not, needed or not), a record
+    says "fails" only when every needed hypothesis is verified True and none of them is assumed."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from proofs_checks._record import assumed, hypothesis
+
+    one = st.one_of(
+        st.builds(lambda v, n: hypothesis("h", "s", v, "d", needed_for_refutation=n),
+                  st.sampled_from([True, False, None]), st.booleans()),
+        st.builds(lambda n: assumed("h", "s", "why", needed_for_refutation=n), st.booleans()))
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.lists(one, max_size=6), st.sampled_from(["holds", "fails", "inconclusive"]))
+    def prop(hyps, verdict):
+        r = record("x", "c", verdict, "e", "fix", {"d": 1}, hyps)
+        needed = [h for h in r["hypotheses"] if h["needed_for_refutation"]]
+        if r["verdict"] == "fails":
+            assert all(h["verified"] is True and not h["assumed"] for h in needed)
+        if verdict == "fails" and any(h["verified"] is not True for h in needed):
+            assert r["verdict"] == "inconclusive"
+        if verdict != "fails":
+            assert r["verdict"] == verdict
+
+    prop()
+
+
+def test_no_hypothesis_is_set_true_or_false_by_hand():
+    """No call of ``hypothesis(...)`` in a check module passes a literal True/False as ``verified``:
+    a hypothesis is computed on the instance, or it is ``assumed(...)`` (null)."""
+    import ast
+    import pathlib
+
+    import proofs_checks
+
+    root = pathlib.Path(proofs_checks.__file__).parent
+    hits = []
+    for p in sorted(root.glob("*.py")):
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", "")) in (
+                    "hypothesis", "_hyp"):
+                args = list(node.args[2:3]) + [k.value for k in node.keywords if k.arg == "verified"]
+                hits += [f"{p.name}:{node.lineno}" for a in args
+                         if isinstance(a, ast.Constant) and isinstance(a.value, bool)]
+    assert hits == []
 
 
 def test_no_literal_verdicts_in_the_checks():

@@ -21,7 +21,7 @@ from ._jobs import unavailable
 from ._scales import SCALES, get_scale, sweeps
 from gift_theory._io import save_figure
 
-from ._sweep import load_points, open_client, open_dataset, run_sweep
+from ._sweep import load_points, open_client, open_dataset, restrict, run_sweep
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -39,6 +39,9 @@ FIGURES = (
     "bound_region",
     "error_ladder",
     "predicted_vs_realised",
+    "gain_vs_baseline",
+    "ceiling",
+    "undertrained",
 )
 
 
@@ -59,7 +62,7 @@ def _sweep_summary(name, ds) -> dict:
 
 def build(scale: str = "quick", *, only: str | None = None, scheduler: str | None = None, n_workers: int = 2,
           mnist_folder: str | None = None, data_dir: str | None = None, figure_dir: str | None = None,
-          compute: bool = True, progress: bool = True, options: dict | None = None) -> dict:
+          compute: bool = True, progress: bool = True, options: dict | None = None, cells=None) -> dict:
     """Run the sweeps behind the chosen figures, then draw each figure from the saved data.
 
     Parameters
@@ -72,12 +75,18 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
     data_dir, figure_dir : default ``paper_figures/data/<scale>``, ``paper_figures/figures/<scale>``
     compute : False draws from existing data only
     options : extra keyword arguments for every fine-tuning job
+    cells : a run in pieces: only the points at these (s0, st) cells, cell by cell in this
+        order (``"key"``: the scale's ``key_cells``); their point files land as usual, no
+        netCDF is written and no figure drawn (run without ``cells`` to assemble and draw)
 
     Returns
     -------
     dict with ``scale``, ``seconds`` (wall), ``sweeps`` (points done/total, seconds per point)
     and ``figures`` (name, label, path, status "drawn" or the reason it is not).
     """
+    import matplotlib
+
+    matplotlib.use("agg")  # a batch build draws to files only; the figure functions choose no backend
     t0 = time.perf_counter()
     sc = get_scale(scale)
     data_dir = data_dir or os.path.join(HERE, "data", sc.name)
@@ -87,7 +96,11 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
     all_sweeps = sweeps(sc, mnist_folder=mnist_folder, options=options)
     needed = []
     for m in mods.values():
-        needed += [s for s in m.SWEEPS if s not in needed]
+        # a figure's SWEEPS are computed; its OPTIONAL ones are drawn when saved (computed by other figures)
+        needed += [s for s in m.SWEEPS if s not in needed and s in all_sweeps]
+    if cells is not None:
+        return _run_cells(sc, all_sweeps, needed, sc.key_cells if cells == "key" else cells, data_dir, scheduler,
+                          n_workers, progress, t0)
 
     client, close = None, None
     if compute and scheduler != "synchronous":
@@ -138,6 +151,13 @@ def _build(sc, mods, all_sweeps, needed, data_dir, figure_dir, compute, progress
     figures = []
     for name, mod in mods.items():
         entry = {"name": name, "label": mod.LABEL, "path": os.path.join(figure_dir, f"{name}.png")}
+        absent = [s for s in mod.SWEEPS if s not in all_sweeps]
+        if absent:  # the scale does not define this figure's sweeps (issue 25's are at paper and tiny only)
+            entry["status"], entry["path"] = f"{NOT_AT_SCALE}: scale {sc.name} has no sweep {', '.join(absent)}", None
+            if progress:
+                sys.stderr.write(f"[figures] {name}: {entry['status']}\n")
+            figures.append(entry)
+            continue
         try:
             if compute and hasattr(mod, "compute"):
                 mod.compute(sc, data_dir)
@@ -145,6 +165,9 @@ def _build(sc, mods, all_sweeps, needed, data_dir, figure_dir, compute, progress
             if missing:
                 raise RuntimeError("; ".join(sweep_problem.get(s, f"no data for sweep {s}") for s in missing))
             data = {s: data_of(s) for s in mod.SWEEPS}
+            # optional inputs: drawn when saved, left out (and said so in the figure) when not
+            data.update({s: data_of(s) for s in getattr(mod, "OPTIONAL", ())
+                         if os.path.isfile(os.path.join(data_dir, f"{s}.nc"))})
             if hasattr(mod, "load"):  # figures with their own saved data (closed forms)
                 data.update(mod.load(data_dir))
             _save_png(mod.draw(data), entry["path"])
@@ -167,6 +190,45 @@ def _build(sc, mods, all_sweeps, needed, data_dir, figure_dir, compute, progress
     return result
 
 
+def _run_cells(sc, all_sweeps, needed, cells, data_dir, scheduler, n_workers, progress, t0) -> dict:
+    """Run the needed sweeps' points at the given (s0, st) cells, cell by cell (see :func:`build`)."""
+    client, close = (None, None) if scheduler == "synchronous" else open_client(scheduler, n_workers)
+    info = []
+    try:
+        for s0, st in cells:
+            for sname in needed:
+                sw = all_sweeps[sname]
+                if "s0" not in sw.dims or "st" not in sw.dims or unavailable(sw.job, sw.fixed):
+                    continue
+                sub = restrict(sw, s0=(float(s0),), st=(float(st),))
+                if sub is None:
+                    continue
+                ds = run_sweep(sub, data_dir, scheduler=scheduler, n_workers=n_workers, progress=progress,
+                               client=client, save=False)
+                info.append(dict(_sweep_summary(sname, ds), cell={"s0": float(s0), "st": float(st)}))
+    finally:
+        if close is not None:
+            close()
+    return {"scale": sc.name, "data_dir": data_dir, "figure_dir": None, "sweeps": info, "figures": [],
+            "seconds": time.perf_counter() - t0, "cells": [[float(a), float(b)] for a, b in cells]}
+
+
+def _parse_cells(text: str):
+    """``key`` or ``S0:ST,S0:ST,...`` -> "key" or [(s0, st), ...]; bad input -> GiftInputError."""
+    from gift_theory import GiftInputError
+
+    if text == "key":
+        return "key"
+    out = []
+    for part in text.split(","):
+        try:
+            a, b = part.split(":")
+            out.append((float(a), float(b)))
+        except ValueError:
+            raise GiftInputError(f"--cells {text}: expected 'key' or S0:ST[,S0:ST...], got {part!r}") from None
+    return out
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--scale", default="quick", choices=tuple(SCALES),
                         help="quick (digits, small nets, 2 seeds: minutes) | paper (the paper's nets, mnist5k, "
@@ -183,6 +245,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--data-dir", default=None, metavar="DIR", help="where the sweep data go")
     parser.add_argument("--figure-dir", default=None, metavar="DIR", help="where the PNGs go")
     parser.add_argument("--draw-only", action="store_true", help="draw from saved data, run no sweep")
+    parser.add_argument("--cells", default=None, metavar="key|S0:ST,...",
+                        help="a run in pieces: only the points at these (s0, st) cells, in this order ('key': the "
+                             "scale's key cells); no netCDF written, no figure drawn")
 
 
 def check_arguments(args) -> None:
@@ -200,19 +265,23 @@ def check_arguments(args) -> None:
 
 def run_args(args) -> dict:
     check_arguments(args)
+    cells = getattr(args, "cells", None)
     return build(args.scale, only=args.only, scheduler=args.scheduler, n_workers=args.workers,
                  mnist_folder=args.mnist_folder, data_dir=args.data_dir, figure_dir=args.figure_dir,
-                 compute=not args.draw_only)
+                 compute=not args.draw_only, cells=None if cells is None else _parse_cells(cells))
 
 
 def render(result: dict) -> str:
     lines = [f"scale {result['scale']}: {result['seconds']:.0f} s wall"]
+    if "cells" in result:
+        lines.append(f"  cells {result['cells']} (a piece: no netCDF, no figure)")
     for s in result["sweeps"]:
         if "error" in s:
             lines.append(f"  sweep {s['name']}: {s['error']}")
         else:
             per = s["seconds_per_point_mean"]
-            lines.append(f"  sweep {s['name']}: {s['points_done']}/{s['points_total']} points"
+            where = f" at s0={s['cell']['s0']:g}, st={s['cell']['st']:g}" if "cell" in s else ""
+            lines.append(f"  sweep {s['name']}{where}: {s['points_done']}/{s['points_total']} points"
                          + (f", {per:.1f} s per point" if per is not None else ""))
     for f in result["figures"]:
         lines.append(f"  {f['label']}: {f['path'] if f['status'] == 'drawn' else f['status']}")
@@ -223,8 +292,12 @@ def render(result: dict) -> str:
     return "\n".join(lines)
 
 
+#: a figure whose sweeps the scale does not define is skipped, not failed
+NOT_AT_SCALE = "not at this scale"
+
+
 def failed(result: dict) -> bool:
-    return any(f["status"] != "drawn" for f in result["figures"])
+    return any(f["status"] != "drawn" and not f["status"].startswith(NOT_AT_SCALE) for f in result["figures"])
 
 
 def main(argv=None, only: str | None = None) -> int:

@@ -74,8 +74,33 @@ def _run_finetune():
     return run_finetune
 
 
+#: the variants of issue 25 at the key cells: name -> (finetune method, its options). gift
+#: without its confirmation and with a 5x chip budget; Algorithm 1 (gift-printed) with eta a
+#: fraction of |w0|, as printed (w0 not a candidate) and with w0 in its selection (as the
+#: paper's text says); the retrain oracle and its control, the same retraining at s0 (no
+#: mismatch: the gain of extra training alone)
+VARIANTS = {
+    "gift": ("gift", {}),
+    "gift-noconfirm": ("gift", {"confirm": False}),
+    "gift-budget100": ("gift", {"budget": 100}),
+    **{f"printed-eta{e:g}": ("gift-printed", {"rel_step": e / 100}) for e in (0.05, 0.1, 0.3, 1)},
+    **{f"printed-w0-eta{e:g}": ("gift-printed", {"rel_step": e / 100, "keep_w0": True}) for e in (0.05, 0.1, 0.3, 1)},
+    "retrain": ("retrain", {}),
+    "retrain-s0": ("retrain", {"at": "s0"}),
+}
+
+
+def _run_ceiling():
+    try:
+        from gift_theory.finetune import run_ceiling
+    except ImportError as exc:
+        raise needs("gift_theory.finetune.run_ceiling", "issue 25's ceiling of the GIFT line") from exc
+    return run_ceiling
+
+
 def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind: str = "awgn",
-             method: str = "gift", dataset: str = "digits", options: dict | None = None, **dims) -> dict:
+             method: str = "gift", dataset: str = "digits", options: dict | None = None,
+             train_epochs: int | None = None, variant: str | None = None, **dims) -> dict:
     """One point of a fine-tuning sweep.
 
     Parameters
@@ -87,6 +112,8 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     noise_kind : see :func:`true_noise`
     method : a CONTRACTS §4 finetune method
     options : extra keyword arguments for ``run_finetune`` (K1, K2, eta, mnist folder, ...)
+    train_epochs : train w0 for this many epochs instead of the default recipe's
+    variant : a name of :data:`VARIANTS` (replaces ``method`` and adds its options)
 
     Returns
     -------
@@ -97,11 +124,19 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     against the realised change (``predicted_change``, ``realised_change``, ... see
     :mod:`gift_theory.finetune._predict`), and the wall seconds of each phase
     (``seconds_setting``: training or loading w0; ``seconds_method``; ``seconds_referee``; ...)
-    with ``seconds_compiling``, the part JAX spent compiling.
+    with ``seconds_compiling``, the part JAX spent compiling; for line searches and Algorithm 1
+    ``kept_w0``, ``confirmation_z``, ``predicted_gain`` and ``predicted_gain_pct`` (``gift_info``).
     """
     s_true, effects = true_noise(noise_kind, st)
     run_finetune = _run_finetune()
     opts = dict(options or {})
+    if variant is not None:
+        if variant not in VARIANTS:
+            raise ValueError(f"variant {variant!r} unknown; known: {', '.join(VARIANTS)}")
+        method, extra = VARIANTS[variant]
+        opts.update(extra)
+    if train_epochs is not None:
+        opts["train_epochs"] = int(train_epochs)
     opts.setdefault("predict_s", prediction_level(s_true, st))
     from gift_theory import _memo
     from gift_theory._phases import PhaseClock
@@ -116,7 +151,9 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
                            seed=int(seed), **opts)
     # "s0"/"st" are grid dimensions here; run_finetune's "st" is the chip's awgn level, kept as s_true
     info = res.get("info", {})
-    flat = dict(res, **info.get("referee", {}), **info.get("prediction", {}))
+    gi = res.get("gift_info") or {}
+    flat = dict(res, **info.get("referee", {}), **info.get("prediction", {}),
+                **{k: v for k, v in gi.items() if k != "reason"})
     if "accepted" in info:
         flat["accepted"] = bool(info["accepted"])
     out = {k: v for k, v in flat.items()
@@ -142,6 +179,52 @@ def shared_work(before: dict, after: dict) -> dict:
     d = {k: sum(after.get(t, zero)[k] - before.get(t, zero)[k] for t in SHARED_TAGS) for k in zero}
     return {"seconds_shared": float(d["seconds_computed"]), "shared_hits": int(d["hits"]),
             "shared_misses": int(d["misses"])}
+
+
+# ----------------------------------------------------------------------------- the ceiling
+def ceiling_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind: str = "awgn",
+                dataset: str = "digits", kinds=("pathwise", "score_paper"), options: dict | None = None,
+                train_epochs: int | None = None, **dims) -> dict:
+    """The referee's best along the GIFT line w0 + a u at one point
+    (:func:`gift_theory.finetune.run_ceiling`): for each direction kind the step with the
+    lowest training loss and the one with the highest training accuracy, scored on training
+    and test data, and w0's numbers on the same draws.
+
+    ``options`` are the fine-tuning sweeps' (only ``referee_K2``, ``K1``, ``K2`` and ``folder``
+    matter here: the same w0, the same problem key, so the same memoized directions);
+    ``train_epochs`` as in :func:`gift_job`.
+
+    Returns
+    -------
+    dict of numbers: ``loss_before`` ... ``test_accuracy_before``, per kind ``<kind>_loss``,
+    ``<kind>_accuracy``, ``<kind>_test_loss``, ``<kind>_test_accuracy``,
+    ``<kind>_accuracy_best``, ``<kind>_test_accuracy_at_best``, ``<kind>_rel_step_loss``,
+    ``<kind>_rel_step_acc``, ``<kind>_at_edge``; ``cos_<kind>_gradient`` with the gradient
+    among the kinds; the phases' seconds as in :func:`gift_job`.
+    """
+    from gift_theory import _memo
+    from gift_theory._phases import PhaseClock
+
+    run_ceiling = _run_ceiling()
+    s_true, effects = true_noise(noise_kind, st)
+    opts = {k: v for k, v in (options or {}).items() if k in ("referee_K2", "K1", "K2")}
+    if _memo.folder() is None:
+        from gift_theory.training import cache_dir
+
+        _memo.use_folder(os.path.join(cache_dir(), "memo"))
+    memo_before = _memo.counters()
+    with PhaseClock() as clock:
+        res = run_ceiling(dataset=dataset, arch=arch, s0=float(s0), st=s_true, true_effects=effects, seed=int(seed),
+                          kinds=tuple(kinds), train_epochs=train_epochs, **opts)
+    out = {k: v for k, v in res.items()
+           if isinstance(v, (int, float, bool, np.number)) and k not in ("s0", "st")}
+    out["s_true"] = s_true
+    for name, p in clock.phases.items():
+        if "/" not in name:
+            out[f"seconds_{name}"] = p["seconds"]
+    out["seconds_compiling"] = sum(p["compile_seconds"] for n, p in clock.phases.items() if "/" not in n)
+    out.update(shared_work(memo_before, _memo.counters()))
+    return out
 
 
 # ----------------------------------------------------------------------------- estimators
@@ -218,7 +301,7 @@ def estimator_job(method: str, K1: int, K2: int, rep: int, *, dataset: str = "di
 def unavailable(job: str, fixed: dict | None = None) -> str | None:
     """Why ``job`` cannot run in this checkout (a missing input), or None; checked once per sweep
     so that a missing dependency is one message, not one failure per point."""
-    if job.endswith(":gift_job"):
+    if job.endswith(":gift_job") or job.endswith(":ceiling_job"):
         try:
             from gift_theory.finetune import run_finetune  # noqa: F401
         except ImportError:

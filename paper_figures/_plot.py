@@ -1,4 +1,5 @@
-"""Drawing helpers shared by the figure scripts (matplotlib ``agg``; data in, figure out).
+"""Drawing helpers shared by the figure scripts (data in, figure out; the backend is chosen by
+the caller: ``paper_figures.build`` uses ``agg``).
 
 Improvements follow the paper's Section "Simulation study": relative improvement of the loss
 ``100 (L_before - L_after) / L_before`` and of the accuracy ``100 (A_after - A_before) /
@@ -9,14 +10,10 @@ over seeds (none with a single seed).
 
 from __future__ import annotations
 
-import matplotlib
-
-matplotlib.use("agg")
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
-from scipy import stats  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
+from scipy import stats
 
 
 def improvements(ds: xr.Dataset, split: str = "train") -> xr.Dataset:
@@ -49,24 +46,40 @@ def mean_ci(da: xr.DataArray, dim: str = "seed", level: float = 0.95):
     return mean, half
 
 
-def heatmap(ax, mean: xr.DataArray, half: xr.DataArray | None, title: str, unit: str = "%", cmap: str = "RdYlGn"):
+def interval_colour(mean, half):
+    """The value a cell is coloured by: the end of its 95 % interval nearest to 0, 0 when the
+    interval contains 0 (a cell whose gain is not distinguishable from none is neutral);
+    the mean where there is no interval (one seed)."""
+    m = np.asarray(mean, float)
+    if half is None:
+        return m
+    h = np.asarray(half, float)
+    shrunk = np.sign(m) * np.maximum(np.abs(m) - np.where(np.isfinite(h), h, 0.0), 0.0)
+    return np.where(np.isfinite(m), shrunk, np.nan)
+
+
+def heatmap(ax, mean: xr.DataArray, half: xr.DataArray | None, title: str, unit: str = "%", cmap: str = "RdYlGn",
+            notes: dict | None = None):
     """Heatmap of ``mean`` over (s0 rows, st columns), cells annotated with mean and ± 95 % CI.
 
-    The colour scale is symmetric about 0 (green = improvement). Cells with s0 = st are
-    outlined: there the model is correctly specified.
+    The colour is the interval's end nearest to 0 (:func:`interval_colour`: neutral when the
+    interval contains 0), on a scale symmetric about 0 (green = improvement). Cells with
+    s0 = st are outlined: there the model is correctly specified. ``notes``: (s0, st) -> extra
+    text under a cell's numbers (e.g. its baseline and retrain-oracle accuracy).
     """
     m = mean.transpose("s0", "st")
     vals = np.asarray(m.values, float)
+    h = None if half is None else np.asarray(half.transpose("s0", "st").values, float)
+    colour = interval_colour(vals, h)
     lim = np.nanmax(np.abs(vals)) if np.isfinite(vals).any() else 1.0
     lim = lim if lim > 0 else 1.0
-    im = ax.imshow(vals, cmap=cmap, vmin=-lim, vmax=lim, origin="lower", aspect="auto")
+    im = ax.imshow(colour, cmap=cmap, vmin=-lim, vmax=lim, origin="lower", aspect="auto")
     s0s, sts = list(m["s0"].values), list(m["st"].values)
     ax.set_xticks(range(len(sts)), [f"{v:g}" for v in sts])
     ax.set_yticks(range(len(s0s)), [f"{v:g}" for v in s0s])
     ax.set_xlabel(r"true noise $s_t$")
     ax.set_ylabel(r"training noise $s_0$")
     ax.set_title(title, fontsize=9)
-    h = None if half is None else np.asarray(half.transpose("s0", "st").values, float)
     for i in range(len(s0s)):
         for j in range(len(sts)):
             v = vals[i, j]
@@ -76,7 +89,10 @@ def heatmap(ax, mean: xr.DataArray, half: xr.DataArray | None, title: str, unit:
             txt = f"{v:.2f}{unit}" if abs(v) < 10 else f"{v:.1f}{unit}"
             if h is not None and np.isfinite(h[i, j]):
                 txt += f"\n±{h[i, j]:.2f}"
-            ax.text(j, i, txt, ha="center", va="center", fontsize=7)
+            note = (notes or {}).get((round(float(s0s[i]), 12), round(float(sts[j]), 12)))
+            if note:
+                txt += "\n" + note
+            ax.text(j, i, txt, ha="center", va="center", fontsize=6 if note else 7)
             if np.isclose(s0s[i], sts[j]):
                 ax.add_patch(plt.Rectangle((j - 0.45, i - 0.45), 0.9, 0.9, fill=False, lw=2, ec="navy", ls="--"))
     plt.colorbar(im, ax=ax, shrink=0.8)
@@ -98,18 +114,61 @@ def grid_note(ds: xr.Dataset) -> str:
     return ", ".join(parts)
 
 
-def improvement_heatmaps(ds: xr.Dataset, split: str, kind: str, title: str):
-    """The two-panel figure of fig:performance_gift and relatives: loss and accuracy."""
+def cell_notes(ds: xr.Dataset, split: str = "train", oracle=()) -> dict:
+    """(s0, st) -> "base A" (mean accuracy of w0 over seeds) and, where one of ``oracle`` (sweeps
+    of the retrain oracle with dims s0, st, seed) has the cell, "oracle B" (its mean accuracy)."""
+    p = "" if split == "train" else "test_"
+    base = ds[f"{p}accuracy_before"].mean("seed")
+    notes = {}
+    for s0 in ds["s0"].values:
+        for st in ds["st"].values:
+            b = float(base.sel(s0=s0, st=st))
+            if not np.isfinite(b):
+                continue
+            txt = f"base {b:.2f}"
+            for orc in oracle or ():
+                if s0 in orc["s0"].values and st in orc["st"].values:
+                    o = float(orc[f"{p}accuracy_after"].sel(s0=s0, st=st).mean("seed"))
+                    if np.isfinite(o):
+                        txt += f", oracle {o:.2f}"
+                        break
+            notes[(round(float(s0), 12), round(float(st), 12))] = txt
+    return notes
+
+
+def retrain_oracle(data: dict, net: str = "deep") -> list:
+    """The retrain oracle's points of ``net`` (datasets with dims s0, st, seed) from the sweeps in
+    ``data``: the variants sweep (deeper net) and the rivals sweeps (rivals: shallower net;
+    rivals_regime: deeper); empty when none has it."""
+    parts = []
+    if net == "deep" and "variants" in data and "retrain" in data["variants"]["variant"].values:
+        parts.append(data["variants"].sel(variant="retrain", drop=True))
+    for name, n in (("rivals", "shallow"), ("rivals_regime", "deep")):
+        if n == net and name in data and "retrain" in data[name]["method"].values:
+            parts.append(data[name].sel({"method": "retrain"}, drop=True))
+    return parts
+
+
+def improvement_heatmaps(ds: xr.Dataset, split: str, kind: str, title: str, notes: dict | None = None, ax=None):
+    """The two-panel figure of fig:performance_gift and relatives: loss and accuracy.
+
+    ``notes``: per-cell text (:func:`cell_notes`); ``ax``: two axes to draw into (default a
+    new figure). Returns the Figure."""
     imp = improvements(ds, split)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    if ax is None:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4.6 if notes else 4))
+    else:
+        axes = list(ax)
+        fig = axes[0].figure
     if kind == "pct":
         panels = [("loss_pct", "loss (MSE) improvement, %", "%"), ("acc_pct", "accuracy improvement, %", "%")]
     else:
         panels = [("loss_abs", "loss (MSE) improvement, absolute", ""),
                   ("acc_abs", "accuracy improvement, percentage points", "")]
-    for ax, (var, t, unit) in zip(axes, panels):
+    for a, (var, t, unit) in zip(axes, panels):
         mean, half = mean_ci(imp[var])
-        heatmap(ax, mean, half, t, unit=unit)
-    fig.suptitle(f"{title}\n{grid_note(ds)}; mean over seeds, ±95 % CI; dashed box: $s_0 = s_t$", fontsize=9)
+        heatmap(a, mean, half, t, unit=unit, notes=notes)
+    fig.suptitle(f"{title}\n{grid_note(ds)}; mean over seeds, ±95 % CI;\ncolour: the interval's end nearest 0 "
+                 f"(neutral if it contains 0); dashed box: $s_0 = s_t$", fontsize=9)
     fig.tight_layout()
     return fig

@@ -23,6 +23,12 @@ from ._sweep import Sweep
 RIVALS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "spsa", "pat", "identify-retrain",
           "retrain")
 
+#: the variants sweep's names (:data:`paper_figures._jobs.VARIANTS` but plain gift, which the
+#: GIFT sweeps already hold at every cell)
+VARIANT_NAMES = ("gift-noconfirm", "gift-budget100", "printed-eta0.05", "printed-eta0.1", "printed-eta0.3",
+                 "printed-eta1", "printed-w0-eta0.05", "printed-w0-eta0.1", "printed-w0-eta0.3", "printed-w0-eta1",
+                 "retrain", "retrain-s0")
+
 
 @dataclasses.dataclass(frozen=True)
 class Scale:
@@ -48,6 +54,28 @@ class Scale:
     est_ref_K2: int = 64
     est_train_epochs: int | None = None
     options: dict = dataclasses.field(default_factory=dict)
+    # issue 25: the regime where the deeper net's baseline collapses, the ceiling of the GIFT
+    # line, the variants at key cells, and the under-trained w0
+    regime_s0: tuple = ()
+    regime_st: tuple = ()
+    regime_rival_methods: tuple = ()
+    regime_rival_s0: tuple = ()
+    regime_rival_seeds: tuple = ()
+    ceiling_kinds: tuple = ("pathwise", "score_paper")
+    ceiling_s0: tuple = ()          # () : the GIFT grid's
+    ceiling_st: tuple = ()
+    ceiling_seeds: tuple = ()
+    variants: tuple = ()
+    variant_s0: tuple = ()
+    variant_st: tuple = ()
+    variant_seeds: tuple = ()
+    under_methods: tuple = ("gift", "gradient")
+    under_epochs: tuple = ()
+    under_s0: tuple = ()
+    under_st: tuple = ()
+    under_seeds: tuple = ()
+    #: (s0, st) cells run first by ``--cells key`` (the most informative: where the baseline is lowest)
+    key_cells: tuple = ()
 
 
 SCALES = {
@@ -64,7 +92,12 @@ SCALES = {
         seeds=tuple(range(10)), s0=(0.02, 0.05, 0.1, 0.15, 0.2), st=(0.02, 0.05, 0.1, 0.15, 0.2),
         violated_s0=(0.02, 0.05, 0.1, 0.15, 0.2), violated_st=(0.02, 0.05, 0.1, 0.15, 0.2),
         rival_methods=RIVALS, rival_s0=(0.05, 0.1, 0.2), rival_st=(0.05, 0.1, 0.2), rival_seeds=tuple(range(10)),
-        est_arch="784-500-250-250-100-50-10", est_K1=(64, 256, 1024, 4096), est_K2=(2, 8, 32), est_reps=5),
+        est_arch="784-500-250-250-100-50-10", est_K1=(64, 256, 1024, 4096), est_K2=(2, 8, 32), est_reps=5,
+        regime_s0=(0.02, 0.05, 0.1, 0.2), regime_st=(0.25, 0.3, 0.4),
+        regime_rival_methods=RIVALS, regime_rival_s0=(0.02,), regime_rival_seeds=(0, 1, 2),
+        variants=VARIANT_NAMES, variant_s0=(0.02, 0.1), variant_st=(0.2, 0.3), variant_seeds=tuple(range(10)),
+        under_epochs=(5, 30), under_s0=(0.02, 0.1), under_st=(0.1, 0.2), under_seeds=tuple(range(5)),
+        key_cells=((0.02, 0.2), (0.02, 0.25), (0.02, 0.3), (0.02, 0.4))),
     # the paper's nets and data at 3 seeds, the violated laws and the rivals at two misspecified
     # pairs (under- and over-estimation of the noise, one in-silico training per seed)
     "paper-subset": Scale(
@@ -81,7 +114,13 @@ SCALES = {
         violated_s0=(0.1,), violated_st=(0.2,),
         rival_methods=("gift", "random"), rival_s0=(0.1,), rival_st=(0.2,), rival_seeds=(0,),
         est_arch="64-12-10", est_K1=(16, 64), est_K2=(2,), est_reps=1, est_methods=("pathwise", "score"),
-        est_ref_K2=8, options={"budget": 6, "referee_K2": 4}),
+        est_ref_K2=8, options={"budget": 6, "referee_K2": 4},
+        ceiling_s0=(0.1,), ceiling_st=(0.2,), ceiling_seeds=(0,),
+        regime_s0=(0.1,), regime_st=(0.3,), regime_rival_methods=("gift", "retrain"), regime_rival_s0=(0.1,),
+        regime_rival_seeds=(0,), variants=("gift-noconfirm", "printed-w0-eta0.1", "retrain", "retrain-s0"),
+        variant_s0=(0.1,), variant_st=(0.2,), variant_seeds=(0, 1),
+        under_epochs=(2, 30), under_s0=(0.1,), under_st=(0.2,), under_seeds=(0, 1),
+        key_cells=((0.1, 0.2),)),
 }
 
 
@@ -110,6 +149,16 @@ def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict
     fig:performance_gift_test_data_violated_awgn.
     ``rivals``: every finetune method on the shallower net, dims (method, s0, st, seed).
     ``estimators``: d/ds grad J estimators, dims (method, K1, K2, rep).
+
+    Issue 25 (when the scale defines them): ``gift_regime`` (GIFT on the deeper net at the
+    extended st where its baseline collapses, dims s0, st, seed); ``rivals_regime`` (the
+    rivals on the deeper net there); ``ceiling_deep`` / ``ceiling_shallow`` (the referee's best
+    along the GIFT line, pathwise and printed direction, at every point of the GIFT grid and
+    the extended st); ``variants`` (gift without confirmation or with a 5x budget,
+    gift-printed with and without w0 at eta in {0.05, 0.1, 0.3, 1} % of |w0|, the retrain
+    oracle and its control at s0; dims variant, s0, st, seed); ``undertrained`` and
+    ``undertrained_ceiling`` (gift and the gradient line search, and their lines' ceilings
+    with the cosine of the two directions, for w0 trained ``train_epochs``).
     """
     scale = get_scale(scale) if isinstance(scale, str) else scale
     fixed = _gift_fixed(scale, mnist_folder, options)
@@ -127,6 +176,29 @@ def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict
         "rivals", {"method": scale.rival_methods, "s0": scale.rival_s0, "st": scale.rival_st,
                    "seed": scale.rival_seeds},
         job, dict(fixed, net="shallow", arch=scale.nets["shallow"], noise_kind="awgn"))
+    deep = dict(fixed, net="deep", arch=scale.nets["deep"], noise_kind="awgn")
+    ceil = "paper_figures._jobs:ceiling_job"
+    if scale.regime_st:
+        out["gift_regime"] = Sweep("gift_regime", {"s0": scale.regime_s0, "st": scale.regime_st, "seed": scale.seeds},
+                                   job, dict(deep, method="gift"))
+        out["rivals_regime"] = Sweep(
+            "rivals_regime", {"method": scale.regime_rival_methods, "s0": scale.regime_rival_s0,
+                              "st": scale.regime_st, "seed": scale.regime_rival_seeds}, job, deep)
+    for net, arch in scale.nets.items():
+        sts = tuple(scale.ceiling_st or scale.st) + (tuple(scale.regime_st) if net == "deep" else ())
+        out[f"ceiling_{net}"] = Sweep(f"ceiling_{net}", {"s0": scale.ceiling_s0 or scale.s0, "st": sts,
+                                                         "seed": scale.ceiling_seeds or scale.seeds}, ceil,
+                                      dict(fixed, net=net, arch=arch, noise_kind="awgn", kinds=scale.ceiling_kinds))
+    if scale.variants:
+        out["variants"] = Sweep("variants", {"variant": scale.variants, "s0": scale.variant_s0, "st": scale.variant_st,
+                                             "seed": scale.variant_seeds}, job, deep)
+    if scale.under_epochs:
+        out["undertrained"] = Sweep(
+            "undertrained", {"method": scale.under_methods, "train_epochs": scale.under_epochs, "s0": scale.under_s0,
+                             "st": scale.under_st, "seed": scale.under_seeds}, job, deep)
+        out["undertrained_ceiling"] = Sweep(
+            "undertrained_ceiling", {"train_epochs": scale.under_epochs, "s0": scale.under_s0, "st": scale.under_st,
+                                     "seed": scale.under_seeds}, ceil, dict(deep, kinds=("pathwise", "gradient")))
     out["estimators"] = Sweep(
         "estimators", {"method": scale.est_methods, "K1": scale.est_K1, "K2": scale.est_K2,
                        "rep": tuple(range(scale.est_reps))},

@@ -31,7 +31,7 @@ import numpy as np
 
 from gift_theory._io import atomic_path, atomic_write_bytes
 
-__all__ = ["Sweep", "run_sweep", "assemble", "load_points", "point_id", "atomic_write_bytes", "toy_job"]
+__all__ = ["Sweep", "run_sweep", "assemble", "load_points", "point_id", "restrict", "atomic_write_bytes", "toy_job"]
 
 
 def _canon(v):
@@ -103,6 +103,21 @@ def point_id(sweep: Sweep, point: Mapping) -> str:
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:20]
 
 
+
+
+def restrict(sweep: Sweep, **values) -> Sweep | None:
+    """The same sweep on a sub-grid: each named dimension keeps only the given values that it
+    has (None when one keeps none). Point ids do not depend on the grid, so the sub-sweep's
+    points are the full sweep's (a run in pieces: the key cells first, then the rest)."""
+    dims = dict(sweep.dims)
+    for k, vals in values.items():
+        if k not in dims:
+            continue
+        keep = [v for v in dims[k] if any(_canon(v) == _canon(w) for w in vals)]
+        if not keep:
+            return None
+        dims[k] = tuple(keep)
+    return Sweep(sweep.name, dims, sweep.job, sweep.fixed)
 
 
 def _points_dir(folder: str, sweep: Sweep) -> str:

@@ -10,6 +10,14 @@ Claims (paper Sections "Simulation study on GIFT" and abstract):
 
 * ``theorem1_first_order`` (ours) -- Theorem 1's first-order change of J_st along the GIFT
   direction against the referee's realised change (:mod:`paper_figures.predicted_vs_realised`).
+* ``undertrained_w0`` (ours, issue 25) -- the paper's explanation of gains at s0 = st tested:
+  does GIFT gain more from an under-trained w0, and from the noise direction or from a plain
+  gradient step (:mod:`paper_figures.undertrained`).
+
+``accuracy_gain_up_to_28pct`` also carries, at its best cell, the ceiling of the GIFT line
+(``ceiling_pct``: the referee's best step along the pathwise direction, chosen on training
+data) and the retrain oracle (``retrain_pct``) with its control at s0, and the best cell of
+the extended st (``regime``) where the deeper net's baseline collapses.
 
 Every number is computed from the saved netCDF files; the verdicts are rules on those numbers
 with 95 % Student-t intervals over seeds (or over grid points), stated in ``rule``.
@@ -103,9 +111,10 @@ def summarise(data_dir: str, loaded: dict | None = None) -> dict:
     ``data_dir`` (``loaded``: sweeps already read, by name)."""
     out = _claims(data_dir, loaded)
     deep, shallow, viol = (_load(data_dir, n, loaded) for n in ("gift_awgn_deep", "gift_awgn_shallow", "gift_violated"))
+    under = _load(data_dir, "undertrained", loaded)
     uses = {"accuracy_gain_up_to_28pct": (deep,), "deeper_benefits_more": (deep, shallow),
             "robust_to_non_awgn": (viol,), "test_resembles_train": (deep,), "gains_at_s0_eq_st": (deep,),
-            "theorem1_first_order": (deep, shallow, viol)}
+            "theorem1_first_order": (deep, shallow, viol), "undertrained_w0": (under,)}
     for name, claim in out.items():
         inst = instance(*uses.get(name, (deep,)))
         claim["instance"], claim["scope"] = inst, inst["scope"]
@@ -137,6 +146,27 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
             "gains, smaller" if np.isfinite(float(hbest)) and float(best) - float(hbest) > 0 else "not reproduced"),
         "summary": f"best mean gain {_fmt(float(best), float(hbest))} % at s0={float(best['s0']):g}, "
                    f"st={float(best['st']):g} (best single run {pmax:.2f} %); paper: up to 28 %"}
+    acc_claim = out["accuracy_gain_up_to_28pct"]
+    acc_claim.update(_beside(data_dir, loaded, float(best["s0"]), float(best["st"])))
+    acc_claim["summary"] += _beside_text(acc_claim)
+    regime = _load(data_dir, "gift_regime", loaded)
+    if regime is not None:
+        mr, hr = mean_ci(improvements(regime, "train")["acc_pct"])
+        fr = mr.stack(cell=("s0", "st"))
+        if np.isfinite(fr.values).any():
+            j = int(np.nanargmax(fr.values))
+            rc = fr.isel(cell=j)
+            r0, r1 = float(rc["s0"]), float(rc["st"])
+            acc_claim["regime"] = {
+                "best_cell": {"s0": r0, "st": r1}, "best_cell_mean_pct": float(rc),
+                "best_cell_ci95": float(hr.stack(cell=("s0", "st")).isel(cell=j)),
+                "baseline_accuracy": float(regime["accuracy_before"].sel(s0=r0, st=r1).mean("seed")),
+                "grid": {"s0": [float(v) for v in regime["s0"].values], "st": [float(v) for v in regime["st"].values]},
+                **_beside(data_dir, loaded, r0, r1)}
+            acc_claim["summary"] += (f"; extended st: best {_fmt(float(rc), acc_claim['regime']['best_cell_ci95'])} % "
+                                     f"at s0={r0:g}, st={r1:g} (baseline "
+                                     f"{acc_claim['regime']['baseline_accuracy']:.2f})"
+                                     + _beside_text(acc_claim["regime"]))
 
     # 2. deeper benefits more (same grid, paired by s0, st, seed)
     if shallow is not None:
@@ -227,6 +257,13 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                 "inconclusive" if not np.isfinite(lh) or lm + lh > 0 else "contradicted"),
             "summary": f"on s0 = st ({n} runs): loss gain {_fmt(lm, lh)} %, accuracy gain {_fmt(am, ah)} %"}
 
+    # 7. (ours) the under-trained w0
+    under, under_c = _load(data_dir, "undertrained", loaded), _load(data_dir, "undertrained_ceiling", loaded)
+    if under is not None and under_c is not None:
+        from .undertrained import summarise as undertrained
+
+        out["undertrained_w0"] = undertrained(under, under_c)
+
     # 6. (ours) Theorem 1's first-order prediction against the realised change
     if "predicted_change" in deep:
         from .predicted_vs_realised import summarise as first_order
@@ -247,6 +284,57 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                        f"{fo['median_realised_over_predicted']:.2f}, {fo['wrong']} wrong ({fo['sign_wrong']} of the "
                        f"wrong sign); with the curvature term r = {fo['correlation_2nd_order']:.2f}"}
     return out
+
+
+def _cell_gain(ds, s0: float, st: float, split: str = "train"):
+    """(mean, 95 % half-width, n) of the relative accuracy gain over seeds at one cell, or None."""
+    if ds is None or s0 not in ds["s0"].values or st not in ds["st"].values:
+        return None
+    v = improvements(ds, split)["acc_pct"].sel(s0=s0, st=st).values
+    m, h, n = _ci(v)
+    return None if n == 0 else (m, h, n)
+
+
+def _beside(data_dir, loaded, s0: float, st: float) -> dict:
+    """At one cell of the deeper net: the ceiling of the GIFT line (pathwise, train and test; the
+    printed direction's, test) and the retrain oracle and its s0 control (train), each a mean
+    relative accuracy gain in % with its 95 % half-width (None where that sweep has no data)."""
+    from .gain_vs_baseline import ceiling_as_finetune
+
+    out = {}
+    ceil = _load(data_dir, "ceiling_deep", loaded)
+    var = _load(data_dir, "variants", loaded)
+    riv = _load(data_dir, "rivals_regime", loaded)
+    got = {}
+    if ceil is not None:
+        for kind, key in (("pathwise", "ceiling"), ("score_paper", "ceiling_printed")):
+            if f"{kind}_accuracy_best" in ceil:
+                ft = ceiling_as_finetune(ceil, kind)
+                got[f"{key}_pct"] = _cell_gain(ft, s0, st, "train")
+                got[f"{key}_test_pct"] = _cell_gain(ft, s0, st, "test")
+    for name, sel in (("retrain", "retrain"), ("retrain_s0", "retrain-s0")):
+        r = None
+        if var is not None and sel in var["variant"].values:
+            r = _cell_gain(var.sel(variant=sel, drop=True), s0, st)
+        if r is None and sel == "retrain" and riv is not None and "retrain" in riv["method"].values:
+            r = _cell_gain(riv.sel({"method": "retrain"}, drop=True), s0, st)
+        got[f"{name}_pct"] = r
+    for k, v in got.items():
+        out[k] = None if v is None else v[0]
+        out[k.replace("_pct", "_ci95")] = None if v is None else v[1]
+        out[k.replace("_pct", "_n")] = 0 if v is None else v[2]
+    return out
+
+
+def _beside_text(c: dict) -> str:
+    parts = []
+    for key, what in (("ceiling_pct", "ceiling of the GIFT line"), ("ceiling_test_pct", "on test"),
+                      ("ceiling_printed_test_pct", "printed D0's line, test"), ("retrain_pct", "retrain oracle"),
+                      ("retrain_s0_pct", "retrain at s0")):
+        if c.get(key) is not None:
+            h = c.get(key.replace("_pct", "_ci95"))
+            parts.append(f"{what} {_fmt(c[key], h if h is not None else float('nan'))} %")
+    return (" [there: " + ", ".join(parts) + "]") if parts else " [no ceiling or retrain data at that cell]"
 
 
 def table(results: dict) -> str:

@@ -9,17 +9,22 @@ st). Quick scale: digits, 64-48-32-32-16-10; paper scale: mnist5k, 784-500-250-2
 Run: ``python -m paper_figures.performance_gift --scale quick``.
 """
 
-from ._plot import improvement_heatmaps
+from ._plot import cell_notes, improvement_heatmaps, retrain_oracle
 
 NAME = "performance_gift"
 LABEL = "fig:performance_gift"
 SWEEPS = ("gift_awgn_deep",)
+#: the retrain oracle, where it ran and is saved (cell labels; computed by other figures)
+OPTIONAL = ("variants", "rivals_regime")
 
 
-def draw(data: dict):
-    """Heatmaps of mean relative loss and accuracy improvement over (s0, st)."""
+def draw(data: dict, ax=None):
+    """Heatmaps of mean relative loss and accuracy improvement over (s0, st); each cell also names
+    its baseline (w0) accuracy and, where it ran, the retrain oracle's. ``ax``: two axes."""
+    notes = cell_notes(data["gift_awgn_deep"], "train", retrain_oracle(data, "deep"))
     return improvement_heatmaps(data["gift_awgn_deep"], "train", "pct",
-                                "fig:performance_gift -- GIFT vs no fine-tuning, deeper net, training data")
+                                "fig:performance_gift -- GIFT vs no fine-tuning, deeper net, training data",
+                                notes=notes, ax=ax)
 
 
 if __name__ == "__main__":

@@ -8,16 +8,20 @@ Data: sweep ``gift_awgn_shallow``. Quick scale: digits, 64-32-32-10; paper scale
 784-500-100-100-10. Run: ``python -m paper_figures.performance_gift_shallow --scale quick``.
 """
 
-from ._plot import improvement_heatmaps
+from ._plot import cell_notes, improvement_heatmaps, retrain_oracle
 
 NAME = "performance_gift_shallow"
 LABEL = "fig:performance_gift_shallow"
 SWEEPS = ("gift_awgn_shallow",)
+#: the retrain oracle, where it ran and is saved (cell labels; computed by other figures)
+OPTIONAL = ("rivals",)
 
 
-def draw(data: dict):
+def draw(data: dict, ax=None):
+    notes = cell_notes(data["gift_awgn_shallow"], "train", retrain_oracle(data, "shallow"))
     return improvement_heatmaps(data["gift_awgn_shallow"], "train", "pct",
-                                "fig:performance_gift_shallow -- GIFT vs no fine-tuning, shallower net, training data")
+                                "fig:performance_gift_shallow -- GIFT vs no fine-tuning, shallower net, training data",
+                                notes=notes, ax=ax)
 
 
 if __name__ == "__main__":

@@ -23,6 +23,18 @@ def add_arguments(parser):
     parser.add_argument("--K2", type=int, default=1, help="shots per input per Eval (default 1)")
     parser.add_argument("--weights", default=None, metavar="FILE.npz",
                         help="fine-tune these weights (W1, b1, ...) instead of training at s0")
+    parser.add_argument("--no-confirm", action="store_true",
+                        help="gift, ift, gradient, random: take the best measured step without the confirmation "
+                             "(a variant, not GIFT)")
+    parser.add_argument("--keep-w0", action="store_true",
+                        help="gift-printed, pathwise: w0 is a candidate of the final selection (as the paper's text "
+                             "says; the printed algorithm does not)")
+    parser.add_argument("--eta-pct", type=float, default=None, metavar="P",
+                        help="gift-printed, pathwise: eta = P %% of |w0| along D^[0] (default 1)")
+    parser.add_argument("--retrain-at", default="chip", choices=("chip", "s0"),
+                        help="retrain: at the chip's physics (the oracle, default) or at s0 (its control)")
+    parser.add_argument("--train-epochs", type=int, default=None, metavar="N",
+                        help="train w0 for N epochs instead of the default recipe's")
 
 
 def run(args) -> dict:
@@ -37,10 +49,31 @@ def run(args) -> dict:
         raise GiftInputError(f"--s0 {args.s0}: must be positive")
     if args.K2 < 1 or (args.K1 is not None and args.K1 < 2):
         raise GiftInputError("--K1 must be at least 2 and --K2 at least 1")
+    extra = {}
+    line = ("gift", "ift", "gradient", "random")
+    printed = ("gift-printed", "pathwise")
+    for flag, on, methods, key, value in (
+            ("--no-confirm", args.no_confirm, line, "confirm", False),
+            ("--keep-w0", args.keep_w0, printed, "keep_w0", True),
+            ("--eta-pct", args.eta_pct is not None, printed, "rel_step",
+             None if args.eta_pct is None else args.eta_pct / 100),
+            ("--retrain-at", args.retrain_at != "chip", ("retrain",), "at", args.retrain_at)):
+        if on:
+            if args.method not in methods:
+                raise GiftInputError(f"{flag}: applies to --method {' | '.join(methods)}, not {args.method}")
+            extra[key] = value
+    if args.eta_pct is not None and not (math.isfinite(args.eta_pct) and args.eta_pct > 0):
+        raise GiftInputError(f"--eta-pct {args.eta_pct}: must be a positive number")
+    if args.train_epochs is not None and args.train_epochs < 1:
+        raise GiftInputError(f"--train-epochs {args.train_epochs}: must be at least 1")
+    if args.train_epochs is not None and args.weights is not None:
+        raise GiftInputError("--train-epochs: not with --weights (the weights are given, not trained)")
     out = run_finetune(dataset=args.dataset, arch=args.arch, s0=args.s0, st=args.st,
                        true_effects=tuple(args.true_effect), method=args.method, seed=args.seed,
-                       budget=args.budget, K1=args.K1, K2=args.K2, weights=args.weights)
+                       budget=args.budget, K1=args.K1, K2=args.K2, weights=args.weights,
+                       train_epochs=args.train_epochs, **extra)
     out["info"] = _plain(out.get("info", {}))
+    out["gift_info"] = _plain(out.get("gift_info"))
     return out
 
 
@@ -53,9 +86,10 @@ def _plain(obj):
     if isinstance(obj, (bool, int, str)) or obj is None:
         return obj
     try:
-        return float(obj)
+        v = float(obj)
     except (TypeError, ValueError):
         return str(obj)
+    return v if math.isfinite(v) else None  # JSON has no NaN: an undefined number is null
 
 
 def render(r: dict) -> str:
@@ -67,4 +101,9 @@ def render(r: dict) -> str:
              f"{'test loss':14}{r['test_loss_before']:10.4f}{r['test_loss_after']:10.4f}",
              f"{'test acc':14}{r['test_accuracy_before']:10.4f}{r['test_accuracy_after']:10.4f}",
              f"chip evaluations: {r['in_situ_evaluations']}   seconds: {r['seconds']:.1f}"]
+    g = r.get("gift_info")
+    if g:
+        z, pg = g.get("confirmation_z"), g.get("predicted_gain_pct")
+        lines.append(("returned w0: " if g["kept_w0"] else "took a step: ") + g["reason"]
+                     + (f"; predicted gain on the line {pg:.2f} %" if pg is not None else ""))
     return "\n".join(lines)

@@ -41,10 +41,13 @@ def _mean_se(d):
     return float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.shape[0]))
 
 
-def gift_printed(problem, D0, eta: float, *, max_iter: int = 1000):
+def gift_printed(problem, D0, eta: float, *, max_iter: int = 1000, keep_w0: bool = False):
     """Algorithm 1 exactly as printed (ray reading, see module docstring).
 
     Stops also when the chip budget cannot pay for the next pair of evaluations.
+    ``keep_w0``: w0 (its Eval L^[0]) is a candidate of the final argmin too, as the paper's
+    text says of its selection ("GIFT never returns weights worse than w0") while the printed
+    algorithm does not; the returned step is then 0 when no candidate measured below L^[0].
 
     Returns
     -------
@@ -67,9 +70,10 @@ def gift_printed(problem, D0, eta: float, *, max_iter: int = 1000):
             break
     if not cands:  # no budget for even one pair: the printed algorithm cannot run
         return w0, {"iterations": 0, "L0": L0, "stopped_by_budget": True, "chosen_step": 0}
-    L, w, c = min(cands, key=lambda t: t[0])  # argmin over c in [i]: w0 is not a candidate
+    pool = cands + ([(L0, w0, 0)] if keep_w0 else [])
+    L, w, c = min(pool, key=lambda t: t[0])  # as printed: argmin over c in [i], w0 not a candidate
     return w, {"iterations": i, "L0": L0, "evals": [(c_, l_) for l_, _, c_ in cands], "chosen_step": c,
-               "eta": eta, "stopped_by_budget": stopped_by_budget}
+               "eta": eta, "stopped_by_budget": stopped_by_budget, "keep_w0": bool(keep_w0)}
 
 
 def pair_se_model(problem, *, seed: int = 0) -> float:
@@ -112,7 +116,7 @@ def fit_quadratic(alphas, means, ses, C2_prior=None):
 
 
 def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int = 4, z_accept: float = 2.5,
-                       confirm_rounds: int | None = None, probe_z: float = 4.0):
+                       confirm_rounds: int | None = None, probe_z: float = 4.0, confirm: bool = True):
     """The repaired GIFT line search along ``direction`` (see module docstring).
 
     Parameters
@@ -127,10 +131,13 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     confirm_rounds : at most this many fresh (w0, candidate) pairs, stopping once accepted
         (default: as many as the budget pays for)
     probe_z : probes at +-a with a^2 C2 / 2 = probe_z * se_pair (a measurable rise)
+    confirm : False skips the confirmation (a variant, not GIFT): the best measured point is
+        returned whenever its measured improvement is positive
 
     Returns
     -------
-    params, info with the measured curve (alphas, observed dJ and se) and the prediction.
+    params, info with the measured curve (alphas, observed dJ and se), the prediction, and
+    ``reason``: why w0 was kept or the step taken (see :func:`why`).
     """
     u, u_norm = unit(direction)
     w0 = problem.w0
@@ -141,7 +148,7 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     a = math.sqrt(2 * probe_z * se_pair / C2_model) if C2_model > 0 else 0.01 * float(norm(w0))
     info = {"C2_model": C2_model, "se_pair_model": se_pair, "probe": a, "accepted": False}
     if problem.evaluations_left() < 3 - 1e-9:
-        info["reason"] = "budget below 3 evaluations"
+        info["reason"] = "budget below 3 evaluations: no step measured"
         return w0, info
     l0 = problem.eval_chip(w0)
     alphas, means, ses = [], [], []
@@ -171,7 +178,16 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     info.update({"alphas": alphas, "observed": means, "observed_se": ses, "C1": C1, "C2_fit": C2_fit,
                  "alpha_predicted": C1 / C2_fit if C2_fit > 0 else None, "alpha_best": alpha_best,
                  "direction_norm": float(u_norm)})
+    info["predicted_gain"] = float(alpha_best * C1 - 0.5 * alpha_best**2 * C2_fit)
+    info["measured_gain"], info["measured_gain_se"] = float(means[best]), float(ses[best])
+    info["loss_w0"] = float(np.mean(l0))
     w_best = axpy(alpha_best, u, w0)
+    if means[best] <= 0:
+        info["reason"] = "no measured step lowered the chip loss"
+        return w0, info
+    if not confirm:
+        info["reason"] = "unconfirmed: the best measured step is taken"
+        return w_best, info
     diffs = []
     rounds = int(problem.evaluations_left() // 2)
     if confirm_rounds is not None:
@@ -179,12 +195,45 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     z_look = max(z_accept, float(stats.norm.isf(stats.norm.sf(z_accept) / max(rounds, 1))))
     info["z_look"] = z_look
     for _ in range(rounds):
-        if problem.evaluations_left() < 2 - 1e-9 or means[best] <= 0:
+        if problem.evaluations_left() < 2 - 1e-9:
             break
         diffs.append(problem.eval_chip(w0) - problem.eval_chip(w_best))
         m, s = _mean_se(np.mean(diffs, axis=0))
         info["confirm_mean"], info["confirm_se"] = m, s
+        info["confirm_z"] = m / s if s > 0 else math.copysign(math.inf, m)
         if m > z_look * s:
             info["accepted"] = True
+            info["reason"] = f"accepted: confirmation z = {info['confirm_z']:.2f} > {z_look:.2f}"
             return w_best, info
+    info["reason"] = (f"confirmation not significant: z = {info['confirm_z']:.2f} <= {z_look:.2f} after {len(diffs)} "
+                      f"fresh pairs" if diffs else "no budget left for the confirmation")
     return w0, info
+
+
+def why(method: str, w0, params, info: dict) -> dict | None:
+    """Why a line-search method returned what it did, for a report row (``gift_info``).
+
+    Returns
+    -------
+    dict ``kept_w0`` (the returned weights are w0), ``reason`` (one line), ``confirmation_z``
+    (the confirmation's last paired z, NaN when it did not run), ``predicted_gain`` (the
+    fitted quadratic's decrease of the chip loss at the best measured step, in loss units;
+    NaN when no step was measured), ``predicted_gain_pct`` (the same relative to w0's
+    measured chip loss); None for a method without a line search or an Algorithm 1 run.
+    """
+    kept = all(bool(jax.numpy.all(a == b)) for a, b in zip(jax.tree_util.tree_leaves(w0),
+                                                          jax.tree_util.tree_leaves(params)))
+    if "chosen_step" in info:  # Algorithm 1 as printed (with or without w0 among its candidates)
+        c = info["chosen_step"]
+        reason = ("no pair measured (budget)" if info.get("iterations", 0) == 0 else
+                  "w0's Eval is the lowest (w0 among the candidates)" if c == 0 else
+                  f"step {c} x eta has the lowest Eval" + ("" if info.get("keep_w0") else " (w0 not a candidate)"))
+        return {"kept_w0": kept, "reason": reason, "confirmation_z": math.nan, "predicted_gain": math.nan,
+                "predicted_gain_pct": math.nan}
+    if "accepted" not in info:
+        return None
+    pg = info.get("predicted_gain", math.nan)
+    l0 = info.get("loss_w0", math.nan)
+    return {"kept_w0": kept, "reason": info.get("reason", ""), "confirmation_z": float(info.get("confirm_z", math.nan)),
+            "predicted_gain": float(pg), "predicted_gain_pct": float(100 * pg / l0) if l0 and math.isfinite(l0)
+            else math.nan}

@@ -13,7 +13,7 @@ from .._params import cast
 from .._phases import phase
 from ..effects import Physics
 from ._directions import direction
-from ._linesearch import gift_printed, paired_line_search
+from ._linesearch import gift_printed, paired_line_search, why
 from ._predict import candidate, first_order_prediction, realised_change
 from ._problem import make_problem, referee_scores, summary
 from ._rivals import identify_retrain, pat, retrain, spsa
@@ -36,14 +36,16 @@ def _line(kind):
     return run
 
 
-def _printed(problem, eta=None, rel_step: float = 0.01, direction_K2: int = 16, kind: str = "score_paper"):
+def _printed(problem, eta=None, rel_step: float = 0.01, direction_K2: int = 16, kind: str = "score_paper",
+             keep_w0: bool = False):
     D0, dinfo = direction(problem, kind, K2=direction_K2)
     if kind == "pathwise":  # on the printed D^[0]'s scale: E[D^[0]] = -(s0/2) d/ds grad J
         D0 = jax.tree_util.tree_map(lambda a: paper_constant(problem.s0) * a, D0)
     if eta is None:  # the paper gives no eta: a step of 1 % of |w0| along D^[0]
         eta = rel_step * float(norm(problem.w0)) / max(float(norm(D0)), 1e-30)
-    w, info = gift_printed(problem, D0, float(eta))
+    w, info = gift_printed(problem, D0, float(eta), keep_w0=keep_w0)
     info["direction"] = dinfo
+    info["rel_step"] = float(eta) * float(norm(D0)) / max(float(norm(problem.w0)), 1e-30)
     return w, info
 
 
@@ -51,8 +53,12 @@ def _none(problem):
     return problem.w0, {}
 
 
-def _retrain(problem):
-    return retrain(problem, problem.chip.physics), {"physics": problem.chip.physics.describe()}
+def _retrain(problem, at: str = "chip"):
+    """The oracle retrains at the chip's physics; ``at="s0"`` is its control, the same retraining at
+    the model's own awgn(s0) (no noise mismatch: what extra training alone gives)."""
+    require(at in ("chip", "s0"), f"retrain: at={at!r}; known: chip, s0")
+    physics = problem.chip.physics if at == "chip" else problem.model
+    return retrain(problem, physics), {"physics": physics.describe(), "at": at}
 
 
 def _printed_pathwise(problem, **kw):
@@ -78,9 +84,12 @@ RUNNERS = {
 }
 
 
-def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = True, weights: str | None = None):
+def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = True, weights: str | None = None,
+                 train_epochs: int | None = None):
     """``(ds, arch, w0)``: the data set and weights trained in silico at s0 (cached), or read
-    from the weight file ``weights`` (W1, b1, ... as written by ``gift train``)."""
+    from the weight file ``weights`` (W1, b1, ... as written by ``gift train``).
+    ``train_epochs``: train for this many epochs instead of the default recipe's (an
+    under-trained w0; cached under its own key)."""
     from .._params import check_params
     from ..data import load_dataset
     from ..training import load_or_train, load_weights
@@ -94,7 +103,15 @@ def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = 
     if weights is not None:
         w0 = check_params(load_weights(weights)[0], arch, where=weights)
     else:
-        w0, _ = load_or_train(dataset, arch, s0=float(s0), seed=int(seed), progress=progress)
+        config = None
+        if train_epochs is not None:
+            import dataclasses
+
+            from ..training import default_config
+
+            require(int(train_epochs) >= 1, f"train_epochs {train_epochs}: must be at least 1")
+            config = dataclasses.replace(default_config(dataset, arch), epochs=int(train_epochs))
+        w0, _ = load_or_train(dataset, arch, s0=float(s0), seed=int(seed), progress=progress, config=config)
     return ds, arch, cast(w0, jnp.float32)
 
 
@@ -152,6 +169,8 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
     info["referee"] = scores
     if cand is not None:
         info["prediction"] = prediction
+    # why the method returned what it did (line searches and Algorithm 1; None for the others)
+    out["gift_info"] = why(method, w0, params, info)
     out["direction"] = u
     out["info"] = info
     out["params"] = params
@@ -159,7 +178,8 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
 
 
 def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),
-                 method: str = "gift", seed: int = 0, weights: str | None = None, **options) -> dict:
+                 method: str = "gift", seed: int = 0, weights: str | None = None, train_epochs: int | None = None,
+                 **options) -> dict:
     """Fine-tune weights trained in silico at ``s0`` against a simulated chip at ``st``.
 
     Parameters
@@ -170,18 +190,24 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
     method : one of :data:`METHODS`
     seed : names the trained weights, the chip's noise and the method's randomness
     weights : optional weight file to fine-tune instead of training at s0
+    train_epochs : train w0 for this many epochs instead of the default recipe's
     options : budget (chip evaluations, default 20), K1 (fine-tuning inputs, default all
         training inputs), K2 (shots per input per Eval, default 1), referee_K2, and the
-        method's own keywords
+        method's own keywords: ``confirm=False`` (gift, ift, gradient, random: no
+        confirmation), ``keep_w0``, ``eta``, ``rel_step`` (gift-printed, pathwise: eta as a
+        fraction of |w0|, default 0.01), ``at="s0"`` (retrain: the control at s0)
 
     Returns
     -------
-    dict with exactly the CONTRACTS §4 finetune keys, plus ``info`` (what the method did).
+    dict with the CONTRACTS §4 finetune keys, plus ``gift_info`` (why a line search or
+    Algorithm 1 returned w0 or a step: ``kept_w0``, ``reason``, ``confirmation_z``,
+    ``predicted_gain``, ``predicted_gain_pct``; None for the other methods) and ``info``
+    (what the method did).
     """
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
     physics = true_physics(st, true_effects)  # bad input is reported before any training
     with phase("setting"):
-        ds, arch_, w0 = load_setting(dataset, arch, s0, seed, weights=weights)
+        ds, arch_, w0 = load_setting(dataset, arch, s0, seed, weights=weights, train_epochs=train_epochs)
     out = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=method, seed=seed, **options)
     out.pop("params")
     out.pop("direction")

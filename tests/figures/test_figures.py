@@ -39,9 +39,30 @@ def fake_run_finetune(dataset, arch, s0, st, true_effects, method, seed, **optio
     return out
 
 
+def fake_run_ceiling(dataset, arch, s0, st, true_effects, seed, kinds, train_epochs=None, **options):
+    """A stand-in ceiling with known gains: the GIFT (pathwise) line gains 2 % (+3 with a w0
+    trained under 30 epochs), the gradient line 1 % (+5 under 30 epochs), the printed line 0.5 %,
+    0.1 % more per seed; |cos(pathwise, gradient)| 0.3."""
+    short = train_epochs is not None and train_epochs < 30
+    gain = {"pathwise": 2.0 + 3.0 * short, "gradient": 1.0 + 5.0 * short, "score_paper": 0.5}
+    out = {"dataset": dataset, "arch": [int(w) for w in arch.split("-")], "s0": s0, "st": st,
+           "loss_before": 0.5, "accuracy_before": 0.8, "test_loss_before": 0.5, "test_accuracy_before": 0.8}
+    for k in kinds:
+        g = gain[k] + 0.1 * seed
+        out.update({f"{k}_loss": 0.49, f"{k}_test_loss": 0.49, f"{k}_accuracy": 0.8 * (1 + g / 100),
+                    f"{k}_test_accuracy": 0.8 * (1 + g / 100), f"{k}_accuracy_best": 0.8 * (1 + g / 100),
+                    f"{k}_test_accuracy_at_best": 0.8 * (1 + g / 100), f"{k}_rel_step_loss": 1e-3,
+                    f"{k}_rel_step_acc": 1e-3, f"{k}_at_edge": False})
+    if "gradient" in kinds:
+        out["cos_pathwise_gradient"] = -0.3
+    out["scan"] = {}
+    return out
+
+
 @pytest.fixture
 def fake_finetune(monkeypatch):
     monkeypatch.setattr(_jobs, "_run_finetune", lambda: fake_run_finetune)
+    monkeypatch.setattr(_jobs, "_run_ceiling", lambda: fake_run_ceiling)
     monkeypatch.setattr(_jobs, "unavailable", lambda job, fixed=None: None)
     monkeypatch.setattr(paper_figures._build, "unavailable", lambda job, fixed=None: None)
 
@@ -86,6 +107,22 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
     assert {p["noise_kind"] for p in fo["wrong_points"]} == {"multiplicative"}
     assert fo["verdict"] == "fails"  # 2/22 > 5 %
     assert all(v["scope"] == "outside" for v in c.values())  # tiny nets on digits: not the paper's instance
+    # issue 25: the ceiling (pathwise 2 %, seed 0 only at tiny) and the retrain oracle (the stand-in's
+    # 20 + 40 st + 0.5 seed, seeds 0 and 1) at the best cell; the extended st's best cell (0.1, 0.3)
+    assert acc["ceiling_pct"] == pytest.approx(2.0, abs=1e-9) and acc["ceiling_n"] == 1
+    assert acc["ceiling_printed_test_pct"] == pytest.approx(0.5, abs=1e-9)
+    assert acc["retrain_pct"] == pytest.approx(28.25, abs=1e-6) and acc["retrain_n"] == 2
+    assert acc["retrain_s0_pct"] == pytest.approx(28.25, abs=1e-6)
+    assert acc["regime"]["best_cell"] == {"s0": 0.1, "st": 0.3}
+    assert acc["regime"]["best_cell_mean_pct"] == pytest.approx(32.25, abs=1e-6)
+    assert acc["regime"]["retrain_pct"] == pytest.approx(32.0, abs=1e-6)  # from rivals_regime (seed 0)
+    assert "ceiling of the GIFT line 2.00" in acc["summary"]
+    # under-training: the GIFT line gains 3 % more from the short w0, but the gradient line 1 % more than it
+    u = c["undertrained_w0"]
+    assert u["ceiling_short_minus_long_pct"]["mean"] == pytest.approx(3.0, abs=1e-9)
+    assert u["ceiling_gift_minus_gradient_short_pct"]["mean"] == pytest.approx(-1.0, abs=1e-9)
+    assert u["verdict"] == "gradient step" and "rule" in u
+    assert u["per_epochs"]["2"]["abs_cos_gift_gradient"]["mean"] == pytest.approx(0.3)
 
 
 def test_figures_without_their_inputs_say_what_they_need(tmp_path, monkeypatch):

@@ -61,7 +61,7 @@ def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
     import gift_theory as gt
     from gift_theory._params import cast
     from gift_theory._phases import PhaseClock, compile_totals, compiled_functions, listen
-    from gift_theory.cli._bench import matmul_gflops
+    from gift_theory._bench import matmul_gflops
     from gift_theory.data import load_dataset
     from gift_theory.finetune import finetune_on, true_physics
     from gift_theory.training import default_config, load_or_train

@@ -17,6 +17,7 @@ import sys
 import time
 
 from .._errors import GiftInputError
+from ._common import Progress
 
 
 def _positive_number(text: str) -> str:
@@ -53,6 +54,15 @@ def add_arguments(parser):
     parser.add_argument("--st", type=_positive_number, help="theorem1: the true noise level st")
     parser.add_argument("--confidence", type=_confidence, default=0.95,
                         help="theorem1, numeric families: simultaneous confidence of the intervals (default 0.95)")
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+class _Silent:
+    def write(self, _):
+        pass
+
+    def flush(self):
+        pass
 
 
 def _run_theorem1(args):
@@ -94,10 +104,16 @@ def run(args):
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise GiftInputError(f"gift check --report {report!r}: {folder} is not a folder")
     t = time.perf_counter()
-    records = run_checks(ids, precise=args.precise, seed=args.seed)
+    ids = tuple(ids) if ids else CHECK_IDS
+    progress, log = Progress("gift check", args.quiet), (_Silent() if args.quiet else None)
+    records = []
+    for i, cid in enumerate(ids):   # one at a time for i/N progress (each check's key depends on its id only)
+        progress(i, len(ids), cid)
+        records += run_checks((cid,), precise=args.precise, seed=args.seed, log=log)
     seconds = time.perf_counter() - t
     write_report(report, records, seconds=seconds, precise=args.precise)
-    sys.stderr.write(f"gift check: report written to {report} ({seconds:.0f} s)\n")
+    if not args.quiet:
+        sys.stderr.write(f"gift check: report written to {report} ({seconds:.0f} s)\n")
     keys = ("id", "claim", "verdict", "evidence", "correction", "counterexample", "hypotheses")
     return {"checks": [{k: r[k] for k in keys} for r in records]}
 

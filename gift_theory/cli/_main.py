@@ -40,10 +40,17 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that reports a bad argument as one line and exit status 2."""
+    """argparse that reports a bad argument as one line and exit status 2, and whose help
+    points to the reference page in the repository (section numbers as there)."""
 
     def error(self, message):
         raise GiftInputError(f"{self.prog}: {message}")
+
+    def format_help(self):
+        from ._common import REFERENCE
+
+        return super().format_help().replace("CONTRACTS §", "reference §").rstrip("\n") + (
+            f"\n\nreference: {REFERENCE} (file formats, JSON outputs, effects, mechanism classes)\n")
 
 
 def _jsonable(obj):
@@ -79,7 +86,18 @@ def _top_help() -> str:
     lines = ["usage: gift COMMAND [options]   (gift COMMAND --help for a command's options)", "",
              "Verify, reproduce and use GIFT (in situ fine-tuning of in silico trained ONNs).", "", "commands:"]
     lines += [f"  {n:<{width}}  {h}" for n, (_, h) in COMMANDS.items()]
+    lines += ["", "An effect is NAME=VALUE (shot=0.01), NAME=V1,V2 (quantization=6,1.0) or NAME (laplace); the built-in names",
+              "(plugins add their own, --plugin FILE.py):", "  " + ", ".join(_effect_names()),
+              "", "Exit status: 0 done, 1 the work failed, 2 bad input (one line, no traceback).",
+              "Reference (file formats, JSON outputs, effects, mechanism classes): docs/reference.md in the gift repository;",
+              "tutorials: docs/notebooks/, docs/lab.md, docs/plugins.md, docs/theory.md."]
     return "\n".join(lines) + "\n"
+
+
+def _effect_names():
+    from ..effects import BUILTIN
+
+    return BUILTIN
 
 
 def main(argv=None) -> int:
@@ -117,7 +135,9 @@ def main(argv=None) -> int:
         emit(result, args.json, getattr(module, "render", None))
         return 0
     except GiftInputError as exc:
-        sys.stderr.write(f"{exc}\n")
+        from ._common import did_you_mean
+
+        sys.stderr.write(f"{did_you_mean(str(exc))}\n")
         return 2
     except KeyboardInterrupt:
         sys.stderr.write("gift: interrupted\n")

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from ._common import add_data_arguments, arch_arg, default_arch, nonneg_float, nonneg_int, positive_int
+from ._common import (add_data_arguments, arch_arg, check_data_folder, default_arch, nonneg_float, nonneg_int,
+                      positive_float, positive_int)
 
 
 def add_arguments(parser) -> None:
@@ -10,12 +11,16 @@ def add_arguments(parser) -> None:
     parser.add_argument("--arch", type=arch_arg, default=None, help="widths, e.g. 64-32-32-10 (default by dataset)")
     parser.add_argument("--activation", default="tanh", help="activation (tanh, identity, sigmoid, sin)")
     parser.add_argument("--s0", type=nonneg_float, default=0.1, help="assumed noise level (default 0.1)")
-    parser.add_argument("--seed", type=nonneg_int, default=0)
-    parser.add_argument("--method", default="minibatch", choices=("minibatch", "projected_sgd", "optax"))
-    parser.add_argument("--epochs", type=positive_int, default=None)
+    parser.add_argument("--seed", type=nonneg_int, default=0,
+                        help="names the initialisation and the sampling; part of the cache key (default 0)")
+    parser.add_argument("--method", default="minibatch", choices=("minibatch", "projected_sgd", "optax"),
+                        help="minibatch: the paper's practice (default); projected_sgd: eq. projected-sgd, one sample "
+                             "per step, projected onto the box H; optax: an optax optimiser")
+    parser.add_argument("--epochs", type=positive_int, default=None,
+                        help="passes over the training set (minibatch, optax; default by data set)")
     parser.add_argument("--steps", type=positive_int, default=None, help="single-sample steps (projected_sgd)")
-    parser.add_argument("--lr", type=nonneg_float, default=None)
-    parser.add_argument("--batch-size", type=positive_int, default=None)
+    parser.add_argument("--lr", type=positive_float, default=None, help="step size / learning rate (default by data set)")
+    parser.add_argument("--batch-size", type=positive_int, default=None, help="mini-batch size (default 32)")
     parser.add_argument("--force", action="store_true", help="retrain even if cached")
     parser.add_argument("--out", default=None, metavar="FILE", help="also copy the weights to FILE (.npz)")
 
@@ -24,16 +29,14 @@ def run(args) -> dict:
     import dataclasses
 
     from .._arch import Architecture
-    from .._errors import GiftInputError
     from ..training import default_config, load_or_train, save_weights
 
+    check_data_folder(args)
     arch = args.arch or default_arch(args.dataset)
     arch = Architecture(arch.widths, args.activation)
     config = default_config(args.dataset, arch)
     changes = {k: v for k, v in (("method", args.method), ("epochs", args.epochs), ("steps", args.steps),
                                  ("lr", args.lr), ("batch_size", args.batch_size)) if v is not None}
-    if changes.get("lr") == 0:
-        raise GiftInputError("gift train: --lr must be positive")
     config = dataclasses.replace(config, **changes)
     params, info = load_or_train(args.dataset, arch, args.s0, args.seed, config=config, folder=args.data_folder,
                                  force=args.force, progress=True)

@@ -26,6 +26,12 @@ def run(capsys, *argv):
     (["train", "--seed", "-3"], "--seed"),
     (["train", "--lr", "0"], "--lr"),
     (["frobnicate"], "unknown command"),
+    (["demo", "--dataset", "mnist"], "--data-folder"),
+    (["demo", "--dataset", "mnist", "--data-folder", "/no/such/folder", "--parts", "finetune"], "/no/such/folder"),
+    (["demo", "--seed", "-1"], "must be an integer >= 0"),
+    (["train", "--seed", "-1"], "must be an integer >= 0"),
+    (["demo", "--s0", "0"], "must be a finite number > 0"),
+    (["demo", "--budget", "nan"], "must be a finite number"),
 ])
 def test_bad_arguments_give_one_line_and_exit_2(capsys, argv, fragment):
     code, out, err = run(capsys, *argv)
@@ -90,3 +96,102 @@ def test_physics_composition_errors():
         gt.Physics.parse(["shot=0.1", "shot=0.2"])
     with pytest.raises(gt.GiftInputError, match="no effect"):
         gt.awgn(0.1).replace(q=0.1)
+
+
+@pytest.mark.parametrize("argv,suggestion", [
+    (["demp"], "did you mean 'demo'?"),
+    (["demo", "--parts", "finetun"], "did you mean 'finetune'?"),
+    (["train", "--dataset", "mnst"], "did you mean 'mnist'?"),
+    (["finetune", "--s0", "0.1", "--st", "0.2", "--true-effect", "shto=0.1"], "did you mean 'shot'?"),
+])
+def test_unknown_names_get_a_did_you_mean(capsys, argv, suggestion):
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert suggestion in err
+
+
+def test_did_you_mean_says_nothing_when_nothing_is_close():
+    from gift_theory.cli._common import did_you_mean
+
+    msg = "gift: unknown command 'zzzz'; commands: demo, train"
+    assert did_you_mean(msg) == msg
+
+
+@pytest.mark.parametrize("command", ["demo", "train", "bench"])
+def test_every_flag_has_help_and_help_points_to_the_reference_page(capsys, command):
+    import importlib
+
+    from gift_theory.cli._main import COMMANDS, _Parser
+
+    parser = _Parser(prog=f"gift {command}")
+    importlib.import_module(f"gift_theory.cli.{COMMANDS[command][0]}").add_arguments(parser)
+    missing = [a.option_strings or a.dest for a in parser._actions if not a.help]
+    assert not missing, f"gift {command}: flags without help: {missing}"
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    out = capsys.readouterr().out
+    assert "docs/reference.md" in out and "CONTRACTS" not in out
+
+
+def test_progress_counts_items_with_time_left_and_is_silent_when_quiet():
+    import io
+
+    from gift_theory.cli._common import Progress
+
+    buf = io.StringIO()
+    p = Progress("gift x", stream=buf)
+    for i in range(3):
+        p(i, 3, f"item{i}")
+    lines = buf.getvalue().splitlines()
+    assert [ln.split("]")[0] for ln in lines] == ["gift x: [1/3", "gift x: [2/3", "gift x: [3/3"]
+    assert "left" not in lines[0] and all("s left" in ln for ln in lines[1:])
+    quiet = io.StringIO()
+    q = Progress("gift x", quiet=True, stream=quiet)
+    q(0, 2, "a")
+    q(1, 2, "b")
+    assert quiet.getvalue() == ""
+
+
+def test_import_gift_theory_changes_no_jax_setting():
+    import subprocess
+    import sys
+
+    code = ("import jax; before = dict(jax.config.values); import gift_theory, gift_theory.lab, gift_theory.finetune; "
+            "after = dict(jax.config.values); print(sorted(k for k in after if after[k] != before.get(k)))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip() == "[]"
+
+
+def _demo_result():
+    evidence = ("a long evidence string " * 12).strip() + " ends with its number 0.123"
+    row = {"method": "gift", "loss_before": 0.7, "loss_after": 0.7, "accuracy_before": 0.9, "accuracy_after": 0.9,
+           "test_accuracy_after": 0.9, "in_situ_evaluations": 19, "seconds": 1.0, "oracle_fraction": 0.0,
+           "why": {"kept_w0": True, "reason": "confirmation not significant: z = 1.84 <= 3.13 after 7 fresh pairs",
+                   "confirmation_z": 1.84, "predicted_gain": 0.0123}}
+    return {"mode": "pair", "dataset": "digits", "arch": "64-32-32-10", "s0": 0.05, "st": 0.2, "true_effects": [],
+            "budget": 20, "rows": [row, dict(row, method="retrain", why=None, loss_after=0.6, oracle_fraction=1.0)],
+            "theory": {"checks": [{"id": "x", "verdict": "fails", "evidence": evidence,
+                                   "correction": "printed rhs / true d/ds grad J = 0.5"}], "total_checks": 21},
+            "seconds": 3.0}, evidence
+
+
+def test_demo_text_prints_evidence_whole_says_why_gift_kept_w0_and_counts_checks_from_the_result():
+    from gift_theory.cli._demo import render
+
+    result, evidence = _demo_result()
+    text = render(result)
+    flat = " ".join(text.split())
+    assert evidence in flat and "printed rhs / true d/ds grad J = 0.5" in flat
+    gift_row = [ln for ln in text.splitlines() if ln.startswith("gift ")][0]
+    assert "kept w0" in gift_row and "z = 1.84" in gift_row and "predicted gain 0.0123" in gift_row
+    assert "gift check runs all 21" in text and "twelve" not in text
+
+
+def test_demo_theory_part_counts_the_registry():
+    from proofs_checks import CHECK_IDS
+
+    from gift_theory._demo import theory_part
+
+    out = theory_part(ids=("score_function_identity",))
+    assert out["total_checks"] == len(CHECK_IDS) and [c["id"] for c in out["checks"]] == ["score_function_identity"]

@@ -21,7 +21,7 @@ from ._jobs import unavailable
 from ._scales import SCALES, get_scale, sweeps
 from gift_theory._io import save_figure
 
-from ._sweep import load_points, open_client, open_dataset, restrict, run_sweep
+from ._sweep import _git_commit, assemble, load_points, open_client, open_dataset, restrict, run_sweep, save_dataset
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -76,8 +76,9 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
     compute : False draws from existing data only
     options : extra keyword arguments for every fine-tuning job
     cells : a run in pieces: only the points at these (s0, st) cells, cell by cell in this
-        order (``"key"``: the scale's ``key_cells``); their point files land as usual, no
-        netCDF is written and no figure drawn (run without ``cells`` to assemble and draw)
+        order (``"key"``: the scale's ``key_cells``); their point files land as usual, then
+        each sweep's netCDF is assembled from every point saved so far (NaN where missing;
+        ``points_done`` says how many); no figure is drawn
 
     Returns
     -------
@@ -193,7 +194,7 @@ def _build(sc, mods, all_sweeps, needed, data_dir, figure_dir, compute, progress
 def _run_cells(sc, all_sweeps, needed, cells, data_dir, scheduler, n_workers, progress, t0) -> dict:
     """Run the needed sweeps' points at the given (s0, st) cells, cell by cell (see :func:`build`)."""
     client, close = (None, None) if scheduler == "synchronous" else open_client(scheduler, n_workers)
-    info = []
+    info, touched = [], set()
     try:
         for s0, st in cells:
             for sname in needed:
@@ -206,9 +207,14 @@ def _run_cells(sc, all_sweeps, needed, cells, data_dir, scheduler, n_workers, pr
                 ds = run_sweep(sub, data_dir, scheduler=scheduler, n_workers=n_workers, progress=progress,
                                client=client, save=False)
                 info.append(dict(_sweep_summary(sname, ds), cell={"s0": float(s0), "st": float(st)}))
+                touched.add(sname)
     finally:
         if close is not None:
             close()
+        for sname in sorted(touched):  # what has landed, as the full grid's arrays (a partial sweep)
+            ds = assemble(data_dir, all_sweeps[sname])
+            ds.attrs["code_commit"] = _git_commit()
+            save_dataset(ds, os.path.join(data_dir, f"{sname}.nc"))
     return {"scale": sc.name, "data_dir": data_dir, "figure_dir": None, "sweeps": info, "figures": [],
             "seconds": time.perf_counter() - t0, "cells": [[float(a), float(b)] for a, b in cells]}
 
@@ -247,7 +253,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--draw-only", action="store_true", help="draw from saved data, run no sweep")
     parser.add_argument("--cells", default=None, metavar="key|S0:ST,...",
                         help="a run in pieces: only the points at these (s0, st) cells, in this order ('key': the "
-                             "scale's key cells); no netCDF written, no figure drawn")
+                             "scale's key cells); the netCDF holds every point saved so far; no figure drawn")
 
 
 def check_arguments(args) -> None:
@@ -274,7 +280,7 @@ def run_args(args) -> dict:
 def render(result: dict) -> str:
     lines = [f"scale {result['scale']}: {result['seconds']:.0f} s wall"]
     if "cells" in result:
-        lines.append(f"  cells {result['cells']} (a piece: no netCDF, no figure)")
+        lines.append(f"  cells {result['cells']} (a piece: netCDF of the points so far, no figure)")
     for s in result["sweeps"]:
         if "error" in s:
             lines.append(f"  sweep {s['name']}: {s['error']}")

@@ -305,7 +305,9 @@ def _beside(data_dir, loaded, s0: float, st: float) -> dict:
     ceil = _load(data_dir, "ceiling_deep", loaded)
     var = _load(data_dir, "variants", loaded)
     riv = _load(data_dir, "rivals_regime", loaded)
-    got = {}
+    got = {"ceiling_pct": None, "ceiling_test_pct": None, "ceiling_printed_pct": None, "ceiling_printed_test_pct": None}
+    out["beside_missing"] = [f"{n}.nc" for n, d in (("ceiling_deep", ceil), ("variants", var), ("rivals_regime", riv))
+                             if d is None]
     if ceil is not None:
         for kind, key in (("pathwise", "ceiling"), ("score_paper", "ceiling_printed")):
             if f"{kind}_accuracy_best" in ceil:

@@ -135,3 +135,39 @@ def test_local_dask_cluster_runs_the_same_sweep(tmp_path):
     assert ds["pid"].values[0, 0] != os.getpid()  # ran in a worker process
     again = assemble(str(tmp_path), sw)
     check_values(again.expand_dims(kind=["x"], axis=2))
+
+
+def test_a_sub_grid_has_the_full_grids_point_ids_and_resumes_into_it(tmp_path):
+    """A run in pieces: the points of a restricted sweep are the full sweep's, so the full run
+    only adds the rest."""
+    from paper_figures._sweep import restrict
+
+    sw = toy_sweep()
+    sub = restrict(sw, a=(2, 7), kind=("y",))
+    assert sub.dims["a"] == (2,) and sub.dims["kind"] == ("y",) and sub.size == 2
+    assert restrict(sw, a=(7,)) is None
+    run_sweep(sub, str(tmp_path), scheduler="synchronous", progress=False, save=False)
+    assert not os.path.exists(tmp_path / "toy.nc")
+    assert set(load_points(str(tmp_path), sw)) == {point_id(sw, p) for p in sub.points()}
+    ds = run_sweep(sw, str(tmp_path), scheduler="synchronous", progress=False)
+    assert ds.attrs["points_done"] == sw.size
+    check_values(ds)
+
+
+def test_build_by_cells_runs_those_cells_only_and_assembles_what_landed(tmp_path, monkeypatch):
+    import paper_figures
+    from paper_figures import _jobs, build
+    from paper_figures._build import main
+
+    calls = []
+    monkeypatch.setattr(_jobs, "_run_ceiling", lambda: lambda **kw: calls.append((kw["s0"], kw["st"], kw["seed"]))
+                        or {"loss_before": 1.0, "pathwise_loss": 0.9})
+    monkeypatch.setattr(paper_figures._build, "unavailable", lambda job, fixed=None: None)
+    res = build("tiny", only="ceiling", cells=[(0.1, 0.3), (0.5, 0.5)], scheduler="synchronous",
+                data_dir=str(tmp_path), progress=False)
+    assert calls == [(0.1, 0.3, 0)] and res["figures"] == []  # 0.3 is an extended st: the deeper net only
+    ds = open_dataset(os.path.join(tmp_path, "ceiling_deep.nc"))
+    assert ds.attrs["points_done"] == 1 and ds.attrs["points_total"] == 2
+    assert float(ds["pathwise_loss"].sel(s0=0.1, st=0.3, seed=0)) == 0.9
+    assert np.isnan(float(ds["pathwise_loss"].sel(s0=0.1, st=0.2, seed=0)))
+    assert main(["--scale", "tiny", "--cells", "0.1-0.2", "--draw-only"]) == 2

@@ -195,3 +195,20 @@ def test_demo_theory_part_counts_the_registry():
 
     out = theory_part(ids=("score_function_identity",))
     assert out["total_checks"] == len(CHECK_IDS) and [c["id"] for c in out["checks"]] == ["score_function_identity"]
+
+
+def test_reference_page_lists_every_builtin_effect_with_its_mechanism_class():
+    """docs/reference.md (the page --help points to) against the registry, not against a list."""
+    import os
+    import re
+
+    from gift_theory.effects import BUILTIN, MECHANISMS, REGISTRY
+
+    path = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "reference.md")
+    with open(path, encoding="utf-8") as fh:
+        text = fh.read()
+    rows = {m.group(1): m.group(2).strip() for m in re.finditer(r"^\| `(\w+)` \|[^\n]*\| (\w+) \|$", text, re.M)}
+    for name in BUILTIN:
+        assert rows.get(name) == REGISTRY[name].mechanism, name
+    classes = set(re.findall(r"^\| `(\w+)` \| [^|]+ \| [^|]*\|$", text.split("## §6")[1], re.M))
+    assert classes == set(MECHANISMS)

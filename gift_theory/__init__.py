@@ -41,6 +41,9 @@ from .effects import awgn as awgn
 from .effects import make_effect as make_effect
 from .effects import parse_effect as parse_effect
 
+from ._io import atomic_write as atomic_write
+from ._io import atomic_write_text as atomic_write_text
+from ._io import save_figure as save_figure
 from ._xla import use_compilation_cache as use_compilation_cache
 
 __version__ = "0.1.0"

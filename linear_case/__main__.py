@@ -8,7 +8,7 @@ import matplotlib
 
 matplotlib.use("agg")  # a script that writes files: no display needed
 
-from gift_theory._io import save_figure  # noqa: E402
+from gift_theory import save_figure  # noqa: E402
 
 from ._plots import plot_bound_regions, plot_example_curves  # noqa: E402
 

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 
 
 def one_line(text: str, width: int = 110) -> str:
@@ -70,16 +68,8 @@ def render_markdown(records, *, seconds: float | None = None, precise: bool = Fa
 
 
 def write_report(path: str, records, **kw) -> str:
-    """Write the markdown report atomically (temp file in the same folder, then os.replace)."""
-    folder = os.path.dirname(os.path.abspath(path)) or "."
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".check_report.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(render_markdown(records, **kw))
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    """Write the markdown report atomically (gift's one atomic writer: a temp file in the same
+    folder, then a rename)."""
+    from gift_theory import atomic_write_text
+
+    return atomic_write_text(path, render_markdown(records, **kw))

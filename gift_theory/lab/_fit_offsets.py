@@ -412,6 +412,33 @@ def base_model(model: Model, meas: Measurement) -> Model:
     return Model(reset(model.physics, kinds))
 
 
+def identified_start(meas: Measurement, params, physics, kinds):
+    """With taps and weight offsets: the offsets where the layer-wise identification puts them
+    (:func:`~gift_theory.lab._identify.identify`: ``W_eff - W``, ``b_eff - b``; per-neuron
+    parameters at 0), ``{kind: [array per layer]}`` -- a start from which L-BFGS has only the
+    prior's shrinkage left to do, so weight errors as large as W itself are fitted and the
+    noise level is not inflated to absorb a misfit mean. None otherwise (the fit starts at 0)."""
+    if not meas.has_taps or not any(k.target == "W" for k in kinds):
+        return None
+    from ._identify import identify
+
+    s = physics.params().get("s")
+    ident = identify(meas, s=None if s is None else float(np.ravel(np.asarray(s))[0])).by_layer()
+    out = {}
+    for k in kinds:
+        arrs = []
+        for l in k.layers:
+            W, b = (np.asarray(v, np.float64) for v in params[l - 1])
+            if k.target == "W":
+                arrs.append(ident[l].W_eff - W)
+            elif k.target == "b":
+                arrs.append(ident[l].b_eff - b)
+            else:
+                arrs.append(np.zeros(k.shape(meas.arch, l)))
+        out[k] = arrs
+    return out
+
+
 def fit_offsets(key, meas: Measurement, model: Model, names) -> Model:
     """``model`` with the effects ``names`` fitted as offsets: a prior N(0, e^2) per kind, e set
     from the first pass's rms and the offsets refitted once (two passes)."""
@@ -420,10 +447,15 @@ def fit_offsets(key, meas: Measurement, model: Model, names) -> Model:
     physics = reset(model.physics, kinds)
     params = model.weights(meas)
     scales = {k: _initial_scale(k, params, physics) for k in kinds}
+    start = identified_start(meas, params, physics, kinds)
+    if start is not None:  # the scale of the offsets the data show, not a fifth of W's
+        scales = {k: max(float(np.sqrt(np.mean(np.concatenate([np.ravel(d) ** 2 for d in start[k]])))),
+                         1e-4 * _initial_scale(k, params, physics)) for k in kinds}
     for _ in range(2):
-        deltas = estimate_offsets(named_subkey(key, "offsets"), meas, physics, params, kinds, scales)
+        deltas = estimate_offsets(named_subkey(key, "offsets"), meas, physics, params, kinds, scales, start=start)
         scales = {k: max(float(np.sqrt(np.mean(np.concatenate([np.ravel(d) ** 2 for d in deltas[k]])))),
                          1e-4 * _initial_scale(k, params, physics)) for k in kinds}
+        start = deltas if start is not None else None
     new_params, new_physics = apply_all(kinds, deltas, params, physics, arch)
     offsets = dict(model.offsets)
     for k in kinds:
@@ -715,6 +747,24 @@ def coupling_test(E: np.ndarray, W: np.ndarray, seed=0) -> tuple[float, float]:
     return z, float(stats.norm.sf(z))
 
 
+def outlier_test(d: np.ndarray) -> tuple[int, float, float]:
+    """Is one of the offsets ``d`` a gross outlier of N(0, e^2) draws, e unknown? Grubbs' test:
+    G = max |d_i - mean| / sd, referred to its exact Student-t bound (P times the two-sided tail
+    of t = sqrt(P (P - 2) G^2 / ((P - 1)^2 - P G^2)) on P - 2 degrees of freedom; exact for
+    the largest value of P normal draws, conservative otherwise). ``(index, z, p)``."""
+    d = np.ravel(np.asarray(d, np.float64))
+    P = d.size
+    sd = np.std(d, ddof=1) if P >= 3 else 0.0
+    if P < 3 or sd <= 0:
+        return 0, 0.0, 1.0
+    i = int(np.argmax(np.abs(d - d.mean())))
+    G = abs(d[i] - d.mean()) / sd
+    den = (P - 1) ** 2 - P * G * G
+    t = np.sqrt(P * (P - 2) * G * G / den) if den > 0 else np.inf
+    p = float(min(1.0, P * 2.0 * stats.t.sf(t, P - 2))) if np.isfinite(t) else 0.0
+    return i, float(stats.norm.isf(max(p / 2.0, 1e-300))) if p < 1.0 else 0.0, p
+
+
 def refusing(rows) -> list[dict]:
     """The rows of :func:`prior_check` that refuse the fitted values: a normal-theory z beyond
     :data:`PRIOR_Z`, a coupling p below :data:`PRIOR_P` over the number of layers tested."""
@@ -743,6 +793,12 @@ def prior_check(model: Model, meas: Measurement, seed: int = 0) -> list[dict]:
                        of E_hat coupled as the rows of W are (a coupling W M on a layer of any
                        shape); its row also carries the exact p-value ``p``.
 
+    ``{target}_outlier`` per layer and per-neuron family of five or more offsets (biases,
+                       per-neuron parameters), :func:`outlier_test`: one
+                       gross outlier (a 5-sigma offset among N(0, e^2) draws) is not a draw of
+                       the prior; its row names the value (``neuron``, ``value``) and carries
+                       the p-value ``p`` and a sentence ``what``.
+
     ``seed``: the coupling test's rotations (layer l draws with ``(seed, l)``).
     Returns one row per layer with offsets: ``{layer, test, z}`` for each test that applies.
     """
@@ -757,6 +813,22 @@ def prior_check(model: Model, meas: Measurement, seed: int = 0) -> list[dict]:
                 p = 2.0 * stats.t.sf(abs(t), df=d.size - 1)
                 out.append({"layer": int(l), "test": "b_mean",
                             "z": float(np.sign(t) * stats.norm.isf(max(p / 2.0, 1e-300)))})
+    # one gross outlier among the offsets (a dead or stuck neuron, a broken weight) is not a draw
+    # of N(0, e^2): Grubbs' test per layer and family, the value named
+    for kind in all_kinds:
+        for l, d in zip(kind.layers, deltas_of[kind]):
+            # per-neuron families only: a weight error's fitted entries are shrunk unevenly (most
+            # directions set by the prior without taps), far from a sample of one normal law
+            if kind.target == "W" or d.size < 5:
+                continue
+            i, z, p = outlier_test(d)
+            where = f"{l}:{i}"
+            out.append({"layer": int(l), "test": f"{kind.target}_outlier", "z": z, "p": p,
+                        "neuron": where, "value": float(np.ravel(d)[i]),
+                        "what": f"{kind.effect} offsets of layer {{l}} single out {where}: "
+                                f"{float(np.ravel(d)[i]):+.3g} against the others' rms "
+                                f"{float(np.sqrt(np.mean(np.delete(np.ravel(d), i) ** 2))):.3g} (not a draw of "
+                                f"N(0, e^2): that one is unlike the rest, e.g. a dead or stuck neuron)"})
     kinds = [k for k in all_kinds if k.target == "W"]
     if not kinds:
         return out

@@ -1,18 +1,25 @@
-"""Stage 7 of the lab: from where the model fails to which mechanism (CONTRACTS §6).
+"""Stage 7 of the lab: from what is measured to which mechanism (CONTRACTS §6).
 
-The localised evidence (:func:`~gift_theory.lab._localise.layer_evidence`: per layer, how the
-residuals depart from the model, each departure a z) and the candidates' fits are turned into
-the ranked ``mechanisms`` list, one class per entry with its layers, its score (a z: how far
-the strongest evidence for it stands beyond the model's noise) and one line of evidence.
+The backbone is the layer-wise identification (:func:`~gift_theory.lab._identify.identify`):
+per layer, the effective mean map, the activation's shape and the noise read off the shots,
+each CONTRACTS §6 class a test on these estimates with its own p-value (Holm-adjusted over
+classes x layers), an effect size and its layers. A class is listed when its adjusted p-value
+is below :data:`ALPHA`, with the layers where it is, its score (the strongest test's z, unbounded)
+and one line of evidence; the list is sorted by score. The catalogue effects fitted by the
+diagnosis then confirm and quantify: a fitted effect of a listed class adds its gain in
+held-out discrepancy to the evidence line (it never lists a class by itself).
 
 **This is the one place where a mechanism rule lives.** Each rule is a function
-``(ctx) -> (score, layers, evidence) | None`` registered in :data:`RULES` under its class; to
-teach the lab a new mechanism, add a rule here. A class is listed when its score exceeds
-:data:`THRESHOLD`; the list is sorted by score.
+``(ctx) -> (score, layers, evidence, p_value) | None`` registered in :data:`RULES` under its
+class; to teach the lab a new mechanism, add a rule here (and a test in ``_identify``).
+Without an identification (a caller that passes none) the rules fall back on the localised
+evidence of :func:`~gift_theory.lab._localise.layer_evidence` (each departure a z; listed
+beyond :data:`THRESHOLD`, p-value the normal tail of the score).
 
-With taps the evidence is each layer's own (its model fed the measured layer before); without
-taps only the output is seen, errors of the hidden layers folded into it, and a hidden-layer
-class is reported on the hidden layers as a possibility the output cannot localise.
+With taps the identification is each layer's own (its input the measured layer before);
+without taps only the output is identified, every layer's deviation folded into it: a class
+found there is reported at the output, and an output transfer is also listed as a possible
+hidden activation (the two cannot be told apart there; docs/identification.md).
 """
 
 from __future__ import annotations
@@ -20,11 +27,14 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy import stats
 
 from ..effects import MECHANISMS, REGISTRY
 
-#: a class is listed when its evidence stands this many standard deviations out
+#: without an identification, a class is listed when its evidence stands this many standard deviations out
 THRESHOLD = 4.0
+#: with an identification, a class is listed when its Holm-adjusted p-value is below this
+ALPHA = 0.01
 
 
 @dataclasses.dataclass
@@ -38,6 +48,8 @@ class Context:
     fit_gain : {class: z} the best moment-fitted candidate of each class: how many baseline
         standard deviations its held-out discrepancy fell below the baseline's
     levels : {layer: (s_layer, level_z)} per-layer noise levels of the one-step check
+    ident : the layer-wise :class:`~gift_theory.lab._identify.Identification`, or None (the
+        rules then read ``evidence`` only)
     """
 
     evidence: dict
@@ -46,6 +58,33 @@ class Context:
     failing: list | None
     fit_gain: dict
     levels: dict
+    ident: object = None
+
+    def __post_init__(self):
+        self.rows = self.ident.rows() if self.ident is not None else []
+
+
+def _significant(ctx, cls, layers=None):
+    return [r for r in ctx.rows if r["class"] == cls and r["p_adj"] < ALPHA
+            and (layers is None or r["layer"] in layers)]
+
+
+def _identified(ctx, cls, exclude=()):
+    """(score, layers, evidence, p_value) of ``cls`` from the identification's tests: the layers
+    where a test of the class rejects after Holm's correction (less ``exclude``), the strongest
+    such test's z and evidence, the smallest adjusted p-value; None when none rejects."""
+    rows = [r for r in _significant(ctx, cls) if r["layer"] not in exclude]
+    if not rows:
+        return None
+    best = max(rows, key=lambda r: r["z"])
+    layers = sorted({int(l) for r in rows for l in r.get("layers", [r["layer"]])})
+    text = best["evidence"]
+    if not ctx.taps:
+        text += " (seen at the output: without taps every layer's deviation folds into it)"
+    g = ctx.fit_gain.get(cls, 0.0)
+    if g > 0:
+        text += f"; a fitted {cls} effect lowers the held-out discrepancy by {g:.1f} sd"
+    return float(best["z"]), layers, text, float(min(r["p_adj"] for r in rows))
 
 
 def _layers_where(ctx, keys, hidden=None, min_z=THRESHOLD, absolute=True):
@@ -111,7 +150,16 @@ def _with_fit(ctx, cls, score, layers, text):
 
 
 def rule_activation(ctx):
-    """Hidden layers whose mean response is a distorted function of the pre-activation."""
+    """Hidden layers whose mean response is a distorted function of the pre-activation (a dead
+    or stuck neuron included); without taps, an output transfer may be a hidden activation."""
+    if ctx.ident is not None:
+        if ctx.taps:
+            return _identified(ctx, "activation_mismatch")
+        r = _identified(ctx, "readout_nonlinearity")
+        if r is None or ctx.depth < 2:
+            return None
+        return (r[0] * 0.99, list(range(1, ctx.depth)), "the output's transfer is distorted; without taps a hidden "
+                "activation cannot be told from the readout: " + r[2], r[3])
     hidden = list(range(1, ctx.depth))
     if not hidden:
         return None
@@ -130,6 +178,8 @@ def rule_readout(ctx):
     while the hidden layers respond as modelled. Noise alone does not move the output's mean
     (nothing nonlinear follows it), so where the output's mean is distorted, the output's noise
     evidence (variance, kurtosis) counts for the readout's transfer too."""
+    if ctx.ident is not None:
+        return _identified(ctx, "readout_nonlinearity")
     score, where = _best_shared(ctx, hidden=False)
     if score > THRESHOLD and ctx.depth in ctx.evidence:
         row = ctx.evidence[ctx.depth]
@@ -144,6 +194,8 @@ def rule_readout(ctx):
 def rule_bias(ctx):
     """Per-neuron constant shifts of the mean, of either sign (offsets drawn per neuron), with no
     shape shared by the neurons (a shift all one way is a distorted transfer)."""
+    if ctx.ident is not None:
+        return _identified(ctx, "bias_offset")
     best, where = 0.0, None
     for l, row in ctx.evidence.items():
         common = max(abs(row.get(k, 0.0)) for k in ("common_slope_z", "common_curve_z", "common_offset_z"))
@@ -161,31 +213,62 @@ def rule_bias(ctx):
 
 def rule_weight(ctx):
     """Reproducible mean residuals that no per-neuron function of z explains: the linear map."""
+    if ctx.ident is not None:
+        return _identified(ctx, "weight_error")
     score, where = _best(ctx, ("structure_z",), absolute=False)
     return _with_fit(ctx, "weight_error", score, _layers_where(ctx, ("structure_z",), absolute=False),
                      _line(where, score, " (reproducible beyond every per-neuron response curve)"))
 
 
 def rule_input_dependent(ctx):
+    if ctx.ident is not None:
+        return _identified(ctx, "input_dependent_noise")
     score, where = _best(ctx, ("var_abs_z",), absolute=False)
     return _with_fit(ctx, "input_dependent_noise", score, _layers_where(ctx, ("var_abs_z",), absolute=False),
                      _line(where, score, " (excess variance growing with |z|)"))
 
 
 def rule_law(ctx):
+    if ctx.ident is not None:
+        return _identified(ctx, "noise_law")
     score, where = _best(ctx, ("kurt_z",))
     return _with_fit(ctx, "noise_law", score, _layers_where(ctx, ("kurt_z",)), _line(where, score, " (kurtosis)"))
 
 
 def rule_gain(ctx):
-    score, where = _best(ctx, ("corr_z", "time_z"), absolute=True)
-    return _with_fit(ctx, "gain_fluctuation", score, _layers_where(ctx, ("corr_z", "time_z")),
-                     _line(where, score, " (fluctuation shared by the neurons, or a trend in time)"))
+    if ctx.ident is not None:
+        return _identified(ctx, "gain_fluctuation")
+    score, where = _best(ctx, ("corr_z",), absolute=True)
+    return _with_fit(ctx, "gain_fluctuation", score, _layers_where(ctx, ("corr_z",)),
+                     _line(where, score, " (fluctuation shared by the neurons)"))
+
+
+def rule_time(ctx):
+    if ctx.ident is not None:
+        return _identified(ctx, "time_drift")
+    score, where = _best(ctx, ("time_z",), absolute=True)
+    return _with_fit(ctx, "time_drift", score, _layers_where(ctx, ("time_z",)),
+                     _line(where, score, " (a trend in the acquisition time)"))
+
+
+def rule_fitted_only(cls):
+    """A class the identification tests (gain_error, correlated_noise); without it only a fitted
+    effect of the class speaks for it."""
+    def rule(ctx):
+        if ctx.ident is not None:
+            return _identified(ctx, cls)
+        return _with_fit(ctx, cls, 0.0, [], "")
+    rule.__name__ = f"rule_{cls}"
+    return rule
 
 
 def rule_level(ctx):
     """A layer whose own noise level differs from the jointly fitted one, and which passes its
     one-step check at its own level (its level is all that is wrong there)."""
+    if ctx.ident is not None:
+        # a layer whose noise grows with its signal has no one level: its level is not the evidence
+        signal = {r["layer"] for c in ("input_dependent_noise", "gain_fluctuation") for r in _significant(ctx, c)}
+        return _identified(ctx, "noise_level", exclude=signal)
     best, layer = 0.0, None
     if ctx.failing:  # a failing layer's misfit sets the joint level: the levels say nothing then
         return 0.0, [], ""
@@ -204,12 +287,24 @@ RULES = {
     "noise_law": rule_law,
     "input_dependent_noise": rule_input_dependent,
     "gain_fluctuation": rule_gain,
+    "time_drift": rule_time,
+    "correlated_noise": rule_fitted_only("correlated_noise"),
+    "gain_error": rule_fitted_only("gain_error"),
     "weight_error": rule_weight,
     "bias_offset": rule_bias,
     "activation_mismatch": rule_activation,
     "readout_nonlinearity": rule_readout,
 }
 assert set(RULES) == set(MECHANISMS), "every CONTRACTS §6 class has a rule"
+
+
+class FitGains(dict):
+    """{class: z} of :func:`fit_gains`, with ``notes``: sentences naming what a refused offset
+    family singles out (a neuron unlike the rest), which :func:`mechanisms` adds to the evidence."""
+
+    def __init__(self, *a, **k):
+        super().__init__(*a, **k)
+        self.notes = {}
 
 
 def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float = 0.5) -> dict:
@@ -225,7 +320,7 @@ def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float =
     ``w_coupling``) are a structured weight error: they count for ``weight_error``."""
     from ._fit_offsets import fitted_as_offsets, refusing
 
-    out = {}
+    out = FitGains()
     unit = base_cmp.se if base_cmp.se > 0 else 1.0
     excess = base_cmp.discrepancy - base_cmp.noise_floor
     for c in ranking:
@@ -237,6 +332,11 @@ def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float =
             if c.comparison.p_value < alpha or c.n_free < 0.5 * c.nominal:
                 continue
             refused = refusing(prior(c.model)) if prior is not None else []
+            for r in refused:
+                if r["test"].endswith("_outlier"):  # the neuron the offsets single out, named
+                    out.notes[f"{c.effects[0]}@{r['layer']}"] = (
+                        f"the fitted {c.effects[0]} values of layer {r['layer']} single out {r['neuron']} "
+                        f"({r['value']:+.3g}; Grubbs p = {r['p']:.2g} against N(0, e^2) offsets)")
             coupled = {"w_structure", "w_coupling"}
             if refused and not (REGISTRY[c.effects[0]].mechanism == "weight_error"
                                 and all(r["test"] in coupled for r in refused)):
@@ -250,15 +350,22 @@ def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float =
 
 
 def mechanisms(ctx: Context) -> list[dict]:
-    """The ranked mechanism classes the evidence points to (score > :data:`THRESHOLD`)."""
+    """The ranked mechanism classes the evidence points to, each ``{mechanism, layers, score,
+    evidence, p_value}`` (CONTRACTS §6): with an identification, those whose adjusted p-value is
+    below :data:`ALPHA`; without, those whose score exceeds :data:`THRESHOLD`. Best first."""
     out = []
     for cls, rule in RULES.items():
         r = rule(ctx)
         if r is None:
             continue
-        score, layers, text = r
-        if np.isfinite(score) and score > THRESHOLD:
+        score, layers, text = r[:3]
+        p = r[3] if len(r) > 3 else float(stats.norm.sf(score)) if np.isfinite(score) else 1.0
+        listed = p < ALPHA if len(r) > 3 else (np.isfinite(score) and score > THRESHOLD)
+        if listed:
             out.append({"mechanism": cls, "layers": sorted(int(l) for l in layers), "score": float(score),
-                        "evidence": text})
+                        "evidence": text, "p_value": float(p)})
     out.sort(key=lambda m: -m["score"])
+    notes = getattr(ctx.fit_gain, "notes", {})
+    if notes and out:
+        out[0]["evidence"] += "; " + "; ".join(notes.values())
     return out

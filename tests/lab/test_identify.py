@@ -1,0 +1,156 @@
+"""Layer-wise system identification (gift_theory.lab._identify) and the mechanisms it names.
+
+Most files here come from a plain-numpy simulator written from CONTRACTS §1-§2 in this file
+(not gift's forward pass), with physics switched on one at a time; one from gift's own chip.
+"""
+
+import jax
+import numpy as np
+import pytest
+from scipy import stats
+
+import gift_theory as gt
+from gift_theory._measurement import Measurement
+from gift_theory._params import Layer
+from gift_theory.lab import simulate_measurement
+from gift_theory.lab._identify import identify
+from gift_theory.lab._mechanisms import Context, mechanisms
+
+
+def _net(seed, widths=(6, 10, 8, 4)):
+    rng = np.random.default_rng(seed)
+    Ws = [rng.normal(0, 1.5 / np.sqrt(widths[i]), (widths[i + 1], widths[i])) for i in range(len(widths) - 1)]
+    bs = [rng.normal(0, 0.3, widths[i + 1]) for i in range(len(widths) - 1)]
+    return Ws, bs
+
+
+def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, bias_drift=None, common=None,
+        taps=True):
+    """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
+    y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
+    (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
+    ``common`` (layer, c): c xi added to every neuron of the layer's output, one xi per shot."""
+    Ws, bs = _net(seed, widths)
+    rng = np.random.default_rng(seed + 1)
+    x = rng.uniform(0, 1, (n, widths[0]))
+    t = (np.arange(n)[:, None] * r + np.arange(r)[None, :]) / (n * r - 1.0)
+    a = x[:, None, :] + s * rng.normal(size=(n, r, widths[0]))
+    outs = []
+    L = len(Ws)
+    for l, (W, b) in enumerate(zip(Ws, bs), start=1):
+        g = (gains or {}).get(l, 1.0)
+        bb = b[None, None, :] + (bias_drift[1] * t[:, :, None] if bias_drift and bias_drift[0] == l else 0.0)
+        z = g * np.einsum("nkp,ip->nki", a, W) + bb + s * rng.normal(size=(n, r, W.shape[0]))
+        a = (np.tanh(z) + s * rng.normal(size=z.shape)) if l < L else z
+        if dead and dead[0] == l:
+            a[:, :, dead[1]] = s * rng.normal(size=(n, r))
+        if common and common[0] == l:
+            a = a + common[1] * rng.normal(size=(n, r, 1))
+        outs.append(a)
+    params = tuple(Layer(W, b) for W, b in zip(Ws, bs))
+    return Measurement(x=x, y=outs[-1], params=params, taps=tuple(outs[:-1]) if taps else None, t=t)
+
+
+def _sig(ident, cls, alpha=0.01):
+    return [r for r in ident.rows() if r["class"] == cls and r["p_adj"] < alpha]
+
+
+def _first(ident):
+    ctx = Context({}, ident.depth, ident.taps, None, {}, {}, ident=ident)
+    return mechanisms(ctx)
+
+
+def test_identified_map_recovers_a_known_fixed_weight_error_on_gifts_chip():
+    arch = gt.Architecture((6, 10, 4))
+    params = gt.init_params(jax.random.PRNGKey(1), arch, gain=1.5)
+    params = tuple(gt.Layer(W, 0.3 * jax.random.normal(jax.random.PRNGKey(10 + l), b.shape))
+                   for l, (W, b) in enumerate(params))
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(2), (100, 6)))
+    phys = gt.Physics.create(s=0.05, weight_error={"e": 0.15, "seed": 3})
+    meas = simulate_measurement(jax.random.PRNGKey(3), params, x, phys, shots=24, taps=True)
+    from gift_theory.effects.weight_error import device_draw
+
+    ident = identify(meas)
+    for li in ident.layers:
+        W = np.asarray(meas.params[li.layer - 1].W, np.float64)
+        E = 0.15 * np.asarray(device_draw(3, li.layer, W.shape, np.float32), np.float64)
+        zerr = (li.W_eff - W - E) / li.theta_se[:, :W.shape[1]]
+        # standardised errors of the identified entries: mean square ~ 1 (chi-square / P)
+        assert np.mean(zerr ** 2) < 1.0 + 6 * np.sqrt(2.0 / zerr.size), (li.layer, np.mean(zerr ** 2))
+        # and the error is found, as a weight error (its size is ~ rms W)
+        assert li.choice == "general"
+    assert {r["layer"] for r in _sig(ident, "weight_error")} == {1, 2}
+
+
+def test_gain_error_fires_on_a_fixed_gain_and_weight_error_does_not():
+    meas = sim(11, gains={1: 0.6, 2: 0.6, 3: 0.6}, n=80, r=16)
+    ident = identify(meas)
+    for li in ident.layers:
+        assert li.choice == "gain", (li.layer, li.choice)
+        assert abs(li.gain - 0.6) < 5 * li.gain_se + 1e-3
+    assert {r["layer"] for r in _sig(ident, "gain_error")} == {1, 2, 3}
+    assert not _sig(ident, "weight_error")
+    m = _first(ident)
+    assert m[0]["mechanism"] == "gain_error" and m[0]["layers"] == [1, 2, 3] and m[0]["p_value"] < 0.01
+
+
+def test_a_dead_neuron_is_found_and_named():
+    meas = sim(12, dead=(1, 3), n=80, r=16)
+    ident = identify(meas)
+    assert ident.by_layer()[1].dead == (3,)
+    rows = _sig(ident, "activation_mismatch")
+    assert any(r["layer"] == 1 and r["neurons"] == (3,) and "1:3" in r["evidence"] for r in rows)
+    assert _first(ident)[0]["mechanism"] == "activation_mismatch"
+
+
+def test_an_additive_time_drift_is_found_at_its_layer():
+    meas = sim(13, bias_drift=(1, 0.3), n=80, r=16)
+    ident = identify(meas)
+    rows = _sig(ident, "time_drift")
+    assert rows and {r["layer"] for r in rows} == {1}
+    m = _first(ident)
+    assert m[0]["mechanism"] == "time_drift" and m[0]["layers"] == [1]
+
+
+def test_correlated_additive_noise_is_found_at_its_layer():
+    meas = sim(14, common=(2, 0.05), n=80, r=16)
+    ident = identify(meas)
+    rows = _sig(ident, "correlated_noise")
+    assert {r["layer"] for r in rows} == {2}
+    assert "common" in rows[0]["evidence"]
+    assert "correlated_noise" in [m["mechanism"] for m in _first(ident)[:2]]
+
+
+def test_without_taps_the_output_is_identified_and_says_what_folds_into_it():
+    meas = sim(15, gains={2: 0.6}, taps=False, n=80, r=16)
+    ident = identify(meas)
+    assert [li.layer for li in ident.layers] == [3]
+    m = _first(ident)
+    assert m and "without taps" in m[0]["evidence"]
+
+
+def _null_family_wise(seeds, taps):
+    """Per file, the smallest Holm-adjusted p over every test (family-wise) and every raw p."""
+    fw, raw = [], []
+    for sd in seeds:
+        rows = identify(sim(100 + sd, n=60, r=16, taps=taps)).rows()
+        fw.append(min(r["p_adj"] for r in rows))
+        raw += [r["p"] for r in rows]
+    return np.array(fw), np.array(raw)
+
+
+def test_under_the_null_no_class_is_named_often():
+    # a few files, fast: the family-wise rate at 0.01 is small (binomial bound on 8 files)
+    fw, raw = _null_family_wise(range(8), taps=True)
+    assert np.sum(fw < 0.01) <= stats.binom.isf(1e-3, len(fw), 0.01)
+    assert np.mean(raw < 0.01) < 0.05
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("taps", [True, False])
+def test_under_the_null_the_p_values_are_not_too_small(taps):
+    # >= 40 simulated files: the family-wise false-positive rate at 0.01 within a binomial bound,
+    # and the raw p-values of every test not piled up below 0.05
+    fw, raw = _null_family_wise(range(40), taps=taps)
+    assert np.sum(fw < 0.01) <= stats.binom.isf(1e-3, len(fw), 0.01) + 1
+    assert np.mean(raw < 0.05) <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / len(raw)) * 3  # tests within a file correlate

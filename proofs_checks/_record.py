@@ -19,7 +19,7 @@ VERDICTS = ("holds", "fails", "inconclusive")
 FAMILY_ALPHA = 1e-3
 #: the family-wise error is split into SHARES equal shares, one per registered check (the
 #: registry holds at most SHARES checks); a check splits its share over its own tests
-SHARES = 20
+SHARES = 24
 ALPHA_CHECK = FAMILY_ALPHA / SHARES
 
 #: default two-sided confidence of a single numerical test outside a check (z about 4.42)

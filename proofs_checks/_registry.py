@@ -1,4 +1,4 @@
-"""The registry of check ids (CONTRACTS §5, then the ids appended by issue 12) and the runner."""
+"""The registry of check ids (CONTRACTS §5, then the ids appended by issues 12 and 27) and the runner."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Callable
 
 import jax
 
-from . import _gift, _linear, _sampling, _sampling_proofs, _sgd, _symbolic, _taylor, _theorem1
+from . import _gift, _kushner, _linear, _sampling, _sampling_proofs, _sgd, _symbolic, _taylor, _theorem1
 from ._record import SHARES
 
 #: id -> check function ``(key=None, precise=False) -> record``; the first twelve are CONTRACTS §5
@@ -34,6 +34,10 @@ CHECKS: dict[str, Callable] = {
     "d0_covariance_identity": _sampling_proofs.d0_covariance_identity,
     "gift_taylor_rule": _taylor.gift_taylor_rule,
     "linear_example_text_claim": _linear.linear_example_text_claim,
+    # appended (issue 27): claims that were not checked
+    "proposition2_unique_point": _kushner.proposition2_unique_point,
+    "kushner_verification": _kushner.kushner_verification,
+    "linear_example_v_scaling": _linear.linear_example_v_scaling,
 }
 
 CHECK_IDS = tuple(CHECKS)

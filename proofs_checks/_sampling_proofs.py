@@ -12,6 +12,7 @@ import mpmath
 import numpy as np
 import sympy as sp
 
+from ._hypotheses import normal_moments
 from ._record import hypothesis, level, record, symbolic_verdict
 
 _n = sp.Symbol("n", positive=True, integer=True)
@@ -79,7 +80,7 @@ def hierarchical_borel_cantelli(key=None, precise: bool = False) -> dict:
         counterexample=None if verdict != "fails" else {
             "schedules_with_divergent_sum": invalid, "fresh_draw_schedules_without_as_convergence": false_concl,
             "toy": "A ~ N(0,1), B|A ~ N(A,1), f = B"},
-        hypotheses=[hypothesis("integrability", "E|f| < inf, E f^2 < inf", True, "f = B ~ N(0, 2): E f^2 = 2")])
+        hypotheses=[normal_moments(2, powers=(1, 2), statement="E|f| < inf, E f^2 < inf with f = B ~ N(0, 2)")])
 
 
 # --------------------------------------------------------------------------------------
@@ -103,8 +104,9 @@ def covariance_identity():
 def bound_violations(rng, n: int = 300, support: int = 4):
     """eq:XYZbeta_bound, E[XYZ] <= E X E Y E Z + sqrt(Var X Var Y) E Z + sqrt(Var(XY) Var Z), on
     ``n`` random joint laws of nonnegative (X, Y, Z) with dependent values (50-digit arithmetic).
-    Returns the number of violations and the smallest slack."""
-    bad, slack_min = 0, mpmath.inf
+    Returns the number of violations, the smallest slack, the smallest value taken by X, Y, Z and
+    whether every value and probability is finite."""
+    bad, slack_min, low, finite = 0, mpmath.inf, np.inf, True
     with mpmath.workdps(50):
         for _ in range(n):
             p = rng.dirichlet(np.ones(support))
@@ -112,6 +114,8 @@ def bound_violations(rng, n: int = 300, support: int = 4):
             X = base * rng.uniform(0.5, 2, support)
             Y = base ** 2 * rng.uniform(0.5, 2, support)
             Z = rng.exponential(size=support) + base
+            low = min(low, float(np.min(X)), float(np.min(Y)), float(np.min(Z)))
+            finite = finite and bool(np.all(np.isfinite(np.concatenate([X, Y, Z, p]))))
             P = [mpmath.mpf(float(q)) for q in p]
             E = lambda f: mpmath.fsum(q * f(i) for i, q in enumerate(P))
             ex, ey, ez = E(lambda i: X[i]), E(lambda i: Y[i]), E(lambda i: Z[i])
@@ -122,7 +126,7 @@ def bound_violations(rng, n: int = 300, support: int = 4):
             slack = rhs - E(lambda i: X[i] * Y[i] * Z[i])
             slack_min = min(slack_min, slack)
             bad += slack < 0
-    return int(bad), float(slack_min)
+    return int(bad), float(slack_min), float(low), bool(finite)
 
 
 def d0_covariance_identity(key=None, precise: bool = False) -> dict:
@@ -130,7 +134,7 @@ def d0_covariance_identity(key=None, precise: bool = False) -> dict:
     d_two, d_central, d_bern = covariance_identity()
     rng = np.random.default_rng(0)
     n_laws = 1000 if precise else 300
-    bad, slack = bound_violations(rng, n_laws)
+    bad, slack, low, finite = bound_violations(rng, n_laws)
     r1, r2, a1, a2 = sp.symbols("r1 r2 a1 a2", real=True)
     R, A = sp.Matrix([r1, r2]), sp.Matrix([a1, a2])
     rank_one = sp.simplify(sum(e ** 2 for e in R * A.T) - (r1 ** 2 + r2 ** 2) * (a1 ** 2 + a2 ** 2))
@@ -152,5 +156,8 @@ def d0_covariance_identity(key=None, precise: bool = False) -> dict:
         correction=None,
         counterexample=None if verdict != "fails" else {"difference_two_argument_reading": str(d_two),
                                                          "violations": bad},
-        hypotheses=[hypothesis("moments", "X, Y, Z nonnegative with finite second moments (and XY)", True,
-                               "symbolic moments; the random laws are finite and nonnegative")])
+        hypotheses=[hypothesis("moments", "X, Y, Z nonnegative with finite second moments (and XY)",
+                               finite and low >= 0 and bool(all(m.is_finite is not False for m in d_two.free_symbols)),
+                               f"the identity: symbolic real moments (finite by being symbols of R); the {n_laws} random "
+                               f"laws have finite support, every value finite: {finite}, smallest value of X, Y, Z = "
+                               f"{low:.3g} >= 0")])

@@ -39,19 +39,35 @@ def steps_hypothesis(eps0: float, k0: float, power: float):
                       f"converges: {conv} (sympy)")
 
 
-def common_hypotheses(in_box=None):
-    """(A1), (A2), (A3), (A5), (B1) on the linear instances (identity activation, Gaussian data);
-    ``in_box``: whether every recorded iterate lies in H (the projection works), when known."""
-    z = sp.Symbol("z", real=True)
-    derivs = [sp.diff(z, z, k) for k in range(1, 4)]
-    return [hypothesis("A1/B1", "sigma in C^r_PB (r >= 2, r >= dim W)", all(d.is_constant() for d in derivs),
-                       f"sigma = identity: derivatives {derivs} (all bounded, C^inf)"),
-            hypothesis("A2", "E ||Y||^m ||X||^n < inf (m <= 4)", True,
-                       "x ~ N(0, I), y = V x: polynomial moments of a Gaussian are finite"),
-            hypothesis("A3", "fresh independent (x, y) and N each step", True, "one fresh key per step (by construction)"),
-            hypothesis("A5", "H is the box of ass:H-is-a-hyperrectangle", True if in_box is None else bool(in_box),
-                       "gt.project onto a gt.Box" + ("" if in_box is None else
-                                                     f"; every recorded iterate inside the box: {bool(in_box)}"))]
+def common_hypotheses(arch, box, in_box=None, keys=None):
+    """(A1)/(B1), (A2), (A3), (A5) computed on a linear instance: (A1)/(B1) on the architecture's
+    activation with r = max(2, dim W) (sympy), (A2) for x ~ N(0, I), y = V x (chi moments, sympy),
+    (A3) the step keys are all distinct (``keys``: raw key data of every step's draws), (A5) the box
+    is a hyperrectangle and, when known (``in_box``), every recorded iterate lies in it."""
+    from ._hypotheses import activation_pb, box_hypothesis, distinct_keys, gaussian_linear_moments
+
+    r = max(2, arch.n_params)
+    a1 = activation_pb(arch.activation, r=r, name="A1/B1", statement=f"sigma in C^r_PB (r >= 2, r >= dim W = {r})")
+    a3 = (distinct_keys(keys) if keys is not None else
+          hypothesis("A3", "fresh independent (x, y) and N each step", None, "the step keys were not recorded"))
+    a5 = box_hypothesis(box, name="A5", statement="H is the box of ass:H-is-a-hyperrectangle")
+    if in_box is not None:
+        a5 = hypothesis("A5", a5["statement"], a5["verified"] and bool(in_box),
+                        a5["detail"] + f"; every recorded iterate inside the box: {bool(in_box)}")
+    return [a1, gaussian_linear_moments(arch.widths[0], _TASK.V), a3, a5]
+
+
+def step_keys(key, R: int, n: int) -> np.ndarray:
+    """The raw data of the keys that draw data and noise at steps 0..n-1 of the R runs of
+    :func:`run_replicates` (same derivation), shape (R * n * 2, key words)."""
+    run_keys = jax.random.split(jax.random.split(key)[1], R)
+
+    def per_run(kk):
+        return jax.vmap(lambda i: jax.random.split(jax.random.fold_in(kk, i)))(jnp.arange(n))
+
+    ks = jax.jit(jax.vmap(per_run))(run_keys)
+    return np.asarray(jax.random.key_data(ks) if jnp.issubdtype(ks.dtype, jax.dtypes.prng_key) else ks).reshape(
+        R * n * 2, -1)
 
 
 def _eps(k, eps0, k0, power):
@@ -90,17 +106,17 @@ def run_replicates(key, arch, s, box, n_steps_list, *, R, eps0, k0, power, init_
     inits = jax.vmap(lambda k: gt.project(gt.init_params(k, arch, dtype=jnp.float64, gain=init_scale), box))(
         jax.random.split(k_init, R))
 
-    def segment(w, keys, start):
-        def body(w, i):
-            return jax.vmap(step, in_axes=(0, 0, None))(w, jax.vmap(lambda kk: jax.random.fold_in(kk, i))(keys),
-                                                        (start + i).astype(jnp.float64)), None
-        return body
-
     run_keys = jax.random.split(k_run, R)
+
+    def body(i, w):
+        # step i (global index) of every run: its own key, folded with i, so no two steps share draws
+        return jax.vmap(step, in_axes=(0, 0, None))(w, jax.vmap(lambda kk: jax.random.fold_in(kk, i))(run_keys),
+                                                    i.astype(jnp.float64))
+
+    advance = jax.jit(lambda w0, a, b: jax.lax.fori_loop(a, b, body, w0))      # compiled once for every segment
     out, w, done = [], inits, 0
     for n in n_steps_list:
-        body = segment(w, run_keys, done)
-        w, _ = jax.jit(lambda w0: jax.lax.scan(body, w0, jnp.arange(n - done)))(w)
+        w = advance(w, jnp.asarray(done), jnp.asarray(n))
         done = n
         out.append(w)
     return out
@@ -110,7 +126,7 @@ def sgd_limit_points(key=None, precise: bool = False) -> dict:
     """Proposition 2 inside its hypotheses (a box that does not bind), and the finding on a
     box that binds, where (B2) fails."""
     key = jax.random.PRNGKey(7) if key is None else key
-    lev = level(2)
+    lev = level(3)
     eps0, k0, power, s, R = 0.05, 100.0, 1.0, 0.5, 32
     N = [2500, 10000, 40000] if not precise else [5000, 20000, 80000]
     arch = gt.Architecture((2, 1), activation="identity", noise_sites="all")
@@ -152,10 +168,18 @@ def sgd_limit_points(key=None, precise: bool = False) -> dict:
         tests.append(sign_verdict(float(lr.mean()), float(lr.std(ddof=1) / math.sqrt(R)), "negative",
                                   confidence=lev.confidence))
     logr = np.log(inn["g"][-1] / inn["g"][0])
+    # "converges to a unique point": the critical set of the strictly convex J_s in the box is the single point
+    # w*, so each run must approach it -- per-run log decrease of ||w - w*|| from the first to the last checkpoint
+    dist = np.log(inn["pg"][-1] / inn["pg"][0])
+    point = sign_verdict(float(dist.mean()), float(dist.std(ddof=1) / math.sqrt(R)), "negative",
+                         confidence=lev.confidence)
+    tests.append(point)
     verdict = decide(fails=any(v == "fails" for v, _ in tests), holds=all(v == "holds" for v, _ in tests))
     # the binding box: (B2) fails at the constrained minimiser, where grad J != 0 and the projected gradient is 0
     tb = rows["tight"]
-    hyps = common_hypotheses(in_box=rows["inner"]["in_box"] and rows["tight"]["in_box"]) + [
+    keys = np.concatenate([step_keys(jax.random.fold_in(key, k), R, N[-1]) for k in (0, 1)])
+    hyps = common_hypotheses(arch, inner_box, in_box=rows["inner"]["in_box"] and rows["tight"]["in_box"],
+                             keys=keys) + [
         steps_hypothesis(eps0, k0, power),
         hypothesis("B2", "grad J|_H != 0 => -grad J|_H + pi != 0", convex and interior and diagonal,
                    f"box [-1, 1]: J_s strictly convex (Hessian of the closed form: eigenvalues "
@@ -174,7 +198,9 @@ def sgd_limit_points(key=None, precise: bool = False) -> dict:
         f"{np.asarray(_TASK.V).tolist()}, s = {s:g}, {R} independent projected-SGD runs, eps_k = {eps0:g}/(1+k/{k0:g}): "
         f"inside (B2) (box [-1, 1]) the exact ||grad J_s|| at the iterate after {N} steps has median "
         f"{' -> '.join(fmt(float(np.median(x))) for x in inn['g'])}, decreasing significantly over each 4x step-size "
-        f"reduction (z = {tests[0][1]:.1f}, {tests[1][1]:.1f}); mean log-decrease {N[0]} -> {N[-1]} steps "
+        f"reduction (z = {tests[0][1]:.1f}, {tests[1][1]:.1f}); the distance to the unique critical point w* of the "
+        f"box (the point the statement names) has median {' -> '.join(fmt(float(np.median(x))) for x in inn['pg'])}, "
+        f"mean log-decrease {fmt(float(dist.mean()))} (z = {point[1]:.1f}: {point[0]}); mean log-decrease {N[0]} -> {N[-1]} steps "
         f"{fmt(float(logr.mean()))} (fluctuations of order sqrt(eps_k) predict log(1/4) = {fmt(math.log(0.25))}); the "
         f"noise-free J_0 keeps ||grad J_0|| = {fmt(float(np.median(inn['g0'])))} at the last iterates (SGD minimises "
         f"J_s). Binding box [-0.5, 0.5] (outside (B2)): ||grad J_s|| stays {fmt(float(np.median(tb['g'][-1])))} while "
@@ -270,7 +296,7 @@ def proposition1_ode_limit(key=None, precise: bool = False) -> dict:
                                   confidence=lev.confidence)
     eps_ratio = _eps(windows[-1], eps0, k0, power) / _eps(windows[0], eps0, k0, power)
     verdict = decide(fails=v_dec == "fails", holds=v_dec == "holds" and v_ctrl == "holds")
-    hyps = common_hypotheses() + [steps_hypothesis(eps0, k0, power)]
+    hyps = common_hypotheses(arch, box) + [steps_hypothesis(eps0, k0, power)]
     evidence = (
         f"linear M_s 2-2-1 with biases, noise at every site, s = {s:g}, box [-0.5, 0.5], {R} runs, eps_k = "
         f"{eps0:g}/(1+k/{k0:g}): from iterations {windows} the SGD path is compared with the projected ODE (projected "

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sympy as sp
 
+from ._hypotheses import activation_pb
 from ._record import hypothesis, record, symbolic_verdict
 
 
@@ -66,8 +67,25 @@ def lemma_gaussian_product_derivative(max_L: int = 3) -> dict:
         correction=("d/ds prod_i phi_s(n_i) = s^-1 sum_i (s^-2 |n_i|^2 - d_i) prod_j phi_s(n_j) "
                     "(verified symbolically for L=1..%d)" % max_L) if corrected_ok else None,
         counterexample=counter,
-        hypotheses=[hypothesis("gaussian", "phi_s^(d) the N(0, s^2 I_d) density, s > 0, d_i >= 1", True,
-                               "symbols s > 0, d_i positive integers, |n_i|^2 >= 0: every case at once")])
+        hypotheses=[_gaussian_density_hypothesis(s, d[0])])
+
+
+def _gaussian_density_hypothesis(s, d):
+    """The product's factors are N(0, s^2 I_d) densities: for d = 1, 2 (sympy), the factor of
+    :func:`gaussian_product` integrates to 1 and has second moment d s^2 over R^d; s > 0 and d >= 1 are
+    properties of the symbols."""
+    xs = sp.symbols("x1:3", real=True)
+    ok, rows = bool(s.is_positive) and bool(d.is_positive) and bool(d.is_integer), []
+    for dim in (1, 2):
+        r2 = sum(x ** 2 for x in xs[:dim])
+        dens = gaussian_product([dim], s, [r2])
+        lims = [(x, -sp.oo, sp.oo) for x in xs[:dim]]
+        mass, m2 = sp.simplify(sp.integrate(dens, *lims)), sp.simplify(sp.integrate(r2 * dens, *lims))
+        ok = ok and mass == 1 and sp.simplify(m2 - dim * s ** 2) == 0
+        rows.append(f"d = {dim}: mass {mass}, E|n|^2 = {m2}")
+    return hypothesis("gaussian", "phi_s^(d) the N(0, s^2 I_d) density, s > 0, d_i >= 1", ok,
+                      f"symbols s > 0: {s.is_positive}, d_i positive integers: {bool(d.is_positive and d.is_integer)}; "
+                      f"the factor integrates (sympy) to " + "; ".join(rows))
 
 
 # --------------------------------------------------------------------------------------
@@ -122,6 +140,17 @@ def backprop_difference(widths=(2, 2, 2, 1), printed: bool = True):
     return nonzero
 
 
+def _generic_sigma_hypothesis():
+    """sigma differentiable: the check's sigma is an undefined sympy Function, whose derivative sympy keeps
+    as an unevaluated Derivative (no property of a particular sigma is used: every differentiable sigma)."""
+    sigma, u = sp.Function("sigma"), sp.Symbol("u")
+    d = sp.diff(sigma(u), u)
+    ok = isinstance(d, sp.Derivative) and d.expr == sigma(u)
+    return hypothesis("sigma", "sigma differentiable (A1)", ok,
+                      f"an undefined sympy Function: d sigma(u)/du = {d} stays unevaluated ({type(d).__name__}), so "
+                      "the symbolic residuals hold for any differentiable sigma")
+
+
 def backprop_formulas(widths=(2, 2, 2, 1)) -> dict:
     nonzero = backprop_difference(widths)
     verdict = symbolic_verdict(len(nonzero) == 0)
@@ -136,7 +165,7 @@ def backprop_formulas(widths=(2, 2, 2, 1)) -> dict:
         f"(reading the printed A^(i-1) as A^(l-1), an index typo). Exact (sympy): no statistical test, no tolerance",
         correction=None,
         counterexample=None if verdict == "holds" else {"differing_entries": [str(e) for e in nonzero[:3]]},
-        hypotheses=[hypothesis("sigma", "sigma differentiable (A1)", True, "an undefined sympy Function: any sigma")])
+        hypotheses=[_generic_sigma_hypothesis()])
 
 
 # --------------------------------------------------------------------------------------
@@ -188,6 +217,24 @@ def score_identity_difference(widths=(1, 1, 1), activation="quadratic"):
     return out
 
 
+_z = sp.Symbol("z", real=True)
+
+
+def _noise_hypothesis():
+    """The moment rule of :func:`_gauss_expect` is the N(0, s^2) law (sympy.stats, moments 1-6) and s > 0."""
+    from sympy.stats import E, Normal
+
+    s = sp.symbols("s", positive=True)
+    n = sp.Symbol("n")
+    X = Normal("X", 0, s)
+    rows = [(k, _gauss_expect(n ** k, [n], s), sp.simplify(E(X ** k))) for k in range(1, 7)]
+    ok = bool(s.is_positive) and all(sp.simplify(a - b) == 0 for _, a, b in rows)
+    return hypothesis("noise", "independent N(0, s^2) noise at the sites of S, s > 0", ok,
+                      "the moment rule used for every noise symbol against sympy.stats N(0, s^2): "
+                      + ", ".join(f"E n^{k} = {a}" for k, a, _ in rows) + f"; s > 0: {s.is_positive}; independence: "
+                      "the rule factorises over distinct symbols")
+
+
 def score_function_identity(widths=(1, 1, 1), activation: str = "quadratic") -> dict:
     res = score_identity_difference(widths, activation)
     s = res["s"]
@@ -199,7 +246,9 @@ def score_function_identity(widths=(1, 1, 1), activation: str = "quadratic") -> 
     ratio_set = sorted({str(r) for r in ratios})
     # a concrete counterexample: all weights 1/2, biases 0, x = 1, y = 0, s = 1/2
     subs = {p: sp.Rational(1, 2) if str(p).startswith("W") else 0 for p in res["params"]}
-    subs.update({sp.Symbol("x1"): 1, sp.Symbol("y1"): 0, s: sp.Rational(1, 2)})
+    subs.update({x: 1 for x in sp.symbols(f"x1:{widths[0] + 1}")})
+    subs.update({y: 0 for y in sp.symbols(f"y1:{widths[-1] + 1}")})
+    subs[s] = sp.Rational(1, 2)
     k = 0
     counter = None
     if verdict == "fails":
@@ -220,6 +269,5 @@ def score_function_identity(widths=(1, 1, 1), activation: str = "quadratic") -> 
                     "(-2 R^(l) (A^(l-1))^T) ] dmu; hence the printed D^[0] estimates -(s0/2) d/ds grad J_s0 "
                     "(verified symbolically here)") if corrected_ok else None,
         counterexample=counter,
-        hypotheses=[hypothesis("A1", "sigma in C^2_PB", True, "sigma(z) = z + z^2/2: polynomial (the identity is "
-                               "then exact in Gaussian moments)"),
-                    hypothesis("noise", "independent N(0, s^2) noise at the sites of S, s > 0", True, "symbol s > 0")])
+        hypotheses=[activation_pb(_z + _z ** 2 / 2) if activation == "quadratic" else activation_pb("identity"),
+                    _noise_hypothesis()])

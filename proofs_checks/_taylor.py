@@ -41,7 +41,7 @@ def gift_taylor_rule(key=None, precise: bool = False) -> dict:
     key = jax.random.PRNGKey(23) if key is None else key
     lev = level(3)           # the shared Theorem-1 intervals, the two paired tests on the ONN
     phi, g0, v, w_st, x = flat_direction_family()
-    never = phi == 0
+    never = phi == 0          # J_st(v_s) - J_st(w0) vanishes identically in s and st
     sides = [linear_side(L) for L in (1, 2, 3)]
     side_ok = all(bool(r.is_positive) for r, e in sides)      # positive for all positive symbols: sign(C1) = sign(st - s0)
     # the exact good set on the L = 1 chain at V = 1/2, m2 = 1, s0 = 1/2, st = 4/5
@@ -67,10 +67,15 @@ def gift_taylor_rule(key=None, precise: bool = False) -> dict:
     corrected_ok = side_ok and vt == "holds" and va == "holds"
     st_sym = next(iter(w_st.free_symbols))
     # for every st != s0 = 1 the refutation holds (phi = 0 identically), and w_st -> w0 as st -> s0
-    phi_free = st_sym not in phi.free_symbols and x not in phi.free_symbols
     close_limit = sp.limit(w_st, st_sym, 1)
-    hyps = [hypothesis("misspecified", "s0 != st", bool(phi_free), f"J_st(v_s) - J_st(w0) = {phi} for every s and "
-                       "every st, in particular every st != s0 = 1"),
+    # the refuting instances: concrete st != s0 = 1, each computed: st - s0 != 0 and phi(s) = 0 for every s there
+    s0_inst, st_insts = sp.Integer(1), (sp.Rational(1, 2), sp.Rational(11, 10), sp.Integer(2))
+    at = [(t, sp.simplify(phi.subs(st_sym, t))) for t in st_insts]
+    misspecified = all(sp.simplify(t - s0_inst) != 0 for t in st_insts)
+    hyps = [hypothesis("misspecified", "s0 != st", misspecified,
+                       f"s0 = {s0_inst}; st in {[str(t) for t in st_insts]}: st - s0 = "
+                       f"{[str(sp.simplify(t - s0_inst)) for t in st_insts]} (sympy), where J_st(v_s) - J_st(w0) = "
+                       f"{[str(ph) for _, ph in at]} as functions of s (zero for every s)"),
             hypothesis("w0_critical", "w_s0 a critical point of J_s0", g0 == 0, f"grad J_1(0) = {g0} (exact)"),
             hypothesis("close", "w_s0 sufficiently close to w_st", close_limit == 0,
                        f"w_st - w_s0 = {w_st} -> {close_limit} as st -> s0: below any threshold for st near s0 (the "

@@ -5,20 +5,22 @@ from __future__ import annotations
 import math
 
 from .._errors import GiftInputError
+from ._common import add_data_arguments, check_data_folder, nonneg_float, nonneg_int, positive_float
 
 
 def add_arguments(parser):
     from ..finetune import METHODS
 
-    parser.add_argument("--dataset", default="digits", help="digits (default), mnist5k, teacher")
+    add_data_arguments(parser)
     parser.add_argument("--arch", default="64-32-32-10", help="widths d0-...-dL (default 64-32-32-10)")
-    parser.add_argument("--s0", type=float, required=True, help="the noise level assumed in training")
-    parser.add_argument("--st", type=float, required=True, help="the chip's true noise level")
+    parser.add_argument("--s0", type=positive_float, required=True, help="the noise level assumed in training")
+    parser.add_argument("--st", type=nonneg_float, required=True, help="the chip's true noise level")
     parser.add_argument("--true-effect", action="append", default=[], metavar="NAME=VALUE",
                         help="a CONTRACTS §2 effect the chip also has (repeatable), e.g. shot=0.01")
     parser.add_argument("--method", default="gift", help=f"one of: {', '.join(METHODS)}")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--budget", type=float, default=20, help="chip evaluations allowed (units of Eval(K1, K2))")
+    parser.add_argument("--seed", type=nonneg_int, default=0,
+                        help="names the trained weights, the chip's noise and the method's randomness (default 0)")
+    parser.add_argument("--budget", type=nonneg_float, default=20, help="chip evaluations allowed (units of Eval(K1, K2))")
     parser.add_argument("--K1", type=int, default=None, help="fine-tuning inputs (default: all training inputs)")
     parser.add_argument("--K2", type=int, default=1, help="shots per input per Eval (default 1)")
     parser.add_argument("--weights", default=None, metavar="FILE.npz",
@@ -40,6 +42,7 @@ def add_arguments(parser):
 def run(args) -> dict:
     from ..finetune import METHODS, run_finetune
 
+    check_data_folder(args)
     if args.method not in METHODS:
         raise GiftInputError(f"--method {args.method!r}: unknown; known: {', '.join(METHODS)}")
     for name, v in (("--s0", args.s0), ("--st", args.st), ("--budget", args.budget)):
@@ -71,7 +74,7 @@ def run(args) -> dict:
     out = run_finetune(dataset=args.dataset, arch=args.arch, s0=args.s0, st=args.st,
                        true_effects=tuple(args.true_effect), method=args.method, seed=args.seed,
                        budget=args.budget, K1=args.K1, K2=args.K2, weights=args.weights,
-                       train_epochs=args.train_epochs, **extra)
+                       train_epochs=args.train_epochs, data_folder=args.data_folder, **extra)
     out["info"] = _plain(out.get("info", {}))
     out["gift_info"] = _plain(out.get("gift_info"))
     return out

@@ -85,11 +85,12 @@ RUNNERS = {
 
 
 def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = True, weights: str | None = None,
-                 train_epochs: int | None = None):
+                 train_epochs: int | None = None, data_folder: str | None = None):
     """``(ds, arch, w0)``: the data set and weights trained in silico at s0 (cached), or read
     from the weight file ``weights`` (W1, b1, ... as written by ``gift train``).
     ``train_epochs``: train for this many epochs instead of the default recipe's (an
-    under-trained w0; cached under its own key)."""
+    under-trained w0; cached under its own key). ``data_folder``: the MNIST IDX folder for
+    ``dataset="mnist"``."""
     from .._params import check_params
     from ..data import load_dataset
     from ..training import load_or_train, load_weights
@@ -97,7 +98,7 @@ def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = 
     arch = Architecture.parse(arch) if isinstance(arch, str) else (
         arch if isinstance(arch, Architecture) else Architecture(tuple(arch)))
     require(s0 > 0, f"--s0 {s0}: the assumed noise level must be positive")
-    ds = load_dataset(dataset)
+    ds = load_dataset(dataset, folder=data_folder)
     require(arch.widths[0] == ds.n_inputs and arch.widths[-1] == ds.n_outputs,
             f"--arch {arch} does not fit dataset {dataset} (inputs {ds.n_inputs}, outputs {ds.n_outputs})")
     if weights is not None:
@@ -111,7 +112,8 @@ def load_setting(dataset: str, arch, s0: float, seed: int = 0, progress: bool = 
 
             require(int(train_epochs) >= 1, f"train_epochs {train_epochs}: must be at least 1")
             config = dataclasses.replace(default_config(dataset, arch), epochs=int(train_epochs))
-        w0, _ = load_or_train(dataset, arch, s0=float(s0), seed=int(seed), progress=progress, config=config)
+        w0, _ = load_or_train(dataset, arch, s0=float(s0), seed=int(seed), progress=progress, config=config,
+                              folder=data_folder)
     return ds, arch, cast(w0, jnp.float32)
 
 
@@ -179,7 +181,7 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
 
 def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),
                  method: str = "gift", seed: int = 0, weights: str | None = None, train_epochs: int | None = None,
-                 **options) -> dict:
+                 data_folder: str | None = None, **options) -> dict:
     """Fine-tune weights trained in silico at ``s0`` against a simulated chip at ``st``.
 
     Parameters
@@ -191,6 +193,7 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
     seed : names the trained weights, the chip's noise and the method's randomness
     weights : optional weight file to fine-tune instead of training at s0
     train_epochs : train w0 for this many epochs instead of the default recipe's
+    data_folder : the MNIST IDX folder for ``dataset="mnist"``
     options : budget (chip evaluations, default 20), K1 (fine-tuning inputs, default all
         training inputs), K2 (shots per input per Eval, default 1), referee_K2, and the
         method's own keywords: ``confirm=False`` (gift, ift, gradient, random: no
@@ -207,7 +210,8 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
     physics = true_physics(st, true_effects)  # bad input is reported before any training
     with phase("setting"):
-        ds, arch_, w0 = load_setting(dataset, arch, s0, seed, weights=weights, train_epochs=train_epochs)
+        ds, arch_, w0 = load_setting(dataset, arch, s0, seed, weights=weights, train_epochs=train_epochs,
+                                      data_folder=data_folder)
     out = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=method, seed=seed, **options)
     out.pop("params")
     out.pop("direction")

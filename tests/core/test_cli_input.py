@@ -32,6 +32,10 @@ def run(capsys, *argv):
     (["train", "--seed", "-1"], "must be an integer >= 0"),
     (["demo", "--s0", "0"], "must be a finite number > 0"),
     (["demo", "--budget", "nan"], "must be a finite number"),
+    (["finetune", "--s0", "0", "--st", "0.2"], "must be a finite number > 0"),
+    (["finetune", "--s0", "0.1", "--st", "0.2", "--seed", "-1"], "must be an integer >= 0"),
+    (["finetune", "--s0", "0.1", "--st", "0.2", "--dataset", "mnist"], "--data-folder"),
+    (["train", "--dataset", "digits", "--data-folder", "/tmp"], "only --dataset mnist"),
 ])
 def test_bad_arguments_give_one_line_and_exit_2(capsys, argv, fragment):
     code, out, err = run(capsys, *argv)
@@ -212,3 +216,27 @@ def test_reference_page_lists_every_builtin_effect_with_its_mechanism_class():
         assert rows.get(name) == REGISTRY[name].mechanism, name
     classes = set(re.findall(r"^\| `(\w+)` \| [^|]+ \| [^|]*\|$", text.split("## §6")[1], re.M))
     assert classes == set(MECHANISMS)
+
+
+def _tiny_mnist(folder, n_train=64, n_test=16):
+    import numpy as np
+
+    from gift_theory.data import write_idx
+    from gift_theory.data._idx import FILES
+
+    rng = np.random.default_rng(0)
+    for split, n in (("train", n_train), ("test", n_test)):
+        write_idx(str(folder / FILES[f"{split}_images"]), rng.integers(0, 256, (n, 28, 28), dtype=np.uint8))
+        write_idx(str(folder / FILES[f"{split}_labels"]), (np.arange(n) % 10).astype(np.uint8))
+
+
+@pytest.mark.slow
+def test_finetune_reads_mnist_from_the_data_folder(capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("GIFT_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "mnist").mkdir()
+    _tiny_mnist(tmp_path / "mnist")
+    code, out, err = run(capsys, "finetune", "--dataset", "mnist", "--data-folder", str(tmp_path / "mnist"),
+                         "--arch", "784-4-10", "--s0", "0.1", "--st", "0.2", "--method", "none", "--json")
+    assert code == 0, err
+    obj = json.loads(out)
+    assert obj["dataset"] == "mnist" and obj["arch"] == [784, 4, 10] and obj["loss_after"] == obj["loss_before"]

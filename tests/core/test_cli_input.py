@@ -121,7 +121,13 @@ def test_did_you_mean_says_nothing_when_nothing_is_close():
     assert did_you_mean(msg) == msg
 
 
-@pytest.mark.parametrize("command", ["demo", "train", "bench"])
+def _commands():
+    from gift_theory.cli._main import COMMANDS
+
+    return list(COMMANDS)
+
+
+@pytest.mark.parametrize("command", _commands())
 def test_every_flag_has_help_and_help_points_to_the_reference_page(capsys, command):
     import importlib
 

@@ -2,7 +2,7 @@
 
     python -m studies.calibrate null  [--sets 120] [--taps|--no-taps] [--fitted [--effect NAME]]
     python -m studies.calibrate ident [--seeds 3] [--taps|--no-taps] [--effects a,b]
-    python -m studies.calibrate time  [--taps] [--warm N]
+    python -m studies.calibrate time  [--taps] [--warm N] [--fresh N]
 
 ``null``: data sets simulated from the awgn model itself; the share of p < 0.01 (and
 < 0.05) is the false-alarm rate of the goodness-of-fit test. With ``--fitted`` the model's
@@ -18,7 +18,9 @@ one) and the coupling test's p per layer, and the summary the refusal rate.
 with that hidden effect on a random network per seed; records whether ``diagnose`` flags a
 missing effect, ranks the hidden one first (top three for two), and whether the winner's
 p-value after fitting is >= 0.01. ``time``: one ``diagnose`` of a 240-input x 64-shot file
-on a 16-32-16-8 network.
+on a 16-32-16-8 network; ``--fresh N`` runs it in N fresh processes one after the other (the
+second and later load the compiled programs from the disk cache: the time a user sees on a
+second ``gift diagnose``), each with its CPU seconds and the load average.
 
 Every row is printed as one JSON line on stdout (progress on stderr), so a partial run is
 still a result; the summary is the last line.
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 
@@ -46,6 +49,7 @@ HIDDEN = {
     "shot": {"shot": 0.03},
     "saturation": {"saturation": 0.7},
     "quantization": {"quantization": {"bits": 5, "v_range": 2.0}},
+    "layer_gain": {"layer_gain": {"g": ((0.6,), (0.8,), (1.25,))}},
     "shot+crosstalk": {"shot": 0.03, "crosstalk": 0.2},
     "none": {},
 }
@@ -157,6 +161,35 @@ def ident_study(seeds, widths, n, r, s, taps, effects, out):
     return summary
 
 
+def time_fresh(taps, fresh: int, out):
+    """``fresh`` fresh processes one after the other, each one ``time`` study with no warm call
+    (its first call: in the second and later processes the compiled programs come from the disk
+    cache); per process its wall and CPU seconds of the diagnose and the 1-minute load average
+    before it (the machine may be shared: compare paired runs)."""
+    import os
+    import subprocess
+
+    rows = []
+    for i in range(int(fresh)):
+        load = os.getloadavg()[0]
+        args = [sys.executable, "-c", "import sys, json; from studies.calibrate import time_study; "
+                f"print(json.dumps(time_study({bool(taps)}, sys.stdout, warm=0)))"]
+        done = subprocess.run(args, capture_output=True, text=True, check=True)
+        row = json.loads(done.stdout.strip().splitlines()[-1])
+        row.update({"study": "time_fresh", "process": i + 1, "load_average_1min": load})
+        rows.append(row)
+        out.write(json.dumps(row) + "\n")
+        out.flush()
+        print(f"[time] fresh process {i + 1}: {row['seconds_first_call']:.2f} s (cpu {row['cpu_first_call']:.2f} s, "
+              f"load {load:.1f})", file=sys.stderr)
+    later = [r["seconds_first_call"] for r in rows[1:]]
+    return {"study": "time", "summary": True, "taps": taps, "fresh": int(fresh),
+            "seconds_fresh": [r["seconds_first_call"] for r in rows],
+            "cpu_fresh": [r["cpu_first_call"] for r in rows],
+            "load_average_1min": [r["load_average_1min"] for r in rows],
+            **({"seconds_second_and_later_median": float(np.median(later))} if later else {})}
+
+
 def time_study(taps, out, warm: int = 1):
     """One diagnose in a fresh process (key 3: compiles, or loads from the disk cache), then
     ``warm`` more in the same process (keys 4, 5, ...). ``seconds_compiled`` is key 4's, the
@@ -171,9 +204,13 @@ def time_study(taps, out, warm: int = 1):
     x = np.asarray(jax.random.uniform(jax.random.PRNGKey(1), (240, 16)))
     meas = simulate_measurement(jax.random.PRNGKey(2), params, x, gt.Physics.create(s=0.1, shot=0.02), shots=64,
                                 taps=taps, times=True)
-    t0 = time.time()
+    t0, c0 = time.time(), os.times()
     diagnose(jax.random.PRNGKey(3), meas)
-    first = time.time() - t0
+    first, c1 = time.time() - t0, os.times()
+    cpu_first = c1.user + c1.system - c0.user - c0.system
+    if warm == 0:
+        return {"study": "time", "summary": True, "taps": taps, "arch": list(widths), "inputs": 240, "shots": 64,
+                "seconds_first_call": first, "cpu_first_call": cpu_first}
     seconds, explained = [], []
     for k in range(4, 4 + int(warm)):
         t0 = time.time()
@@ -182,7 +219,7 @@ def time_study(taps, out, warm: int = 1):
         explained.append(bool(d.explained))
         print(f"[time] warm call, key {k}: {seconds[-1]:.2f} s (explained: {explained[-1]})", file=sys.stderr)
     res = {"study": "time", "summary": True, "taps": taps, "arch": list(widths), "inputs": 240, "shots": 64,
-           "seconds_first_call": first, "seconds_compiled": seconds[0]}
+           "seconds_first_call": first, "cpu_first_call": cpu_first, "seconds_compiled": seconds[0]}
     if len(seconds) > 1:
         res.update({"seconds_warm": seconds, "explained_warm": explained,
                     "seconds_warm_median": float(np.median(seconds))})
@@ -200,6 +237,8 @@ def main(argv=None):
     p.add_argument("--inputs", type=int, default=160)
     p.add_argument("--shots", type=int, default=48)
     p.add_argument("--warm", type=int, default=1, help="time: diagnose calls after the first (keys 4, 5, ...)")
+    p.add_argument("--fresh", type=int, default=0,
+                   help="time: instead, N fresh processes one after the other, each timing its first call")
     p.add_argument("--s", type=float, default=0.1)
     p.add_argument("--effects", default=",".join(HIDDEN))
     p.add_argument("--effect", default=None, choices=[k for k in HIDDEN if "+" not in k and k != "none"],
@@ -215,6 +254,10 @@ def main(argv=None):
         res = null_study(a.sets, widths, a.inputs, a.shots, a.s, a.taps, a.fitted, out, a.effect)
     elif a.study == "ident":
         res = ident_study(a.seeds, widths, a.inputs, a.shots, a.s, a.taps, a.effects.split(","), out)
+    elif a.fresh:
+        if a.fresh < 0:
+            p.error(f"--fresh {a.fresh}: the number of processes must be at least 1")
+        res = time_fresh(a.taps, a.fresh, out)
     else:
         res = time_study(a.taps, out, a.warm)
     out.write(json.dumps(res) + "\n")

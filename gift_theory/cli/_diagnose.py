@@ -44,19 +44,24 @@ def render(out) -> str:
         lines.append("failing layers (one-step check, 0.01 with Bonferroni over the layers): "
                      + (", ".join(map(str, fl)) if fl else "none"))
     if out.get("mechanisms"):
-        lines.append("mechanisms the localised evidence points to (CONTRACTS section 6; score in sd):")
+        lines.append("mechanisms the localised evidence points to (CONTRACTS section 6; score in sd, p after "
+                     "multiplicity correction):")
         for m in out["mechanisms"]:
             where = f"layers {', '.join(map(str, m['layers']))}" if m["layers"] else "layers ?"
-            lines.append(f"  {m['mechanism']:<22s} {where:<14s} {m['score']:7.1f}  {m['evidence']}")
+            p = m.get("p_value")
+            ptext = f"p = {p:<9.3g}" if isinstance(p, (int, float)) else " " * 13
+            lines.append(f"  {m['mechanism']:<22s} {where:<14s} {m['score']:7.1f}  {ptext} {m['evidence']}")
     if not out.get("explained", True) and out.get("reasons"):
         lines.append("why not explained: " + "; ".join(out["reasons"]))
-    lines.append("ranking (held-out discrepancy after fitting; models that pass first, then by parsimony-penalised "
-                 "discrepancy):")
+    lines.append("ranking (held-out discrepancy after fitting): the models that pass (by parsimony-penalised "
+                 "discrepancy), then those refused by a check of their fitted values, then those the data reject:")
     for i, r in enumerate(out["ranking"], 1):
         ps = ", ".join(f"{k}={v:.4g}" for k, v in r["params"].items() if isinstance(v, (int, float)))
+        ps += "".join(f", {k}=[{', '.join(f'{x:.3g}' for x in v)}]" for k, v in r["params"].items()
+                      if isinstance(v, list) and 0 < len(v) <= 8)
         name = " + ".join(r.get("with", []) + [r["effect"]])
-        lines.append(f"  {i:2d}. {name:<28s} {r['discrepancy_after']:10.4g}  p = {r['p_value_after']:<9.3g} "
-                     f"[{r.get('mechanism', '')}] {ps}")
+        lines.append(f"  {i:2d}. {name:<28s} {r.get('status', ''):<8s} {r['discrepancy_after']:10.4g}  "
+                     f"p = {r['p_value_after']:<9.3g} [{r.get('mechanism', '')}] {ps}")
     if any("net_discrepancy_after" in r for r in out["ranking"]):
         lines.append("  (fitted offsets: p against the refit null, i.e. net of the offsets' estimation error)")
         if not out.get("refit_null_calibrated", True):

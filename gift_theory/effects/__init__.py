@@ -9,7 +9,7 @@ laplace            (uses s)                law             noise_law            
 uniform            (uses s)                law             noise_law              :mod:`.uniform`
 multiplicative     m                       gain            input_dependent_noise  :mod:`.multiplicative`
 common_mode        c                       gain            gain_fluctuation       :mod:`.common_mode`
-drift              r                       gain            gain_fluctuation       :mod:`.drift`
+drift              r                       gain            time_drift             :mod:`.drift`
 crosstalk          k                       weights         weight_error           :mod:`.crosstalk`
 weight_error       e (device: seed)        weights         weight_error           :mod:`.weight_error`
 shot               q                       readout         input_dependent_noise  :mod:`.shot`
@@ -17,10 +17,12 @@ saturation         v_max                   readout         readout_nonlinearity 
 quantization       bits, v_range           readout         readout_nonlinearity   :mod:`.quantization`
 bias_offset        sigma (device: seed)    bias            bias_offset            :mod:`.bias_offset`
 activation_gain    kappa (hidden layers)   activation      activation_mismatch    :mod:`.activation_gain`
+layer_gain         g (one per layer)       weights         gain_error             :mod:`.layer_gain`
 =================  ======================  ==============  =====================  ======================
 
-The first eleven are CONTRACTS §2's table (:data:`EFFECT_NAMES`); :data:`BUILTIN` lists all
-thirteen built-in ones. A user adds an effect in a file of their own (CONTRACTS §2b)::
+The first eleven are CONTRACTS §2's original table (:data:`EFFECT_NAMES`); :data:`BUILTIN`
+lists all fourteen built-in ones (the §2 table now lists every one of them). A user adds an
+effect in a file of their own (CONTRACTS §2b)::
 
     from gift_theory.effects import Effect, register
 
@@ -70,6 +72,7 @@ from .uniform import Uniform as Uniform
 from .weight_error import WeightError as WeightError
 from .bias_offset import BiasOffset as BiasOffset
 from .activation_gain import ActivationGain as ActivationGain
+from .layer_gain import LayerGain as LayerGain
 from ._physics import Physics as Physics
 from ._physics import awgn as awgn
 from ._plugins import load_entry_points as load_entry_points
@@ -79,8 +82,8 @@ from ._plugins import load_plugin as load_plugin
 EFFECT_NAMES = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "drift",
                 "crosstalk", "weight_error", "shot", "saturation", "quantization")
 
-#: every built-in effect, in catalogue order: CONTRACTS §2's eleven, then the open-catalogue ones
-BUILTIN = EFFECT_NAMES + ("bias_offset", "activation_gain")
+#: every built-in effect, in catalogue order: CONTRACTS §2's first eleven, then the ones added since
+BUILTIN = EFFECT_NAMES + ("bias_offset", "activation_gain", "layer_gain")
 
 if set(BUILTIN) != set(REGISTRY):  # pragma: no cover - a module was added without listing it
     raise ImportError(f"effect registry and catalogue disagree: {sorted(set(BUILTIN) ^ set(REGISTRY))}")

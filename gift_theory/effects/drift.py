@@ -1,4 +1,5 @@
-"""``drift``: gain g_l = 1 + r t, t in [0, 1] the shot's normalised acquisition time.
+"""``drift``: gain g_l = 1 + r t, t in [0, 1] the shot's normalised acquisition time
+(CONTRACTS §6 class ``time_drift``: a parameter that changes over the acquisition time).
 Without acquisition times t = 0 and the effect is silent."""
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ class Drift(Effect):
     params = ("r",)
     defaults = {"r": 0.05}
     stage = "gain"
-    mechanism = "gain_fluctuation"
+    mechanism = "time_drift"
     order = 2
     needs_times = True
     description = "gain 1 + r t drifting linearly with the acquisition time t"

@@ -39,6 +39,7 @@ from ._diagnose import default_candidates as default_candidates
 from ._diagnose import diagnose as diagnose
 from ._diagnose import fit_effects as fit_effects
 from ._diagnose import penalised_score as penalised_score
+from ._diagnose import ranked as ranked
 from ._diagnose import split_inputs as split_inputs
 from ._fit import fit_model as fit_model
 from ._io import load_csv as load_csv

@@ -6,19 +6,34 @@ One :func:`diagnose` reads top-down as the stages of the lab::
     model shots             (the core's sampler and forward pass)             ._shots
     fit a model             (moments, offsets, values read off the data)      ._fit
     score its discrepancy   (channels, the Q-test, the noise floor)           ._compare
+    check each that passes  (identified? its own effect? every layer?)        ._verdict
     localise                (one-step check per layer, residual profiles)     ._localise
     name mechanisms         (rules from the localised evidence)               ._mechanisms
     verdict                 (explained? what remains, where to look)          ._verdict
 
 The baseline (awgn, s fitted) and every candidate ``awgn + effect`` (every registered effect
 by default: the built-in ones and any plugin) are fitted on the fitting half and scored on
-the held-out half. Candidates are ranked by ``discrepancy_after + 2 sd * (parameters the
-effect adds)`` -- sd the baseline's standard deviation of the discrepancy under the model, a
-per-device offset family counted by its effective degrees of freedom -- so a one-parameter
-effect that explains the data beats a many-parameter one that also does (CONTRACTS §4); a
-candidate that passes its test ranks before every one that fails (:func:`rank_key`).
-``missing_effect_detected`` is the baseline's goodness-of-fit test, ``p_value < 0.01``.
-A model with fitted offsets is tested against a refit null (:mod:`._fit_offsets`).
+the held-out half. ``missing_effect_detected`` is the baseline's goodness-of-fit test,
+``p_value < 0.01``. A model with fitted offsets is tested against a refit null
+(:mod:`._fit_offsets`).
+
+**Status and order** (CONTRACTS §6, 2026-11-25). Every candidate has a ``status``:
+``"passes"`` (p >= 0.01 and every check of the verdict's rule holds: its values identified and
+its own effect's, with taps every layer right, and it buys its keep -- :mod:`._verdict`),
+``"refused"`` (p >= 0.01 but a check refuses it) or ``"fails"`` (p < 0.01). The ranking lists
+those that pass, then the refused ones, then those the data reject (:func:`ranked`); among those
+that pass by the penalised held-out discrepancy ``discrepancy_after + 2 sd * (parameters the
+effect adds)`` (sd the baseline's standard deviation of the discrepancy, a per-device offset
+family counted by its effective degrees of freedom: CONTRACTS §4's parsimony, so a
+one-parameter effect that explains the data beats a many-parameter one that also does), among
+the refused and the rejected by the held-out discrepancy itself. So ranking[0] is the model the
+verdict line names, and an effect the data reject at 0.01 is never first while another entry
+passes or is refused.
+
+**Pure.** A :class:`Session` is immutable: what it computes for a model -- its refit null, the
+checks of its fitted values -- depends on the model (its name and fitted values) and the
+session's named subkeys only, never on what was scored before it or on how many threads
+score at once; the memo that spares recomputing them is keyed by that content.
 """
 
 from __future__ import annotations
@@ -26,9 +41,13 @@ from __future__ import annotations
 import concurrent.futures
 import contextvars
 import dataclasses
+import functools
+import hashlib
 import os
 import sys
+import threading
 import time
+import zlib
 
 import jax
 import numpy as np
@@ -36,6 +55,7 @@ import numpy as np
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from ..effects import BUILTIN, REGISTRY
+from .._model import named_subkey
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, failing_layers, one_step_check
 from ._fit import fit_model
@@ -48,9 +68,10 @@ from ._localise import (
     signatures,
     where_it_fails,
 )
+from ._identify import identify
 from ._mechanisms import Context, fit_gains, mechanisms
 from ._shots import Model
-from ._verdict import as_json_fields, verdict
+from ._verdict import as_json_fields, refusals, time_free, verdict
 
 #: the significance level of the goodness-of-fit test (CONTRACTS §4)
 ALPHA = 0.01
@@ -76,12 +97,31 @@ def default_candidates(meas: Measurement) -> list[str]:
     return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)]
 
 
+#: a candidate's status (CONTRACTS §6), in ranking order
+STATUSES = ("passes", "refused", "fails")
+
+
+def n_scalar_params(name: str, arch) -> int:
+    """The scalar parameters effect ``name`` adds to a model: one per parameter, a per-layer one
+    (``shape = "layers"``) once per layer of its scope."""
+    cls = REGISTRY[name]
+    n = 0
+    for p in cls.params:
+        if cls.shape.get(p) == "layers":
+            n += sum(1 for l in range(1, arch.depth + 1) if cls.acts_on(cls, l, arch.depth))
+        else:
+            n += 1
+    return n
+
+
 @dataclasses.dataclass(frozen=True)
 class Candidate:
     """One fitted extension of the model, scored on held-out inputs.
 
     n_free : the parameters it adds, an offset family counted by its effective degrees of freedom
     nominal : the parameters it adds, every offset counted as one
+    status : ``"passes"``, ``"refused"`` or ``"fails"`` (see the module); empty until checked
+    refused_because : why a candidate that passes its test is not an explanation (status refused)
     """
 
     effects: tuple
@@ -91,18 +131,26 @@ class Candidate:
     seconds: float
     n_free: float = 0.0
     nominal: int = 0
+    status: str = ""
+    refused_because: tuple = ()
+
+    @property
+    def name(self) -> str:
+        return "+".join(self.effects)
 
     def mechanism(self) -> str:
         return "+".join(REGISTRY[e].mechanism for e in self.effects)
 
     def as_json(self) -> dict:
         # a second-stage entry is named by the effect it adds; "with" lists the ones before
-        out = {"effect": self.effects[-1], "mechanism": self.mechanism(),
+        out = {"effect": self.effects[-1], "mechanism": self.mechanism(), "status": self.status,
                "discrepancy_after": self.comparison.discrepancy, "p_value_after": self.comparison.p_value,
                "params": self.model.params_json(), "se": self.comparison.se, "score": self.score,
                "n_free": self.n_free, "nominal_params": self.nominal}
         if len(self.effects) > 1:
             out["with"] = list(self.effects[:-1])
+        if self.refused_because:
+            out["refused_because"] = list(self.refused_because)
         if self.comparison.replicates:
             out["net_discrepancy_after"] = self.comparison.net_discrepancy
             out["refit_null_replicates"] = self.comparison.replicates
@@ -123,100 +171,207 @@ def penalised_score(cmp: Comparison, n_params: float, base: Comparison | None = 
     return float(cmp.discrepancy + 2.0 * unit * n_params)
 
 
+def model_key(model: Model) -> tuple[str, str]:
+    """A model's identity by content: its name (its effects, joined by "+") and a digest of every
+    value it was fitted to (physics parameters, offset scales, the weights it runs with)."""
+    h = hashlib.sha1()
+
+    def add(tag, v):
+        h.update(tag.encode())
+        rows = v if isinstance(v, (tuple, list)) else (v,)
+        for row in rows:
+            h.update(np.ascontiguousarray(np.asarray(row, np.float64)).tobytes())
+
+    for k, v in sorted(model.physics.params().items()):
+        add(k, v)
+    for k, v in sorted(model.offsets.items()):
+        add("offset:" + k, v)
+    if model.params is not None:
+        for l, (W, b) in enumerate(model.params):
+            add(f"W{l}", W)
+            add(f"b{l}", b)
+    return "+".join(model.effects), h.hexdigest()
+
+
+def name_key(key, name: str):
+    """``key`` folded with a model's name (its own stream: the same name, the same numbers)."""
+    return jax.random.fold_in(key, zlib.crc32(name.encode()) & 0x7FFFFFFF)
+
+
+class _Memo:
+    """A thread-safe memo of pure functions: ``get(key, make)`` returns ``make()``, made once per
+    key (a second thread asking for a key being made waits for it). The key must determine the
+    value: then what a caller gets never depends on what was asked before."""
+
+    def __init__(self):
+        self._done, self._making, self._lock = {}, {}, threading.Lock()
+
+    def get(self, key, make):
+        with self._lock:
+            if key in self._done:
+                return self._done[key]
+            lock = self._making.setdefault(key, threading.Lock())
+        with lock:
+            with self._lock:
+                if key in self._done:
+                    return self._done[key]
+            value = make()
+            with self._lock:
+                self._done[key] = value
+        return value
+
+
+@dataclasses.dataclass(frozen=True, eq=False, init=False)
 class Session:
     """What every model scored on one measurement shares: the split of its inputs, the held-out
-    half's :class:`Reference`, the fitting half's moments, the refit null of offset models and
-    the baseline. Built once by :func:`diagnose`, :func:`fit_effects` and
-    :func:`compare_measurement` from the same named subkeys, so their numbers agree."""
+    half's :class:`Reference`, the fitting half's moments and the baseline. Built once by
+    :func:`diagnose`, :func:`fit_effects` and :func:`compare_measurement` from the same named
+    subkeys, so their numbers agree.
+
+    Immutable and pure: its fields are set once; what it computes for a model (the refit null of
+    a model with fitted offsets, the checks of its fitted values) is a function of the model's
+    content (:func:`model_key`) and the session's subkeys -- the refit null's key is folded with
+    the model's name -- kept in a memo keyed by that content, so the numbers do not depend on
+    the order models are scored in or on the number of threads (``workers``).
+    """
+
+    meas: Measurement
+    shots: int | None
+    workers: int
+    k_fit: object
+    k_cmp: object
+    k_step: object
+    train: np.ndarray
+    test: np.ndarray
+    fit_meas: Measurement
+    test_meas: Measurement
+    ref: Reference
+    problem: MomentProblem
+    baseline: Model | None
+    baseline_comparison: Comparison | None
+    _memo: _Memo
 
     def __init__(self, key, meas: Measurement, shots: int | None = None, workers: int | None = None):
-        self.meas, self.shots = meas, shots
+        put = functools.partial(object.__setattr__, self)
+        put("meas", meas)
+        put("shots", shots)
         # threads for the refit nulls' replicates and the candidates (the numbers do not depend on it)
-        self.workers = default_workers() if workers is None else max(1, int(workers))
-        k_split, self.k_fit, self.k_cmp, k_ref, self.k_step = jax.random.split(key, 5)
-        self.train, self.test = split_inputs(k_split, meas.n)
-        self.fit_meas, self.test_meas = meas.subset(self.train), meas.subset(self.test)
-        self.ref: Reference = reference(k_ref, self.test_meas)
-        self.problem = MomentProblem(self.k_fit, self.fit_meas, shots)
-        self._replicates, self._priors = {}, {}
-        self.baseline: Model | None = None  # fit() reads it: offsets fitted from scratch start from it
-        self.baseline = self.fit(())
-        self.baseline_comparison = self.score(self.baseline)
+        put("workers", default_workers() if workers is None else max(1, int(workers)))
+        k_split, k_fit, k_cmp, k_ref, k_step = jax.random.split(key, 5)
+        for name, v in (("k_fit", k_fit), ("k_cmp", k_cmp), ("k_step", k_step)):
+            put(name, v)
+        train, test = split_inputs(k_split, meas.n)
+        put("train", train)
+        put("test", test)
+        put("fit_meas", meas.subset(train))
+        put("test_meas", meas.subset(test))
+        put("ref", reference(k_ref, self.test_meas))
+        put("problem", MomentProblem(self.k_fit, self.fit_meas, shots))
+        put("_memo", _Memo())
+        put("baseline", None)  # fit() reads it: offsets fitted from scratch start from it
+        put("baseline", self.fit(()))
+        put("baseline_comparison", None)
+        put("baseline_comparison", self.score(self.baseline))
 
     def fit(self, effects, start: Model | None = None) -> Model:
         return fit_model(self.k_fit, self.fit_meas, effects, start=start, K=self.shots, problem=self.problem,
                          baseline=self.baseline)
 
     def prior(self, model: Model) -> list:
-        """:func:`~gift_theory.lab._fit_offsets.prior_check` of a fitted model on the fitting
-        half, made once per model (the mechanisms' fit gains and the verdict both read it)."""
-        if id(model) not in self._priors:
-            self._priors[id(model)] = (model, prior_check(model, self.fit_meas))
-        return self._priors[id(model)][1]
+        """:func:`~gift_theory.lab._fit_offsets.prior_check` of a fitted model on the fitting half
+        (the mechanisms' fit gains and the checks both read it; [] without offsets)."""
+        if not any(model.offsets):
+            return []
+        return self._memo.get(("prior",) + model_key(model), lambda: prior_check(model, self.fit_meas))
+
+    def full_reference(self) -> Reference:
+        """The noise floor of every input (the one-step checks' reference), made once."""
+        return self._memo.get(("full_reference",), lambda: reference(named_subkey(self.k_step, "floor"), self.meas))
+
+    def one_step(self, model: Model, own_level: bool = True) -> list:
+        """The one-step check of every layer of ``model`` on every input (with taps)."""
+        return self._memo.get(("one_step", own_level) + model_key(model), lambda: list(one_step_check(
+            self.k_step, model, self.meas, ref=self.full_reference(), own_level=own_level)))
+
+    def refit_null(self, model: Model) -> list:
+        """The refit null of a model with fitted offsets (:func:`offset_replicates`), its key folded
+        with the model's name."""
+        name = "+".join(model.effects)
+        return self._memo.get(("refit_null",) + model_key(model), lambda: offset_replicates(
+            name_key(self.k_cmp, name), model, self.fit_meas, self.test_meas, self.ref, channel_values=channel_values,
+            shots=self.shots, workers=self.workers))
 
     def score(self, model: Model, plain: Comparison | None = None, held_out: Measurement | None = None) -> Comparison:
-        """The held-out comparison; a model with fitted offsets against its refit null (made once
-        per set of offset effects and reused). With taps, a model whose plain test already
-        rejects at :data:`REFIT_SKIP_P` skips the refit null: there the offsets are identified and
-        their estimation error shifts the discrepancy by a few of its standard deviations
-        (measured: 5.5 on docs/lab.md's weight_error example), far less than such a rejection
-        needs (some 30). ``plain``: the model's plain comparison, if already made.
-
-        The refit nulls are numbered in the order they are first needed, so models must be
-        scored in a fixed order (:meth:`candidates` does); the rest is safe to run in threads.
+        """The held-out comparison; a model with fitted offsets against its own refit null. With
+        taps, a model whose plain test already rejects at :data:`REFIT_SKIP_P` skips the refit
+        null: there the offsets are identified and their estimation error shifts the
+        discrepancy by a few of its standard deviations (measured: 5.5 on docs/lab.md's
+        weight_error example), far less than such a rejection needs (some 30). ``plain``: the
+        model's plain comparison, if already made.
 
         ``held_out``: a variant of the held-out half with the same data (the verdict's time-free
         twin holds the acquisition times at their mean), scored against the same reference."""
-        names = tuple(sorted(n for n in model.offsets if fitted_as_offsets(n)))
+        offsets = any(fitted_as_offsets(n) for n in model.offsets)
         test_meas = self.test_meas if held_out is None else held_out
         if plain is None:
             plain = compare(self.k_cmp, model, test_meas, shots=self.shots, ref=self.ref)
-        if not names or (self.meas.has_taps and plain.p_value < REFIT_SKIP_P):
+        if not offsets or (self.meas.has_taps and plain.p_value < REFIT_SKIP_P):
             return plain
-        if names not in self._replicates:
-            self._replicates[names] = offset_replicates(
-                jax.random.fold_in(self.k_cmp, len(self._replicates)), model, self.fit_meas, self.test_meas,
-                self.ref, channel_values=channel_values, shots=self.shots, workers=self.workers)
         return compare(self.k_cmp, model, test_meas, shots=self.shots, ref=self.ref,
-                       null_replicates=self._replicates[names])
+                       null_replicates=self.refit_null(model))
+
+    def checks(self, cand: "Candidate") -> "Candidate":
+        """``cand`` with its status: ``"fails"`` below 0.01, else ``"passes"`` or ``"refused"`` by
+        the verdict's rule (:func:`~gift_theory.lab._verdict.refusals`: its fitted values against
+        their prior, with taps every layer's one-step check, a time effect against its time-free
+        twin, and whether it buys its keep)."""
+        if cand.comparison.p_value < ALPHA:
+            return dataclasses.replace(cand, status="fails", refused_because=())
+        steps = self.one_step(cand.model, own_level=False) if self.meas.has_taps else None
+        twin = None
+        if self.meas.t is not None and any(REGISTRY[e].needs_times for e in cand.effects):
+            twin = self.score(cand.model, held_out=time_free(self.test_meas))
+        why = refusals(cand, self.baseline_comparison, steps, self.prior(cand.model), twin)
+        return dataclasses.replace(cand, status="refused" if why else "passes", refused_because=tuple(why))
 
     def _prepare(self, start, fit_names, added):
-        """The order-free part of a candidate (fit, plain comparison, parameter count): pure."""
+        """Fit, score and check one candidate: pure."""
         t0 = time.time()
         model = self.fit(fit_names, start=start)
-        plain = compare(self.k_cmp, model, self.test_meas, shots=self.shots, ref=self.ref)
         n_free, nominal = 0.0, 0
         for name in added:
             if fitted_as_offsets(name):
                 dof, nom = effective_dof(self.k_fit, self.fit_meas, model, kinds_of([name], self.meas.arch))
                 n_free, nominal = n_free + dof, nominal + nom
             else:
-                n_free, nominal = n_free + len(REGISTRY[name].params), nominal + len(REGISTRY[name].params)
-        return model, plain, n_free, nominal, time.time() - t0
+                k = n_scalar_params(name, self.meas.arch)
+                n_free, nominal = n_free + k, nominal + k
+        cmp = self.score(model)
+        return model, cmp, n_free, nominal, time.time() - t0
 
     def candidates(self, requests) -> list:
-        """Fit and score ``requests`` in order: (effects, start model or None, the effects to fit
-        on top of it, the effects whose parameters the candidate is charged for), ...
+        """Fit, score and check ``requests``: (effects, start model or None, the effects to fit
+        on top of it, the effects whose parameters the candidate is charged for), ... Returned
+        in the order of ``requests``, each with its status (:meth:`checks`).
 
-        The fits and plain comparisons are independent, so the session's ``workers`` threads run
-        them at once (JAX's programs and numpy's sorts run without the GIL); the refit nulls are
-        then made in the order of ``requests``. Same numbers for any number of threads."""
+        Each candidate is a pure function of its request, so the session's ``workers`` threads
+        run them at once (JAX's programs and numpy's sorts run without the GIL): same numbers
+        for any number of threads and any order of ``requests``."""
         requests = list(requests)
+
+        def one(r):
+            effects, *rest = r
+            model, cmp, n_free, nominal, seconds = self._prepare(*rest)
+            cand = Candidate(tuple(effects), model, cmp, penalised_score(cmp, n_free, self.baseline_comparison),
+                             seconds, float(n_free), int(nominal))
+            return self.checks(cand)
+
         if self.workers > 1 and len(requests) > 1:
             with concurrent.futures.ThreadPoolExecutor(max_workers=self.workers) as pool:
                 # each task in a copy of this context, so a PhaseClock still sees its compiles
-                futs = [pool.submit(contextvars.copy_context().run, self._prepare, *r[1:]) for r in requests]
-                prepared = [f.result() for f in futs]
-        else:
-            prepared = [self._prepare(*r[1:]) for r in requests]
-        out = []
-        for (effects, *_), (model, plain, n_free, nominal, seconds) in zip(requests, prepared):
-            t0 = time.time()
-            cmp = self.score(model, plain)
-            score = penalised_score(cmp, n_free, self.baseline_comparison)
-            out.append(Candidate(tuple(effects), model, cmp, score, seconds + time.time() - t0, float(n_free),
-                                 int(nominal)))
-        return out
+                futs = [pool.submit(contextvars.copy_context().run, one, r) for r in requests]
+                return [f.result() for f in futs]
+        return [one(r) for r in requests]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -263,30 +418,33 @@ class Diagnosis:
 
 
 def rank_key(c: Candidate):
-    """Candidates that pass their test (p >= 0.01) come first, each group by penalised score: a
-    model that fits is an answer, one that fails is not, whatever parameters it spends (a
-    per-device offset family with its hundreds of effective parameters must not lose to a
-    one-parameter effect that leaves the data unexplained)."""
-    return (c.comparison.p_value < ALPHA, c.score)
+    """The order of the ranking (CONTRACTS §6): those that pass, then the refused ones, then those
+    the data reject; among those that pass by penalised score (the parsimony of CONTRACTS §4),
+    among the others by held-out discrepancy; ties by name (the order never depends on the
+    order the candidates were scored in)."""
+    status = c.status or ("fails" if c.comparison.p_value < ALPHA else "passes")
+    within = c.score if status == "passes" else c.comparison.discrepancy
+    return (STATUSES.index(status), within, c.name)
 
 
-def _improves(pair: Candidate, first: Candidate) -> bool:
-    """A pair replaces its first effect at the top only if it passes the test and ranks before
-    it (:func:`rank_key`): a failing pair is not an answer (measured: fitted weight offsets
-    that still fail were "improved" by a 1 % drift gain)."""
-    return pair.comparison.p_value >= ALPHA and rank_key(pair) < rank_key(first)
+def ranked(cands) -> list:
+    """``cands`` in the ranking's order (:func:`rank_key`)."""
+    return sorted(cands, key=rank_key)
+
+
+def search_key(c: Candidate):
+    """The greedy second step's order: the candidates that pass their test first, each group by
+    penalised score (a failing per-device offset family with hundreds of effective parameters
+    must not become the first effect a pair is built on), ties by name."""
+    return (c.comparison.p_value < ALPHA, c.score, c.name)
 
 
 def _merge_second_stage(first: Candidate, stage2: list, singles: list) -> list:
-    """The ranking after the greedy second step: the best pair that improves on the first
-    effect (:func:`_improves`), the first effect itself right after it (the path that led
-    there), the other improving pairs, then everything else by penalised score. A runner-up
-    tried on top of the first is listed as the pair only."""
-    better = sorted((c for c in stage2 if _improves(c, first)), key=rank_key)
+    """Every candidate after the greedy second step, in the ranking's order: the pairs, the first
+    effect, and the singles not tried on top of it (a runner-up tried on top of the first is
+    listed as the pair only)."""
     named = {c.effects[-1] for c in stage2}
-    rest = sorted([c for c in stage2 if not any(c is b for b in better)] + [c for c in singles if c.effects[0] not in named],
-                  key=rank_key)
-    return better[:1] + [first] + better[1:] + rest
+    return ranked(list(stage2) + [first] + [c for c in singles if c.effects[0] not in named])
 
 
 def _compatible(first: Candidate, name: str) -> bool:
@@ -320,7 +478,7 @@ def _rank(session: Session, names, second, verbose: bool) -> list:
     for name, cand in zip(names, ranking):
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
              f"p = {cand.comparison.p_value:.3g} ({cand.seconds:.1f} s)", verbose)
-    ranking.sort(key=rank_key)
+    ranking.sort(key=search_key)
     if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
         first = ranking[0]
         rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
@@ -329,8 +487,8 @@ def _rank(session: Session, names, second, verbose: bool) -> list:
         for cand in stage2:
             _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
                  f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
-        ranking = _merge_second_stage(first, stage2, ranking[1:])
-    return ranking
+        return _merge_second_stage(first, stage2, ranking[1:])
+    return ranked(ranking)
 
 
 def _localise(session: Session, base: Model, meas: Measurement, shots):
@@ -338,7 +496,7 @@ def _localise(session: Session, base: Model, meas: Measurement, shots):
     failing layers, the layer evidence, the signatures and where-it-fails (pure: keyed by
     the session's step key)."""
     taps = meas.has_taps
-    steps = tuple(one_step_check(session.k_step, base, meas)) if taps else ()
+    steps = tuple(session.one_step(base)) if taps else ()
     failing = failing_layers(steps) if taps else None
     res = residuals(session.k_step, base, meas, shots)
     local = one_step_residuals(session.k_step, base, meas, {r["layer"]: r["s"] for r in steps}) if taps else res
@@ -396,7 +554,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     taps = meas.has_taps
     # name mechanisms, then the verdict
     ctx = Context({row["layer"]: row for row in evidence}, meas.arch.depth, taps, failing,
-                  fit_gains(ranking, base_cmp, session.prior), {r["layer"]: (r["s"], r["level_z"]) for r in steps})
+                  fit_gains(ranking, base_cmp, session.prior), {r["layer"]: (r["s"], r["level_z"]) for r in steps},
+                  ident=identify(meas))  # the layer-wise identification: the mechanisms' backbone
     mechs = mechanisms(ctx)
     explained, reasons, line = verdict(session, ranking, meas, mechs, failing)
     _log(line, verbose)

@@ -11,6 +11,10 @@ the effect itself (:meth:`gift_theory.effects.Effect.search`: its bounds and def
 scale read off the data) -- followed by a local search on all of them (Brent's method for
 one, Nelder-Mead for several; no gradient needed: a reverse-mode gradient of the loss costs
 ~6 evaluations).
+
+A per-layer parameter (``shape = {"g": "layers"}``: ``layer_gain``'s g) is one coordinate
+per layer in its effect's scope, named ``"g@l"`` (l 1-based), each scanned in layer order (a
+layer's gain moves its own tap's moments first) over the effect's ``search`` values.
 """
 
 from __future__ import annotations
@@ -75,7 +79,7 @@ def _theta_loss(theta, params, x, noise, physics, t, dat, arch, rK, free, positi
     (the core's forward, as :func:`layer_outputs`), the moments and the loss (the same numbers
     as those steps one program each, without a dispatch between them)."""
     vals = {p: (jnp.exp(theta[i]) if positive[i] else theta[i]) for i, p in enumerate(free)}
-    outs = forward(params, x[:, None, :], noise, physics.replace(**vals), arch, t=t, taps=True).taps
+    outs = forward(params, x[:, None, :], noise, with_values(physics, vals), arch, t=t, taps=True).taps
     return _loss_of_outputs(outs, dat, t, rK)
 
 
@@ -113,18 +117,63 @@ def _scalar(v) -> bool:
     return not isinstance(v, (tuple, list)) and np.ndim(v) == 0
 
 
+def _split(p: str) -> tuple[str, int | None]:
+    """``"g@2"`` -> ``("g", 2)`` (a per-layer coordinate), ``"s"`` -> ``("s", None)``."""
+    name, at, layer = p.partition("@")
+    return (name, int(layer)) if at else (name, None)
+
+
 def _owner(physics, p):
-    return next(e for e in physics.effects if p in e.params)
+    name = _split(p)[0]
+    return next(e for e in physics.effects if name in e.params)
+
+
+def per_layer_coordinates(physics, arch) -> tuple[str, ...]:
+    """The coordinates ``"p@l"`` of every per-layer parameter of ``physics`` on the layers of
+    its effect's scope (l 1-based)."""
+    return tuple(f"{p}@{l}" for e in physics.effects for p, kind in e.shape.items() if kind == "layers"
+                 for l in range(1, arch.depth + 1) if e.acts_on(l, arch.depth))
+
+
+def per_layer_arrays(physics, arch):
+    """``physics`` with every per-layer parameter held as one (1,)-array per layer (a scalar
+    value repeated), the form :func:`with_values` sets coordinates of."""
+    todo = {p: getattr(e, p) for e in physics.effects for p, kind in e.shape.items() if kind == "layers"
+            and _scalar(getattr(e, p))}
+    if not todo:
+        return physics
+    return physics.replace(**{p: tuple(np.full((1,), float(v)) for _ in range(arch.depth)) for p, v in todo.items()})
+
+
+def with_values(physics, vals: dict):
+    """``physics.replace`` of scalar parameters and per-layer coordinates ``"p@l"`` (traceable:
+    the values may be JAX tracers; a per-layer parameter must already be held per layer)."""
+    plain = {p: v for p, v in vals.items() if _split(p)[1] is None}
+    rows: dict = {}
+    for p, v in vals.items():
+        name, l = _split(p)
+        if l is not None:
+            if name not in rows:
+                rows[name] = list(_owner(physics, name).param_dict()[name])
+            rows[name][l - 1] = jnp.reshape(v, (1,))
+    return physics.replace(**plain, **{k: tuple(v) for k, v in rows.items()}) if plain or rows else physics
+
+
+def _current(physics, p) -> float:
+    """The value of a scalar parameter or of one per-layer coordinate."""
+    name, l = _split(p)
+    v = _owner(physics, p).param_dict()[name]
+    return float(np.asarray(v if l is None else v[l - 1]).reshape(-1)[0])
 
 
 def _positive(physics, p) -> bool:
     """A parameter with a lower bound >= 0 is fitted on the log scale."""
-    return type(_owner(physics, p)).bounds.get(p, (-np.inf, np.inf))[0] >= 0
+    return type(_owner(physics, p)).bounds.get(_split(p)[0], (-np.inf, np.inf))[0] >= 0
 
 
 def theta_of(physics, free):
-    return np.array([np.log(max(float(_owner(physics, p).param_dict()[p]), 1e-12)) if _positive(physics, p)
-                     else float(_owner(physics, p).param_dict()[p]) for p in free])
+    return np.array([np.log(max(_current(physics, p), 1e-12)) if _positive(physics, p) else _current(physics, p)
+                     for p in free])
 
 
 def values_of(physics, free, theta) -> dict:
@@ -191,7 +240,8 @@ def fit_moments(problem: MomentProblem, physics, params, scan, rescan_s: bool = 
     """Fit every free scalar parameter of ``physics`` (those no effect reads off the data).
 
     scan : names of the parameters to scan first (the new ones), each over its effect's
-        :meth:`~gift_theory.effects.Effect.search` values
+        :meth:`~gift_theory.effects.Effect.search` values (a per-layer parameter: each of its
+        coordinates, in layer order)
     rescan_s : scan awgn's s down from its value once more after the new parameters: an added
         effect usually takes over part of the variance s had absorbed
 
@@ -202,7 +252,11 @@ def fit_moments(problem: MomentProblem, physics, params, scan, rescan_s: bool = 
     fixed = set()
     for e in physics.effects:
         fixed |= set((type(e).from_data(problem.meas.layers()) or {}).keys())
-    free = tuple(p for p, v in physics.params().items() if p not in fixed and _scalar(v))
+    arch = problem.meas.arch
+    physics = per_layer_arrays(physics, arch)
+    shaped = {p for e in physics.effects for p in e.shape}
+    free = tuple(p for p, v in physics.params().items() if p not in fixed and p not in shaped and _scalar(v))
+    free += tuple(c for c in per_layer_coordinates(physics, arch) if _split(c)[0] not in fixed)
     if not free:
         return physics
     f = problem.loss(physics, params, free)
@@ -210,12 +264,12 @@ def fit_moments(problem: MomentProblem, physics, params, scan, rescan_s: bool = 
     layers = problem.meas.layers()
     grids = {}
     for p in scan:
-        if p in free:
-            vals = np.asarray(type(_owner(physics, p)).search(p, layers), np.float64)
-            grids[free.index(p)] = np.log(vals) if _positive(physics, p) else vals
+        for c in (c for c in free if _split(c)[0] == p):
+            vals = np.asarray(type(_owner(physics, c)).search(p, layers), np.float64)
+            grids[free.index(c)] = np.log(vals) if _positive(physics, c) else vals
     if rescan_s and "s" in free:
         i = free.index("s")
         grids.pop(i, None)
         grids[i] = np.log(max(float(physics.s), 1e-12)) + np.log([0.4, 0.55, 0.7, 0.85, 1.0, 1.1])
     theta, _ = optimise(f, theta0, grids)
-    return physics.replace(**values_of(physics, free, theta))
+    return with_values(physics, {p: np.float64(v) for p, v in values_of(physics, free, theta).items()})

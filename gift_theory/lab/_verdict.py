@@ -23,11 +23,17 @@
       Bonferroni over the layers): the model is right where it acts, not only on average; and
    d. an effect fitted by its scalar parameters buys its keep: its penalised score (held-out
       discrepancy + 2 sd per parameter, the ranking's) is below the baseline's discrepancy --
-      else the data are only barely inconsistent with awgn and the effect that passes may just
-      absorb noise.
+      else the effect that passes may just absorb noise.
 
 A model that fits anything is not an explanation: (a) and (b) refuse one that passed only
-because it could follow whatever the chip did. When the data are not explained, the verdict
+because it could follow whatever the chip did. The same checks give every candidate of the
+ranking its status (:func:`refusals`; ``"refused"`` when one of a-d refuses a candidate that
+passes its test), and the top-ranked model is the first that passes, else the first refused,
+else the closest of those the data reject -- the one the verdict line names.
+
+**Words follow the numbers.** A reason that speaks of how far the data are from a model says
+it from that model's p-value (:func:`p_words`): "barely inconsistent" only for 1e-3 <= p < 0.01,
+"inconsistent" down to 1e-6, "far from it" below, each with its p. When the data are not explained, the verdict
 says what remains against the noise floor and which mechanism classes and layers to look at
 (:mod:`._mechanisms`).
 """
@@ -38,32 +44,39 @@ import dataclasses
 
 import numpy as np
 
-from ..effects import REGISTRY
-from ._compare import failing_layers, one_step_check
+from ._compare import failing_layers
 from ._fit_offsets import refusing
 
 ALPHA = 0.01
 
 
-def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None) -> tuple[bool, list[str]]:
-    """``(explained, reasons)`` by the module's rule; reasons say why not (or, when explained,
-    what passed). ``twin``: the top model's held-out comparison with the times held at their
-    mean (rule b'), when it acts through them."""
-    if baseline_cmp.p_value >= ALPHA:
-        return True, [f"the awgn model passes (p = {baseline_cmp.p_value:.3g}): nothing is missing"]
-    if top is None:
-        return False, ["no candidate was tried"]
-    name = " + ".join(top.effects)
+def p_words(p: float) -> str:
+    """How far from a model its p-value puts the data, in words that never contradict it."""
+    if p >= ALPHA:
+        return f"consistent with it (p = {p:.3g})"
+    if p >= 1e-3:
+        return f"barely inconsistent with it (p = {p:.3g})"
+    if p >= 1e-6:
+        return f"inconsistent with it (p = {p:.3g})"
+    return f"far from it (p = {p:.3g})"
+
+
+def refusals(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[str]:
+    """Why a candidate that passes its held-out test is still no explanation (rules a, b, b', c,
+    d of the module); [] when none refuses it. ``steps``: its one-step checks (with taps);
+    ``prior``: :func:`~gift_theory.lab._fit_offsets.prior_check` rows of its fitted values;
+    ``twin``: its held-out comparison with the times held at their mean, when it acts through
+    them."""
+    name = " + ".join(cand.effects)
     why = []
-    if top.comparison.p_value < ALPHA:
-        why.append(f"the best model, awgn + {name}, fails its held-out test (p = {top.comparison.p_value:.3g})")
-    if top.nominal and top.n_free < 0.5 * top.nominal and any(top.model.offsets):
-        why.append(f"{name}'s {top.nominal} fitted values are not identified by the data (effective degrees of "
-                   f"freedom {top.n_free:.0f}: the prior, not the data, sets most of them)")
-    if not any(top.model.offsets) and top.score >= baseline_cmp.discrepancy:
-        why.append(f"awgn + {name} lowers the held-out discrepancy by {baseline_cmp.discrepancy - top.comparison.discrepancy:.3g}"
-                   f", less than its {top.n_free:g} parameter(s) cost (2 sd each): the data are barely inconsistent "
-                   f"with awgn and no effect buys its keep")
+    if cand.nominal and cand.n_free < 0.5 * cand.nominal and any(cand.model.offsets):
+        why.append(f"{name}'s {cand.nominal} fitted values are not identified by the data (effective degrees of "
+                   f"freedom {cand.n_free:.0f}: the prior, not the data, sets most of them)")
+    if not any(cand.model.offsets) and cand.score >= baseline_cmp.discrepancy:
+        why.append(f"awgn + {name} lowers the held-out discrepancy by "
+                   f"{baseline_cmp.discrepancy - cand.comparison.discrepancy:.3g}, less than its {cand.n_free:g} "
+                   f"parameter(s) cost (2 sd each): it does not buy its keep (the data are "
+                   f"{p_words(baseline_cmp.p_value).replace('it (', 'awgn (')})")
     what = {"w_correlation": "weight offsets of layer {l} are proportional to the programmed weights (a gain, not an "
                              "error drawn apart from them)",
             "w_structure": "weight offsets of layer {l} are a fixed linear map of the programmed weights (a coupling)",
@@ -72,19 +85,37 @@ def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None) -> tuple
             "b_mean": "bias offsets of layer {l} all go one way (a shifted transfer, not per-neuron draws of either "
                       "sign)"}
     for row in refusing(prior):
-        why.append(f"the fitted {what[row['test']].format(l=row['layer'])}: z = {row['z']:.1f}"
-                   + (f" (p = {row['p']:.2g})" if "p" in row else ""))
+        text = what.get(row["test"], row.get("what", f"{row['test']} of layer {{l}}")).format(l=row["layer"])
+        why.append(f"the fitted {text}: z = {row['z']:.1f}" + (f" (p = {row['p']:.2g})" if "p" in row else ""))
     unit = baseline_cmp.se if baseline_cmp.se > 0 else 1.0
-    if twin is not None and twin.discrepancy - top.comparison.discrepancy < 2.0 * unit:
+    if twin is not None and twin.discrepancy - cand.comparison.discrepancy < 2.0 * unit:
         why.append(f"with every acquisition time held at its mean, awgn + {name} does nearly as well (held-out "
-                   f"discrepancy {twin.discrepancy:.3g} against {top.comparison.discrepancy:.3g}, "
-                   f"{(twin.discrepancy - top.comparison.discrepancy) / unit:.1f} sd apart, less than the 2 sd a "
-                   f"parameter must buy; p = {twin.p_value:.3g}): a constant gain does what its trend in time does, "
+                   f"discrepancy {twin.discrepancy:.3g} against {cand.comparison.discrepancy:.3g}, "
+                   f"{(twin.discrepancy - cand.comparison.discrepancy) / unit:.1f} sd apart, less than the 2 sd a "
+                   f"parameter must buy; p = {twin.p_value:.3g}): a constant does what its trend in time does, "
                    f"so the data show no trend")
-    if top_steps:
-        bad = failing_layers(top_steps)
+    if steps:
+        bad = failing_layers(steps)
         if bad:
             why.append(f"with {name} fitted, layer(s) {', '.join(map(str, bad))} still fail their one-step check")
+    return why
+
+
+def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None) -> tuple[bool, list[str]]:
+    """``(explained, reasons)`` by the module's rule for the top-ranked candidate; reasons say
+    why not (or, when explained, what passed). A candidate that carries its status (ranked by
+    :func:`~gift_theory.lab._diagnose.diagnose`) is judged by it; otherwise its checks are
+    made here from ``top_steps``, ``prior`` and ``twin`` (:func:`refusals`)."""
+    if baseline_cmp.p_value >= ALPHA:
+        return True, [f"the awgn model passes (p = {baseline_cmp.p_value:.3g}): nothing is missing"]
+    if top is None:
+        return False, ["no candidate was tried"]
+    name = " + ".join(top.effects)
+    if top.comparison.p_value < ALPHA:
+        return False, [f"the best model, awgn + {name}, fails its held-out test (p = {top.comparison.p_value:.3g}; "
+                       f"the baseline's p = {baseline_cmp.p_value:.3g})"]
+    status = getattr(top, "status", "")
+    why = list(top.refused_because) if status else refusals(top, baseline_cmp, top_steps, prior, twin)
     if why:
         return False, why
     return True, [f"awgn + {name} passes its held-out test (p = {top.comparison.p_value:.3g}) and every check of "
@@ -92,8 +123,8 @@ def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None) -> tuple
 
 
 def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failing, closest=None) -> str:
-    """The one plain line of ``gift diagnose``; ``closest``: the candidate with the lowest
-    held-out discrepancy (what remains is said of it; default ``top``)."""
+    """The one plain line of ``gift diagnose``. It names ``top`` (ranking[0]); ``closest``, when
+    given, is said to be what remains instead (old callers; the diagnosis passes none)."""
     closest = top if closest is None else closest
     if explained:
         if baseline_cmp.p_value >= ALPHA:
@@ -113,14 +144,16 @@ def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failin
     elif failing:
         where = f"; look at layer(s) {', '.join(map(str, failing))}"
     return ("NOT EXPLAINED: nothing gift knows explains these data -- " + best
-            + ("" if top is None or top.comparison.p_value < ALPHA else f"; awgn + {' + '.join(top.effects)} passes, "
-               f"but {reasons[0]}") + where)
+            + ("" if top is None or top.comparison.p_value < ALPHA else f"; awgn + {' + '.join(top.effects)} passes "
+               f"its test, but {reasons[0]}") + where)
 
 
 def as_json_fields(explained: bool, reasons, line: str, failing, mechanisms) -> dict:
     return {"explained": bool(explained), "verdict": line, "reasons": list(reasons),
             "failing_layers": None if failing is None else [int(l) for l in failing],
-            "mechanisms": [dict(m, score=float(np.round(m["score"], 3))) for m in mechanisms]}
+            "mechanisms": [dict(m, score=float(np.round(m["score"], 3)),
+                                **({"p_value": float(m["p_value"])} if m.get("p_value") is not None else {}))
+                           for m in mechanisms]}
 
 
 def time_free(meas):
@@ -129,19 +162,10 @@ def time_free(meas):
 
 
 def verdict(session, ranking, meas, mechanisms, failing) -> tuple[bool, list, str]:
-    """``(explained, reasons, line)`` of a diagnosis: the rule of this module on the top-ranked
-    model (its fitted offsets checked against their prior on the fitting inputs; with taps, its
-    one-step check on every input; an effect acting through the times, its time-free twin on
-    the held-out half), and the plain line naming the closest model. ``session``: the
-    diagnosis's :class:`~gift_theory.lab._diagnose.Session`."""
+    """``(explained, reasons, line)`` of a diagnosis: the rule of this module on ranking[0], whose
+    checks :meth:`~gift_theory.lab._diagnose.Session.checks` made (its status), and the plain
+    line naming it. ``session``: the diagnosis's :class:`~gift_theory.lab._diagnose.Session`."""
     top = ranking[0] if ranking else None
-    baseline_cmp = session.baseline_comparison
-    prior, top_steps, twin = (), None, None
-    if top is not None and baseline_cmp.p_value < ALPHA and top.comparison.p_value >= ALPHA:
-        prior = session.prior(top.model)
-        top_steps = one_step_check(session.k_step, top.model, meas, own_level=False) if meas.has_taps else None
-        if meas.t is not None and any(REGISTRY[e].needs_times for e in top.effects):
-            twin = session.score(top.model, held_out=time_free(session.test_meas))
-    explained, reasons = explanation(top, baseline_cmp, top_steps, prior, twin)
-    closest = min(ranking, key=lambda c: c.comparison.discrepancy) if ranking else None
-    return explained, reasons, verdict_line(explained, reasons, top, baseline_cmp, mechanisms, failing, closest)
+    explained, reasons = explanation(top, session.baseline_comparison)
+    return explained, reasons, verdict_line(explained, reasons, top, session.baseline_comparison, mechanisms,
+                                            failing)

@@ -86,21 +86,23 @@ def write(tmp_path, text, name="my_effect.py"):
 
 def test_public_api_and_mechanisms():
     assert fx.MECHANISMS == ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation",
-                             "weight_error", "bias_offset", "activation_mismatch", "readout_nonlinearity")
+                             "time_drift", "correlated_noise", "gain_error", "weight_error", "bias_offset",
+                             "activation_mismatch", "readout_nonlinearity")
     assert fx.STAGES == ("level", "law", "weights", "bias", "gain", "activation", "readout")
     assert gt.EFFECT_NAMES == fx.EFFECT_NAMES and len(fx.EFFECT_NAMES) == 11
-    assert fx.BUILTIN == fx.EFFECT_NAMES + ("bias_offset", "activation_gain")
+    assert fx.BUILTIN == fx.EFFECT_NAMES + ("bias_offset", "activation_gain", "layer_gain")
     assert set(fx.BUILTIN) == set(fx.REGISTRY)
     table6 = {"awgn": "noise_level", "laplace": "noise_law", "uniform": "noise_law",
               "shot": "input_dependent_noise", "multiplicative": "input_dependent_noise",
-              "common_mode": "gain_fluctuation", "drift": "gain_fluctuation", "crosstalk": "weight_error",
+              "common_mode": "gain_fluctuation", "drift": "time_drift", "crosstalk": "weight_error",
               "weight_error": "weight_error", "saturation": "readout_nonlinearity",
               "quantization": "readout_nonlinearity", "bias_offset": "bias_offset",
-              "activation_gain": "activation_mismatch"}
+              "activation_gain": "activation_mismatch", "layer_gain": "gain_error"}
     assert {n: fx.REGISTRY[n].mechanism for n in fx.BUILTIN} == table6
     for n in fx.BUILTIN:
         cls = fx.REGISTRY[n]
-        assert cls.layers in ("all", "hidden") and cls.description and cls.shape == {}
+        assert cls.layers in ("all", "hidden") and cls.description
+        assert cls.shape == ({"g": "layers"} if n == "layer_gain" else {})
         assert fx.register(cls) is cls  # registering the same class again is harmless
 
 
@@ -431,7 +433,7 @@ BAD = {
     "layers": (_variant(**{'params = ("c",)': 'params = ("c",)\n    layers = "middle"'}), r"layers='middle' must be"),
     "layers zero": (_variant(**{'params = ("c",)': 'params = ("c",)\n    layers = (0, 2)'}), r"layers=\(0, 2\) must be"),
     "shape value": (_variant(**{'params = ("c",)': 'params = ("c",)\n    shape = {"c": "weights"}'}),
-                    r"the only per-parameter shape is 'neurons'"),
+                    r"a parameter's shape is 'neurons' or 'layers'"),
     "shape key": (_variant(**{'params = ("c",)': 'params = ("c",)\n    shape = {"d": "neurons"}'}),
                   r"shape names 'd', which is not in params"),
     "activation output": (_plugin("""

@@ -70,7 +70,7 @@ def test_explained_rule():
     assert not ok and "one way" in why[0]
     # passes, but its improvement does not pay for its parameter (baseline discrepancy 10)
     ok, why = explanation(_cand(0.5, score=12.0), _Cmp(0.008, discrepancy=10.0))
-    assert not ok and "buys its keep" in why[0]
+    assert not ok and "buy its keep" in why[0]
     # passes on average, but a layer still fails its one-step check
     steps = [{"layer": 1, "p_value": 1e-6}, {"layer": 2, "p_value": 0.4}]
     ok, why = explanation(_cand(0.5), base_fails, top_steps=steps)

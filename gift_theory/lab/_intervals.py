@@ -374,7 +374,7 @@ def moment_intervals(key, meas: Measurement, model: Model, K: int | None = None,
     for i, p in enumerate(free):
         lo_th, hi_th = theta[i] - q * se[i], theta[i] + q * se[i]
         pos = _positive(physics, p)
-        lo, hi = (math.exp(lo_th), math.exp(hi_th)) if pos else (lo_th, hi_th)
+        lo, hi = (math.exp(min(lo_th, 700.0)), math.exp(min(hi_th, 700.0))) if pos else (lo_th, hi_th)
         blo, bhi = type(_owner(physics, p)).bounds.get(p.partition("@")[0], (-math.inf, math.inf))
         if not np.isfinite(se[i]) or H[i, i] <= 0:
             lo, hi = blo, bhi  # a loss flat or concave here: the data do not pin the parameter

@@ -225,6 +225,126 @@ HOOKS = {
 }
 
 
+TIME_HOOKS = {
+    "weights": ("def weights(self, W, layer, t):\n    return W * (1 + self.c * t)",
+                dict(weights=lambda W, c, t: W * (1 + c * t))),
+    "bias": ("def bias(self, b, layer, t):\n    return b + self.c * t", dict(bias=lambda b, c, t: b + c * t)),
+    "activation": ("def activation(self, z, sigma, layer, t):\n    return sigma(z) * (1 - self.c * t)",
+                   dict(activation=lambda z, c, t: np.tanh(z) * (1 - c * t))),
+    "readout": ("def readout(self, v, noise, layer, t):\n    return v + self.c * t", dict(readout=lambda v, c, t: v + c * t)),
+}
+
+
+@pytest.mark.parametrize("stage", list(TIME_HOOKS))
+def test_hooks_take_the_acquisition_time(stage, x64):
+    """CONTRACTS §2b (2026-11-25): a hook with a keyword t gets each shot's time, shaped to
+    broadcast against its first argument; the forward pass over (inputs, shots) equals the
+    noiseless numpy process run shot by shot at that shot's t. Without times t = 0."""
+    ns = {}
+    src = textwrap.dedent(f"""
+        from gift_theory.effects import Effect, register
+        class Timed(Effect):
+            c: float = 0.0
+            name = "test_timed"
+            params = ("c",)
+            stage = {stage!r}
+            mechanism = "time_drift" if "time_drift" in __import__("gift_theory").effects.MECHANISMS else "weight_error"
+        """) + textwrap.indent(TIME_HOOKS[stage][0], "    ") + "\n"
+    exec(src, ns)
+    cls = fx.register(ns["Timed"])
+    assert cls.needs_times  # t without a default
+    arch, params, x = net((3, 4, 5, 2))
+    c, n, r = 0.7, x.shape[0], 3
+    t = np.linspace(0.0, 1.0, n * r).reshape(n, r)
+    phys = gt.Physics.create(s=None, test_timed=c)
+    got = gt.forward(params, jnp.asarray(x)[:, None, :], {}, phys, arch, t=jnp.asarray(t), taps=True)
+    (kw, fn), = TIME_HOOKS[stage][1].items()
+    for i in range(n):
+        for k in range(r):
+            hook = (lambda v, l, tt=t[i, k]: fn(v, c, tt)) if kw != "activation" else \
+                (lambda z, l, tt=t[i, k]: fn(z, c, tt) if l < arch.depth else z)
+            _, outs = np_forward(params, x[i:i + 1], arch.depth, **{kw: hook})
+            for g, w in zip(got.taps, outs):
+                np.testing.assert_allclose(np.asarray(g)[i, k], w[0], rtol=1e-12, atol=1e-12)
+    # without times the hook sees t = 0: the programmed process
+    plain = gt.forward(params, jnp.asarray(x), {}, phys, arch).y
+    want, _ = np_forward(params, x, arch.depth)
+    np.testing.assert_allclose(np.asarray(plain), want, rtol=1e-12, atol=1e-12)
+
+
+def test_time_keyword_with_default_is_optional(x64):
+    @fx.register
+    class Opt(fx.Effect):
+        c: float = 0.0
+        name = "test_opt_time"
+        params = ("c",)
+        stage = "bias"
+        mechanism = "bias_offset"
+
+        def bias(self, b, layer, t=None):
+            return b if t is None else b + self.c * t
+
+    assert not Opt.needs_times
+    arch, params, x = net()
+    phys = gt.Physics.create(s=None, test_opt_time=0.5)
+    want, _ = np_forward(params, x, arch.depth)
+    np.testing.assert_allclose(np.asarray(gt.forward(params, jnp.asarray(x), {}, phys, arch).y), want, rtol=1e-12)
+
+
+def test_per_neuron_recipe_and_value_in_hooks(x64):
+    """The docs' recipe ``self.alive * sigma(z)`` and ``self.value("alive", layer)`` agree: a hook
+    runs on the layer's view of the effect (Effect.at_layer)."""
+    outs = {}
+    for body in ("self.alive * sigma(z)", 'self.value("alive", layer) * sigma(z)'):
+        ns = {}
+        exec(textwrap.dedent(f"""
+            from gift_theory.effects import Effect, register
+            class Alive(Effect):
+                alive: float = 1.0
+                name = "test_alive"
+                params = ("alive",)
+                shape = {{"alive": "neurons"}}
+                bounds = {{"alive": (0.0, 2.0)}}
+                stage = "activation"
+                layers = "hidden"
+                mechanism = "activation_mismatch"
+                def activation(self, z, sigma, layer):
+                    return {body}
+            """), ns)
+        fx.REGISTRY.pop("test_alive", None)
+        fx.register(ns["Alive"])
+        arch, params, x = net((3, 4, 5, 2))
+        alive = (np.array([1.0, 0.0, 0.5, 1.0]), np.linspace(0.2, 1.0, 5), np.ones(2))
+        phys = gt.Physics.create(s=None, test_alive={"alive": alive})
+        outs[body] = np.asarray(gt.forward(params, jnp.asarray(x), {}, phys, arch).y)
+        want, _ = np_forward(params, x, arch.depth, activation=lambda z, l: alive[l - 1] * np.tanh(z))
+        np.testing.assert_allclose(outs[body], want, rtol=1e-12, atol=1e-12)
+    eff = fx.make_effect("test_alive", alive=alive)
+    with pytest.raises(gt.GiftInputError, match="no parameter 'dead'"):
+        eff.value("dead", 1)
+
+
+def test_a_noise_law_may_be_restricted_to_layers():
+    from gift_theory._model import site_laws
+
+    @fx.register
+    class LawTwo(fx.Effect):
+        name = "test_law_two"
+        stage = "law"
+        layers = (2,)
+        mechanism = "noise_law"
+
+        @staticmethod
+        def standard(key, shape, dtype):
+            return jax.random.laplace(key, shape, dtype) / np.sqrt(2.0)
+
+    arch = gt.Architecture((3, 4, 5, 2))
+    laws = site_laws(arch, gt.Physics.create(s=0.1, test_law_two=True))
+    assert {k for k, (_, law) in laws.items() if law is not None} == {"w2", "a2"}
+    laws = site_laws(arch, gt.Physics.create(s=0.1, laplace=True))
+    assert {k for k, (_, law) in laws.items() if law is not None} == {"a0", "w1", "a1", "w2", "a2", "w3"}
+
+
 @pytest.mark.parametrize("stage,layers", [(st, sc) for st in HOOKS for sc in ("all", "hidden", "output", (1, 3), (2,))
                                           if (st, sc) != ("activation", "output")])  # refused (see BAD)
 def test_layer_scope_of_every_stage(stage, layers, x64):

@@ -132,7 +132,7 @@ def _referee(arch, params, roof: float, repeats: int) -> dict:
     import jax.numpy as jnp
 
     import gift_theory as gt
-    from ..finetune._problem import referee_scores
+    from .finetune._problem import referee_scores
 
     n, K2 = 5000, 32
     x = jax.random.uniform(jax.random.PRNGKey(3), (n, DEEP[0]))

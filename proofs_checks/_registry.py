@@ -17,7 +17,8 @@ CHECKS: dict[str, Callable] = {
         max_L=4 if precise else 3),
     "backprop_formulas": lambda key=None, precise=False: _symbolic.backprop_formulas(
         (2, 3, 2, 2) if precise else (2, 2, 2, 1)),
-    "score_function_identity": lambda key=None, precise=False: _symbolic.score_function_identity(),
+    "score_function_identity": lambda key=None, precise=False: _symbolic.score_function_identity(
+        (((1, 1, 1), "quadratic"), ((1, 2, 1), "identity")) + ((((2, 1, 1), "quadratic"),) if precise else ())),
     "d0_limit": _sampling.d0_limit,
     "hierarchical_sampling": _sampling.hierarchical_sampling,
     "sgd_limit_points": _sgd.sgd_limit_points,

@@ -235,39 +235,51 @@ def _noise_hypothesis():
                       "the rule factorises over distinct symbols")
 
 
-def score_function_identity(widths=(1, 1, 1), activation: str = "quadratic") -> dict:
-    res = score_identity_difference(widths, activation)
-    s = res["s"]
-    diffs = [sp.expand(t - p) for t, p in zip(res["true"], res["printed"])]
-    fixed = [sp.expand(t - c) for t, c in zip(res["true"], res["corrected"])]
-    ratios = [sp.cancel(p / t) for t, p in zip(res["true"], res["printed"]) if sp.expand(t) != 0]
-    verdict = symbolic_verdict(all(d == 0 for d in diffs))
-    corrected_ok = all(d == 0 for d in fixed)
-    ratio_set = sorted({str(r) for r in ratios})
-    # a concrete counterexample: all weights 1/2, biases 0, x = 1, y = 0, s = 1/2
-    subs = {p: sp.Rational(1, 2) if str(p).startswith("W") else 0 for p in res["params"]}
-    subs.update({x: 1 for x in sp.symbols(f"x1:{widths[0] + 1}")})
-    subs.update({y: 0 for y in sp.symbols(f"y1:{widths[-1] + 1}")})
-    subs[s] = sp.Rational(1, 2)
-    k = 0
-    counter = None
-    if verdict == "fails":
-        counter = {"network": "-".join(map(str, widths)) + " with sigma(z)=z+z^2/2", "weights": 0.5, "biases": 0.0,
-                   "x": 1.0, "y": 0.0, "s": 0.5, "parameter": str(res["params"][k]),
-                   "d/ds grad J": float(res["true"][k].subs(subs)),
-                   "printed rhs": float(res["printed"][k].subs(subs))}
+def score_function_identity(nets=((1, 1, 1), "quadratic"), activation: str | None = None) -> dict:
+    """The score-function identity on one or several networks: ``nets`` is ``(widths, activation)`` or a
+    tuple of them (``activation`` in {"quadratic", "identity"}); a bare widths tuple with ``activation``
+    is one network."""
+    if activation is not None or (nets and isinstance(nets[0], int)):
+        nets = ((tuple(nets), activation or "quadratic"),)
+    elif nets and isinstance(nets[1], str):
+        nets = (nets,)
+    names = {"quadratic": "sigma(z)=z+z^2/2", "identity": "sigma(z)=z"}
+    rows, all_diff_zero, corrected_ok, counter = [], True, True, None
+    for widths, act in nets:
+        res = score_identity_difference(widths, act)
+        s = res["s"]
+        diffs = [sp.expand(t - p) for t, p in zip(res["true"], res["printed"])]
+        fixed = [sp.expand(t - c) for t, c in zip(res["true"], res["corrected"])]
+        ratios = [sp.cancel(p / t) for t, p in zip(res["true"], res["printed"]) if sp.expand(t) != 0]
+        zero = all(d == 0 for d in diffs)
+        all_diff_zero &= zero
+        corrected_ok &= all(d == 0 for d in fixed)
+        rows.append(f"{'-'.join(map(str, widths))} network with {names[act]} ({len(res['params'])} parameters): printed "
+                    f"rhs / true d/ds grad J = {', '.join(sorted({str(r) for r in ratios}))} for every parameter; "
+                    f"corrected rhs {'exact' if all(d == 0 for d in fixed) else 'NOT exact'}")
+        if not zero and counter is None:
+            # a concrete counterexample: all weights 1/2, biases 0, x = 1, y = 0, s = 1/2
+            subs = {p: sp.Rational(1, 2) if str(p).startswith("W") else 0 for p in res["params"]}
+            subs.update({x: 1 for x in sp.symbols(f"x1:{widths[0] + 1}")})
+            subs.update({y: 0 for y in sp.symbols(f"y1:{widths[-1] + 1}")})
+            subs[s] = sp.Rational(1, 2)
+            k = next(i for i, d in enumerate(diffs) if d != 0)
+            counter = {"network": "-".join(map(str, widths)) + " with " + names[act], "weights": 0.5, "biases": 0.0,
+                       "x": 1.0, "y": 0.0, "s": 0.5, "parameter": str(res["params"][k]),
+                       "d/ds grad J": float(res["true"][k].subs(subs)),
+                       "printed rhs": float(res["printed"][k].subs(subs))}
+    verdict = symbolic_verdict(all_diff_zero)
     return record(
         "score_function_identity",
         "eqs. d-ds-nablaW-ENO / d-ds-nablab-ENO: d/ds grad_W(l) J_s = int E_N[(sum_alpha (s^-2 |N^alpha|^2 "
         "- d_alpha)) R^(l) (A^(l-1))^T] dmu (and the same without A^T for b)",
         verdict,
-        f"exact Gaussian expectations (sympy) on a {'-'.join(map(str, widths))} network with sigma(z)=z+z^2/2: "
-        f"printed rhs / true d/ds grad J = {', '.join(ratio_set)} for every parameter; the rhs with "
-        f"weight (s^-2|N|^2-d)/s and -2 R A^T (the loss gradient) matches "
-        f"{'exactly' if corrected_ok else 'NOT'}. Exact (sympy): no statistical test, no tolerance",
+        "exact Gaussian expectations (sympy): " + "; ".join(rows)
+        + ". The corrected rhs uses the weight (s^-2|N|^2-d)/s and -2 R A^T (the loss gradient). Exact (sympy): no "
+          "statistical test, no tolerance",
         correction=("d/ds grad_W(l) J_s = int E_N[ s^-1 (sum_alpha (s^-2 |N^alpha|^2 - d_alpha)) "
                     "(-2 R^(l) (A^(l-1))^T) ] dmu; hence the printed D^[0] estimates -(s0/2) d/ds grad J_s0 "
                     "(verified symbolically here)") if corrected_ok else None,
-        counterexample=counter,
-        hypotheses=[activation_pb(_z + _z ** 2 / 2) if activation == "quadratic" else activation_pb("identity"),
-                    _noise_hypothesis()])
+        counterexample=counter if verdict == "fails" else None,
+        hypotheses=[activation_pb(_z + _z ** 2 / 2 if act == "quadratic" else _z, name=f"A1 ({names[act]})")
+                    for act in sorted({a for _, a in nets})] + [_noise_hypothesis()])

@@ -172,7 +172,8 @@ def theorem1_condition(key=None, precise: bool = False) -> dict:
     search = search_families(key, n=20000 if precise else 4000)
     hyps, refuted, rows = [], False, []
     for name, r in res.items():
-        mine = [h for h in r["hypotheses"] if h["name"] in ("s_positive", "w0_critical", "printed_condition")]
+        mine = [h for h in r["hypotheses"] if h["name"] in ("s_positive", "st_ne_s0", "w0_critical",
+                                                             "printed_condition")]
         inside = all(h["verified"] is True for h in mine)
         hyps += _instance_hypotheses(name, mine, inside)
         c1_zero = r["C1"]["value"] == 0.0 and r["C1_exact"] == "0"

@@ -44,3 +44,5 @@ def test_d0_printed_constant(x64):
     assert abs(r + 0.15) < 4.5 * se          # E D^[0] = -(s/2) d/ds grad J
     d, dse = res["corrected"]
     assert abs(d) < 4.5 * dse
+    cm, cse, norm = res["coordinates"]                  # the correction along every coordinate direction
+    assert cm.shape == (arch.n_params,) and np.all(np.abs(cm) < 5.0 * cse) and norm > 0

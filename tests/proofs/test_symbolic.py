@@ -5,6 +5,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 import sympy as sp
 from hypothesis import given
 from hypothesis import strategies as st
@@ -52,3 +53,10 @@ def test_score_identity_ratio_is_minus_s_over_2():
             assert sp.simplify(p / t + s / 2) == 0
     r = S.score_function_identity((1, 1, 1), activation="identity")
     assert r["verdict"] == "fails" and r["correction"]
+
+
+@pytest.mark.slow
+def test_score_identity_beyond_one_neuron_per_layer():
+    r = S.score_function_identity((((1, 1, 1), "quadratic"), ((1, 2, 1), "identity")))
+    assert r["verdict"] == "fails" and r["correction"] and "1-2-1" in r["evidence"]
+    assert all(h["verified"] is True for h in r["hypotheses"])

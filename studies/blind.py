@@ -3,7 +3,11 @@
     python -m studies.blind write DIR [--files-per-effect 3] [--seed 0] [--no-taps]            built-in catalogue
     python -m studies.blind write DIR --physics open [--files-per-physics 3] [--nulls N]
                                       [--seed 0] [--no-taps] [--setting random|reference]   physics outside it
-    python -m studies.blind score DIR [--limit N] [--match TEXT] [--runner inprocess|subprocess]
+    python -m studies.blind write DIR --physics new [--no-taps]        issue 24's second set (+ a null), reference setting
+    python -m studies.blind write DIR --physics mesh [--strength default|small|large] [--no-taps]   the MZI-mesh chip
+    python -m studies.blind score DIR [--limit N] [--match TEXT] [--runner inprocess|subprocess] [--keep JSONDIR]
+    python -m studies.blind rescore DIR --keep JSONDIR                 score kept diagnose JSONs again
+    python -m studies.blind table A.jsonl [B.jsonl ...]                markdown tables of scored rows
 
 ``write`` draws, per file, a random architecture (2-4 layers, widths 3-28, tanh), random
 weights, inputs, noise level and effect strength, and simulates the chip with
@@ -17,6 +21,10 @@ the study lived in gift_theory/lab). Open study (``--physics open``): the files 
 CONTRACTS §3 keys only, and the labels -- physics, CONTRACTS §6 mechanism class, the layers
 where a one-step check must fail, ``expressible_by``, parameters -- go to ``DIR/labels.json``;
 ``--setting reference`` pins the network to 8-16-8-4, 160 inputs x 48 shots, s = 0.1.
+
+Mesh study (``--physics mesh``): :mod:`studies.mesh_sim`, an MZI-mesh chip (SVD, Clements
+meshes, attenuators, homodyne readout) with its imperfections, on a 16-32-16-8 network,
+240 inputs x 64 shots, s = 0.05; labels (class, accepted classes, layers) in labels.json.
 
 ``score`` runs ``gift diagnose FILE --json --seed i --quiet`` on the i-th file (sorted) --
 through the ``gift`` console entry point in this process (default), or one ``gift`` process
@@ -43,7 +51,8 @@ import zlib
 
 import numpy as np
 
-from .contract_sim import CLASS_OF, OPEN_PHYSICS, loguniform, simulate_contract
+from .contract_sim import CLASS_OF, NEW_PHYSICS, OPEN_PHYSICS, loguniform, simulate_contract
+from .mesh_sim import DEFAULT_STRENGTH, MESH_PHYSICS, MESH_SETTING, simulate_mesh, uniform_loss_gain
 
 #: effects of the study and the range each parameter is drawn from (log-uniform for scales)
 EFFECTS = ("none", "laplace", "uniform", "multiplicative", "common_mode", "drift", "crosstalk", "weight_error",
@@ -122,6 +131,30 @@ def write(folder, files_per_effect: int, seed: int, taps: bool, effects=EFFECTS)
     return written
 
 
+def _jsonable(v, digits=6):
+    """A label value for JSON: arrays (and lists of them) as rounded lists."""
+    if isinstance(v, np.ndarray):
+        return np.round(v, digits).tolist()
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x, digits) for x in v]
+    if isinstance(v, dict):
+        return {k: _jsonable(x, digits) for k, x in v.items()}
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def _save_measurement(folder, fname, x, y, t, Ws, bs, tp, taps):
+    """The CONTRACTS §3 keys only (no label ever goes into a file gift reads)."""
+    arrays = {"x": x, "y": y, "t": t, "activation": np.array("tanh")}
+    for l, (W, b) in enumerate(zip(Ws, bs), start=1):
+        arrays[f"W{l}"], arrays[f"b{l}"] = W, b
+    if taps:
+        for l, a in enumerate(tp, start=1):
+            arrays[f"a{l}"] = a
+    np.savez(os.path.join(folder, fname), **arrays)
+
+
 def _open_settings(physics, files_per_physics: int, nulls: int):
     return [(name, i) for name in physics for i in range(files_per_physics)] + [("none", i) for i in range(nulls)]
 
@@ -146,25 +179,63 @@ def write_open(folder, files_per_physics: int, seed: int, taps: bool, physics=tu
         spec = OPEN_PHYSICS.get(name)
         params = spec.draw(rng, widths, n, r) if spec else {}
         y, tp, t = simulate_contract(rng, widths, Ws, bs, x, r, s, {name: params} if spec else {})
-        arrays = {"x": x, "y": y, "t": t, "activation": np.array("tanh")}
-        for l, (W, b) in enumerate(zip(Ws, bs), start=1):
-            arrays[f"W{l}"], arrays[f"b{l}"] = W, b
-        if taps:
-            for l, a in enumerate(tp, start=1):
-                arrays[f"a{l}"] = a
         fname = f"{name}_{i}.npz"
-        np.savez(os.path.join(folder, fname), **arrays)
-        shown = {k: v for k, v in params.items() if k != "C"}  # the dense coupling is re-made from the seed
-        if "delta" in shown:
-            shown["delta"] = [np.round(d, 6).tolist() for d in shown["delta"]]
+        _save_measurement(folder, fname, x, y, t, Ws, bs, tp, taps)
+        shown = _jsonable({k: v for k, v in params.items() if k != "C"})  # the dense coupling is re-made from the seed
         labels[fname] = {"physics": name, "mechanism": spec.mechanism if spec else None,
-                         "layers": spec.layers(L) if spec else [], "expressible_by": list(spec.expressible_by) if spec else [],
+                         "classes": spec.classes() if spec else [],
+                         "layers": spec.layers(L, params) if spec else [],
+                         "expressible_by": list(spec.expressible_by) if spec else [],
                          "contained_in": list(spec.contained_in) if spec else [],
                          "definition": spec.definition if spec else "no effect beyond awgn",
                          "params": {"s": s, **shown}, "arch": widths, "n": n, "r": r, "taps": taps,
                          "seed": seed, "setting": setting}
         sys.stderr.write(f"wrote {fname}: arch {'-'.join(map(str, widths))}, n={n}, r={r}, s={s:.3g}, {name} "
-                         f"{json.dumps({k: v for k, v in shown.items() if k != 'delta'})}\n")
+                         f"{json.dumps({k: v for k, v in shown.items() if not isinstance(v, list)})}\n")
+    with open(os.path.join(folder, "labels.json"), "w") as f:
+        json.dump(labels, f, indent=1)
+    return sorted(labels)
+
+
+def write_mesh(folder, files_per_physics: int, seed: int, taps: bool, physics=tuple(MESH_PHYSICS), strength=None,
+               setting=MESH_SETTING):
+    """Files from the MZI-mesh chip (:mod:`studies.mesh_sim`) on its 16-32-16-8 setting; labels to ``labels.json``.
+
+    ``strength``: "small" | "large" for every physics, or None for ``DEFAULT_STRENGTH`` (the
+    weight errors small, loss and crosstalk large). Each file's draws come from its own stream
+    (seed, physics, index), so the files with and without taps hold the same shots. ``setting``:
+    {"widths", "n", "r", "s"} (tests use a small one).
+    """
+    for name in physics:
+        if name not in MESH_PHYSICS:
+            raise ValueError(f"--only: unknown mesh physics {name!r}; known: {', '.join(MESH_PHYSICS)}")
+    os.makedirs(folder, exist_ok=True)
+    labels = {}
+    for name in physics:
+        spec = MESH_PHYSICS[name]
+        level = strength or DEFAULT_STRENGTH[name]
+        for i in range(files_per_physics):
+            rng = np.random.default_rng([seed, zlib.crc32(name.encode()), i])
+            widths, Ws, bs, x, n, r, s = _draw_setting(rng, taps, setting)
+            L = len(Ws)
+            imp = spec.imperfections(L, level)
+            y, tp, t, Weffs = simulate_mesh(rng, Ws, bs, x, r, s, imp)
+            fname = f"{name}_{i}.npz"
+            _save_measurement(folder, fname, x, y, t, Ws, bs, tp, taps)
+            rel = [float(np.linalg.norm(We - W) / np.linalg.norm(W)) for We, W in zip(Weffs, Ws)]
+            params = {"s": s, "strength": level,
+                      **{k: v for k, v in vars(imp).items() if k != "layers" and v},
+                      "imperfection_layers": {k: list(v) for k, v in imp.layers.items()},
+                      "relative_weight_error": rel}
+            if imp.loss_db:
+                params["g"] = [uniform_loss_gain(W.shape, imp.on("loss_db", l)) for l, W in enumerate(Ws, 1)]
+            labels[fname] = {"physics": name, "mechanism": spec.mechanism, "classes": list(spec.accepted),
+                             "layers": spec.layers(L), "expressible_by": list(spec.expressible_by),
+                             "contained_in": list(spec.contained_in), "definition": spec.definition,
+                             "params": params, "arch": widths, "n": n, "r": r, "taps": taps, "seed": seed,
+                             "setting": "mesh"}
+            sys.stderr.write(f"wrote {fname}: arch {'-'.join(map(str, widths))}, n={n}, r={r}, s={s:.3g}, {name} "
+                             f"{level}, ||W_eff - W|| / ||W|| = {np.round(rel, 3).tolist()}\n")
     with open(os.path.join(folder, "labels.json"), "w") as f:
         json.dump(labels, f, indent=1)
     return sorted(labels)
@@ -252,8 +323,17 @@ def score_row(out, label, taps: bool) -> dict:
     one_step_layers_exact with taps: the layers whose ``where`` p-value is below 0.01 / L
                         (Bonferroni) equal the label's layers (the scorer's reading, for a
                         diagnose that has ``where`` but no ``failing_layers``)
-    mechanism_first     ``mechanisms[0].mechanism`` is the label's class (for a pair of built-in
-                        effects: one of their classes); None on a null file
+    mechanism_first     ``mechanisms[0].mechanism`` is one of the label's accepted classes
+                        (``classes``: for a pair of built-in effects their classes; for the
+                        mesh's phase jitter input_dependent_noise or correlated_noise; otherwise
+                        the label's ``mechanism``); None on a null file
+    container_explained a wrong explanation whose top entry is in the label's ``contained_in``
+                        (a model that contains the physics without being it: over-flexible)
+    status_first        ranking[0]'s ``status`` (CONTRACTS §6, 2026-11-25; None if absent)
+    rejected_first      a rejected effect first: ranking[0] is rejected while another entry
+                        passes or is refused. With ``status`` on the entries: ranking[0] "fails"
+                        and another is "passes" or "refused"; without it: ranking[0]'s
+                        p_value_after < 0.01 and another entry's >= 0.01. None without a ranking
     """
     ranking = out.get("ranking") or []
     top = _entry_name(ranking[0]) if ranking else None
@@ -283,6 +363,9 @@ def score_row(out, label, taps: bool) -> dict:
     classes = label.get("classes") or ([label["mechanism"]] if label.get("mechanism") else [])
     row["mechanism_first"] = (None if mechs is None or null
                               else bool(mechs) and mechs[0].get("mechanism") in classes)
+    row["container_explained"] = None if wrong is None else bool(wrong and top in label.get("contained_in", []))
+    row["status_first"] = ranking[0].get("status") if ranking else None
+    row["rejected_first"] = rejected_first(ranking)
     steps = {int(w["layer"]): w.get("p_value") for w in out.get("where") or [] if "layer" in w}
     row["one_step_p"] = steps or None
     # the scorer's own reading of the per-layer one-step p-values: fail at 0.01, Bonferroni over the layers
@@ -290,6 +373,21 @@ def score_row(out, label, taps: bool) -> dict:
                                     else sorted(l for l, p in steps.items() if p < 0.01 / len(steps))
                                     == sorted(set(label["layers"])))
     return row
+
+
+def rejected_first(ranking):
+    """True when ranking[0] is an effect the data reject while another entry passes or is refused
+    (``status`` where the entries carry it, else p_value_after against 0.01); None without entries."""
+    if not ranking:
+        return None
+    if all("status" in e for e in ranking):
+        return ranking[0]["status"] == "fails" and any(e["status"] in ("passes", "refused") for e in ranking[1:])
+
+    def rejected(e):
+        p = e.get("p_value_after")
+        return p is not None and p < 0.01
+
+    return rejected(ranking[0]) and any(e.get("p_value_after") is not None and not rejected(e) for e in ranking[1:])
 
 
 def _identified(row, label) -> bool:
@@ -301,7 +399,8 @@ def _identified(row, label) -> bool:
 
 
 _COUNTED = ("detected", "explained_correct", "expressible_top", "wrong_explanation", "wrong_by_baseline",
-            "failing_layers_exact", "one_step_layers_exact", "mechanism_first")
+            "container_explained", "failing_layers_exact", "one_step_layers_exact", "mechanism_first",
+            "rejected_first")
 
 
 def summarize(rows, builtin: bool) -> dict:
@@ -326,9 +425,49 @@ def summarize(rows, builtin: bool) -> dict:
                "detection_rate": float(np.mean([r["detected"] for r in eff])) if eff else None,
                "false_alarm_rate": float(np.mean([r["detected"] for r in null])) if null else None,
                "wrong_explanations": count(ok, "wrong_explanation"),
-               "wrong_explanations_by_baseline": count(ok, "wrong_by_baseline")}
+               "wrong_explanations_by_baseline": count(ok, "wrong_by_baseline"),
+               "mechanism_first": count(eff, "mechanism_first"),
+               "failing_layers_exact": count(ok, "failing_layers_exact"),
+               "rejected_first": count(ok, "rejected_first")}
     if builtin:
         summary["identification_rate"] = float(np.mean([r["identified"] for r in eff])) if eff else None
+    return summary
+
+
+def _row(f, label, shape, res, err, builtin: bool) -> dict:
+    row = {"file": f, "physics": label["physics"], "mechanism_label": label["mechanism"],
+           "classes_label": label.get("classes"), "layers_label": label["layers"],
+           "expressible_by": label["expressible_by"], **shape}
+    if builtin:
+        row.update(hidden=label["physics"], truth=label["truth"])
+    else:
+        row.update(params=label["params"], contained_in=label.get("contained_in", []))
+    if err:
+        row["error"] = err
+    else:
+        row.update(score_row(res, label, shape["taps"]))
+        if builtin:
+            row["identified"] = _identified(row, label)
+    return row
+
+
+def rescore(folder, kept, out=sys.stdout):
+    """Score again the ``gift diagnose --json`` objects kept by ``score --keep`` (no gift run):
+    the scorer's columns as they are now, on the answers of the code that made them."""
+    with open(os.path.join(folder, "labels.json")) as f:
+        labels = json.load(f)
+    rows = []
+    for f in sorted(labels):
+        path = os.path.join(kept, f[:-4] + ".json")
+        if not os.path.exists(path):
+            row = _row(f, labels[f], _shape(os.path.join(folder, f)), None, f"no kept JSON {path}", builtin=False)
+        else:
+            with open(path) as fh:
+                row = _row(f, labels[f], _shape(os.path.join(folder, f)), json.load(fh), None, builtin=False)
+        rows.append(row)
+        out.write(json.dumps(row) + "\n")
+    summary = summarize(rows, builtin=False)
+    out.write(json.dumps(summary) + "\n")
     return summary
 
 
@@ -366,18 +505,7 @@ def score(folder, limit=None, out=sys.stdout, runner="inprocess", match=None, ke
             os.makedirs(keep, exist_ok=True)
             with open(os.path.join(keep, f[:-4] + ".json"), "w") as fh:
                 json.dump(res, fh)
-        row = {"file": f, "physics": label["physics"], "mechanism_label": label["mechanism"],
-               "layers_label": label["layers"], "expressible_by": label["expressible_by"], **shape}
-        if labels is None:
-            row.update(hidden=label["physics"], truth=label["truth"])
-        else:
-            row.update(params=label["params"], contained_in=label.get("contained_in", []))
-        if err:
-            row["error"] = err
-        else:
-            row.update(score_row(res, label, shape["taps"]))
-            if labels is None:
-                row["identified"] = _identified(row, label)
+        row = _row(f, label, shape, res, err, builtin=labels is None)
         row["seconds"] = time.time() - t0
         rows.append(row)
         out.write(json.dumps(row) + "\n")
@@ -392,33 +520,109 @@ def score(folder, limit=None, out=sys.stdout, runner="inprocess", match=None, ke
     return summary
 
 
+def _mark(v):
+    return "-" if v is None else "yes" if v else "no"
+
+
+def table(paths, out=None):
+    """Markdown tables from score/rescore JSON lines: one per file, then one line per file set.
+
+    paths : JSONL files (each a study set; the summary line is recomputed from the rows).
+    Columns: detected (baseline p), explained, wrong explanation, ranking[0] and its
+    p_value_after (and status), first mechanism and whether it is an accepted class, failing
+    layers and whether exact, a rejected effect first.
+    """
+    out = sys.stdout if out is None else out
+    sets = []
+    for path in paths:
+        with open(path) as f:
+            rows = [json.loads(line) for line in f if line.strip()]
+        rows = [r for r in rows if not r.get("summary")]
+        sets.append((os.path.basename(path), rows))
+        out.write(f"\n{os.path.basename(path)}\n\n")
+        out.write("| file | label (accepted classes; layers) | detected (p) | explained | wrong | ranking[0] (p after, status) "
+                  "| first mechanism | right class | failing layers | exact | rejected first |\n")
+        out.write("|---|---|---|---|---|---|---|---|---|---|---|\n")
+        for r in rows:
+            if r.get("error"):
+                out.write(f"| {r['file']} | {r['physics']} | error: {r['error']} |||||||||\n")
+                continue
+            classes = r.get("classes_label") or ([r["mechanism_label"]] if r.get("mechanism_label") else [])
+            p_after = r.get("p_after")
+            out.write(f"| {r['file']} | {'/'.join(classes) or 'none'}; {r['layers_label']} "
+                      f"| {_mark(r['detected'])} ({r['baseline_p']:.2g}) | {_mark(r.get('explained'))} "
+                      f"| {_mark(r.get('wrong_explanation'))} | {'+'.join(r.get('first_entry') or []) or '-'} "
+                      f"({'-' if p_after is None else f'{p_after:.2g}'}, {r.get('status_first') or '-'}) "
+                      f"| {(r.get('mechanisms') or ['-'])[0] if r.get('mechanisms') else '-'} "
+                      f"| {_mark(r.get('mechanism_first'))} | {r.get('failing_layers')} "
+                      f"| {_mark(r.get('failing_layers_exact'))} | {_mark(r.get('rejected_first'))} |\n")
+    out.write("\n| set | files | detected (effects) | false alarms (nulls) | wrong explanations | first class right "
+              "| failing layers exact | rejected effect first |\n|---|---|---|---|---|---|---|---|\n")
+    for name, rows in sets:
+        ok = [r for r in rows if not r.get("error")]
+        eff = [r for r in ok if r["physics"] != "none"]
+        null = [r for r in ok if r["physics"] == "none"]
+
+        def frac(rs, key):
+            vals = [r.get(key) for r in rs if r.get(key) is not None]
+            return f"{sum(bool(v) for v in vals)}/{len(vals)}" if vals else "-"
+
+        out.write(f"| {name} | {len(ok)}{f' (+{len(rows) - len(ok)} errors)' if len(rows) > len(ok) else ''} "
+                  f"| {frac(eff, 'detected')} | {frac(null, 'detected')} | {frac(ok, 'wrong_explanation')} "
+                  f"| {frac(eff, 'mechanism_first')} | {frac(ok, 'failing_layers_exact')} "
+                  f"| {frac(ok, 'rejected_first')} |\n")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m studies.blind", description=__doc__.split("\n\n")[0])
-    p.add_argument("what", choices=("write", "score"))
-    p.add_argument("folder")
-    p.add_argument("--physics", choices=("builtin", "open"), default="builtin",
-                   help="write: the built-in catalogue's effects, or physics outside it (labels in labels.json)")
-    p.add_argument("--files-per-effect", "--files-per-physics", dest="files", type=int, default=3)
+    p.add_argument("what", choices=("write", "score", "rescore", "table"))
+    p.add_argument("folder", nargs="+", help="the study folder (table: the JSONL files)")
+    p.add_argument("--physics", choices=("builtin", "open", "new", "mesh"), default="builtin",
+                   help="write: the built-in catalogue's effects, physics outside it (open; new: issue 24's second "
+                        "set, one file each and a null on the reference setting), or the MZI-mesh chip "
+                        "(labels in labels.json)")
+    p.add_argument("--strength", choices=("default", "small", "large"), default="default",
+                   help="mesh study: every physics small or large (default: weight errors small, loss and "
+                        "crosstalk large)")
+    p.add_argument("--files-per-effect", "--files-per-physics", dest="files", type=int, default=None,
+                   help="files per effect (default 3; --physics new and mesh: 1)")
     p.add_argument("--nulls", type=int, default=None, help="open study: null files (default: --files-per-physics)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--taps", action=argparse.BooleanOptionalAction, default=True)
     p.add_argument("--effects", default=",".join(EFFECTS), help="built-in study: the effects (pairs with +)")
     p.add_argument("--only", default=",".join(OPEN_PHYSICS), help="open study: the physics")
-    p.add_argument("--setting", choices=("random", "reference"), default="random",
-                   help="open study: random networks like the built-in study's, or 8-16-8-4, 160 x 48, s = 0.1")
+    p.add_argument("--setting", choices=("random", "reference"), default=None,
+                   help="open study: random networks like the built-in study's (default), or 8-16-8-4, 160 x 48, "
+                        "s = 0.1 (the default of --physics new)")
     p.add_argument("--limit", type=int, default=None)
     p.add_argument("--match", default=None, help="score: only files whose name contains this (same seeds as a full run)")
     p.add_argument("--keep", default=None, metavar="DIR", help="score: also write each diagnose JSON to DIR")
     p.add_argument("--runner", choices=("inprocess", "subprocess"), default="inprocess",
                    help="score: the gift entry point in this process, or one gift process per file")
     a = p.parse_args(argv)
+    if a.what != "table":
+        if len(a.folder) != 1:
+            p.error(f"{a.what} takes one folder")
+        a.folder = a.folder[0]
     try:
+        if a.what == "table":
+            table(a.folder)
+            return 0
         if a.what == "score":
             score(a.folder, a.limit, runner=a.runner, match=a.match, keep=a.keep)
+        elif a.what == "rescore":
+            if a.keep is None:
+                raise ValueError("rescore needs --keep DIR (the kept diagnose JSONs)")
+            rescore(a.folder, a.keep)
         elif a.physics == "open":
-            write_open(a.folder, a.files, a.seed, a.taps, tuple(a.only.split(",")), a.nulls, a.setting)
+            write_open(a.folder, a.files or 3, a.seed, a.taps, tuple(a.only.split(",")), a.nulls, a.setting or "random")
+        elif a.physics == "new":
+            write_open(a.folder, a.files or 1, a.seed, a.taps, NEW_PHYSICS, 1 if a.nulls is None else a.nulls,
+                       a.setting or "reference")
+        elif a.physics == "mesh":
+            write_mesh(a.folder, a.files or 1, a.seed, a.taps, strength=None if a.strength == "default" else a.strength)
         else:
-            write(a.folder, a.files, a.seed, a.taps, tuple(a.effects.split(",")))
+            write(a.folder, a.files or 3, a.seed, a.taps, tuple(a.effects.split(",")))
     except (ValueError, OSError) as exc:
         sys.stderr.write(f"python -m studies.blind {a.what}: {exc}\n")
         return 2

@@ -50,6 +50,32 @@ Open physics (n: a fresh standard draw of the file's noise law; xi: standard nor
                                       xi(k) = rho xi(k-1) + sqrt(1 - rho^2) eta_k,
                                       rho = exp(-1 / tau), tau in shots. gain_fluctuation; []
 
+The second set (issue 24, ``NEW_PHYSICS``)::
+
+``sin_modulator``    (none)           hidden layers: act(z) = sin(z) (a Mach-Zehnder modulator's
+                                      field transfer, slope 1 at 0 like tanh) instead of tanh.
+                                      activation_mismatch; []
+``bias_drift``       c                layer 1: b_1^eff = b_1 + c t (t the shot's normalised time),
+                                      one c for the layer. time_drift; []
+``dead_neuron``      layer, neuron    one neuron of one hidden layer transmits nothing: its
+                                      activation is 0 (a_l[i] = D(0 + n_al)). activation_mismatch
+                                      (CONTRACTS §6 names a dead neuron there); layers [layer]; []
+``common_noise``     c                every layer: z_l += c xi_l, one xi_l per layer per shot shared
+                                      by all its neurons (additive). correlated_noise; []
+``detector_gain_offset`` gain, offset every layer output: D first maps v[i] to gain[i] v[i] + offset[i],
+                                      gain[i] ~ 1 + N(0, gain_sd^2), offset[i] ~ N(0, offset_sd^2),
+                                      fixed per device (each output has its own detector).
+                                      readout_nonlinearity; []
+``student_t_layer``  nu, layer        one layer's n_w and n_a drawn from Student's t with nu
+                                      degrees of freedom scaled to standard deviation s.
+                                      noise_law; layers [layer]; []
+``last_layer_weight_error`` e, E      the last layer only: W_L^eff = W_L + E, E iid N(0, e^2) fixed
+                                      per device. weight_error; layers [L]; [] (contained in the
+                                      catalogue's weight_error, which puts offsets in every layer)
+
+The catalogue's ``layer_gain`` (CONTRACTS §2, 2026-11-25) takes ``{"g": [g_1 .. g_L]}``: g_l
+multiplies layer l's gain.
+
 Randomness: one ``numpy.random.Generator`` threads through a whole simulation; an effect
 draws from it only when present, so a simulation without the open physics consumes exactly
 the draws of the original transcription (the blind study's built-in files are unchanged).
@@ -64,18 +90,20 @@ import numpy as np
 
 #: the effect names of CONTRACTS §2
 CATALOGUE = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "drift", "crosstalk", "weight_error",
-             "shot", "saturation", "quantization")
+             "shot", "saturation", "quantization", "layer_gain")
 
 #: the mechanism class (CONTRACTS §6) of every catalogue effect
 CLASS_OF = {"awgn": "noise_level", "laplace": "noise_law", "uniform": "noise_law",
             "shot": "input_dependent_noise", "multiplicative": "input_dependent_noise",
-            "common_mode": "gain_fluctuation", "drift": "gain_fluctuation",
+            "common_mode": "gain_fluctuation", "drift": "time_drift",
             "crosstalk": "weight_error", "weight_error": "weight_error",
-            "saturation": "readout_nonlinearity", "quantization": "readout_nonlinearity"}
+            "saturation": "readout_nonlinearity", "quantization": "readout_nonlinearity",
+            "layer_gain": "gain_error"}
 
-#: the mechanism classes of CONTRACTS §6
-MECHANISMS = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "weight_error",
-              "bias_offset", "activation_mismatch", "readout_nonlinearity")
+#: the mechanism classes of CONTRACTS §6 (time_drift, correlated_noise, gain_error: 2026-11-25)
+MECHANISMS = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "time_drift",
+              "correlated_noise", "gain_error", "weight_error", "bias_offset", "activation_mismatch",
+              "readout_nonlinearity")
 
 
 def loguniform(rng, lo, hi):
@@ -92,7 +120,8 @@ class OpenPhysics:
 
     name : the effect's name in this simulator (``simulate_contract``'s ``effects`` key)
     mechanism : its CONTRACTS §6 class
-    scope : "all" | "hidden" | "output": the layers it acts on (``layers(L)``, 1-based)
+    scope : "all" | "hidden" | "output" | "first" | "drawn" (one layer, drawn per device as
+        ``params["layer"]``): the layers it acts on (``layers(L, params)``, 1-based)
     expressible_by : catalogue effects whose model is exactly this physics
     contained_in : catalogue effects whose fitted model contains this physics as one of its
         values although their model (law, structure) is not this physics: a fitted
@@ -101,6 +130,7 @@ class OpenPhysics:
     definition : one line, the formula
     draw : ``(rng, widths, n, r) -> params``: the study's strength (visible but not
         overwhelming at 8-16-8-4, 160 inputs x 48 shots, s = 0.1) and the device's fixed draws
+    accepted : further classes a diagnosis may name first (none for any physics here yet)
     """
 
     name: str
@@ -110,9 +140,19 @@ class OpenPhysics:
     contained_in: tuple[str, ...]
     definition: str
     draw: Callable
+    accepted: tuple[str, ...] = ()
 
-    def layers(self, L: int) -> list[int]:
-        return {"all": list(range(1, L + 1)), "hidden": list(range(1, L)), "output": [L]}[self.scope]
+    def layers(self, L: int, params=None) -> list[int]:
+        """The 1-based layers it acts on; scope "drawn": the device's ``params["layer"]``."""
+        if self.scope == "drawn":
+            if params is None:
+                raise ValueError(f"{self.name}: the layer it acts on is drawn per device; pass its params")
+            return [int(params["layer"])]
+        return {"all": list(range(1, L + 1)), "hidden": list(range(1, L)), "output": [L], "first": [1]}[self.scope]
+
+    def classes(self) -> list[str]:
+        """The classes accepted as a diagnosis's first mechanism: the primary one, then ``accepted``."""
+        return [self.mechanism] + [c for c in self.accepted if c != self.mechanism]
 
 
 def bias_offset_device(rng, widths, sigma):
@@ -144,6 +184,27 @@ def _draw_ar1_gain(rng, widths, n, r):
     return {"c": loguniform(rng, 0.12, 0.25), "tau": float(rng.uniform(0.01, 0.05) * n * r)}
 
 
+def _draw_dead_neuron(rng, widths, n, r):
+    layer = int(rng.integers(1, len(widths) - 1))  # a hidden layer (1-based)
+    return {"layer": layer, "neuron": int(rng.integers(widths[layer]))}
+
+
+def _draw_detector(rng, widths, n, r):
+    gain_sd, offset_sd = loguniform(rng, 0.05, 0.12), loguniform(rng, 0.03, 0.08)
+    return {"gain_sd": gain_sd, "offset_sd": offset_sd,
+            "gain": [1.0 + rng.normal(0.0, gain_sd, d) for d in widths[1:]],
+            "offset": [rng.normal(0.0, offset_sd, d) for d in widths[1:]]}
+
+
+def _draw_student_t(rng, widths, n, r):
+    return {"nu": float(rng.uniform(3.5, 6.0)), "layer": int(rng.integers(1, len(widths)))}
+
+
+def _draw_last_weight_error(rng, widths, n, r):
+    e = loguniform(rng, 0.05, 0.15)
+    return {"e": e, "E": rng.normal(0.0, e, (widths[-1], widths[-2]))}
+
+
 # strengths: at 8-16-8-4, 160 x 48 shots, s = 0.1 the layer-wise mean shifts (for the
 # variance effects the variance ratios) are of the size the built-in study's ranges give
 OPEN_PHYSICS = {p.name: p for p in (
@@ -169,7 +230,35 @@ OPEN_PHYSICS = {p.name: p for p in (
                 "every layer: g *= 1 + c xi(k), xi one AR(1) process (correlation time tau shots) in "
                 "acquisition order, shared by all neurons and layers",
                 _draw_ar1_gain),
+    # the second set (issue 24)
+    OpenPhysics("sin_modulator", "activation_mismatch", "hidden", (), (),
+                "hidden layers: act(z) = sin(z) (a Mach-Zehnder modulator's field transfer) instead of tanh",
+                lambda rng, widths, n, r: {}),
+    OpenPhysics("bias_drift", "time_drift", "first", (), (),
+                "layer 1: b_eff = b + c t, t the shot's normalised acquisition time (one c for the layer)",
+                lambda rng, widths, n, r: {"c": _signed(rng, 0.1, 0.25)}),
+    OpenPhysics("dead_neuron", "activation_mismatch", "drawn", (), (),
+                "one neuron of a hidden layer transmits nothing: a_l[i] = D(0 + n_a) (its activation noise stays)",
+                _draw_dead_neuron),
+    OpenPhysics("common_noise", "correlated_noise", "all", (), (),
+                "every layer: z_l += c xi_l, one xi_l ~ N(0, 1) per layer per shot shared by all its neurons",
+                lambda rng, widths, n, r: {"c": loguniform(rng, 0.08, 0.15)}),
+    OpenPhysics("detector_gain_offset", "readout_nonlinearity", "all", (), (),
+                "every layer output: D first maps v to gain[i] v + offset[i], gain ~ 1 + N(0, gain_sd^2), "
+                "offset ~ N(0, offset_sd^2) per neuron, fixed per device",
+                _draw_detector),
+    OpenPhysics("student_t_layer", "noise_law", "drawn", (), (),
+                "one layer: its n_w and n_a drawn from Student's t with nu degrees of freedom, scaled to "
+                "standard deviation s",
+                _draw_student_t),
+    OpenPhysics("last_layer_weight_error", "weight_error", "output", (), ("weight_error",),
+                "the last layer only: W_L^eff = W_L + E, E iid N(0, e^2) fixed per device",
+                _draw_last_weight_error),
 )}
+
+#: issue 24's second set of physics outside the catalogue (``python -m studies.blind write --physics new``)
+NEW_PHYSICS = ("sin_modulator", "bias_drift", "dead_neuron", "common_noise", "detector_gain_offset",
+               "student_t_layer", "last_layer_weight_error")
 
 
 def ar1_path(rng, length, tau):
@@ -209,7 +298,10 @@ def simulate_contract(rng, widths, Ws, bs, x, r, s, effects: dict, activation=np
     L = len(Ws)
     law = "laplace" if "laplace" in effects else "uniform" if "uniform" in effects else "gaussian"
 
-    def additive(shape):
+    def additive(shape, layer=None):
+        if "student_t_layer" in effects and layer == effects["student_t_layer"]["layer"]:
+            nu = effects["student_t_layer"]["nu"]
+            return s * rng.standard_t(nu, shape) / np.sqrt(nu / (nu - 2.0))
         if law == "laplace":
             return rng.laplace(0.0, s / np.sqrt(2.0), shape)
         if law == "uniform":
@@ -234,20 +326,28 @@ def simulate_contract(rng, widths, Ws, bs, x, r, s, effects: dict, activation=np
             We = We + rng.normal(0.0, effects["weight_error"]["e"], W.shape)  # fixed for the device
         if "dense_crosstalk" in effects:
             We = We + effects["dense_crosstalk"]["k"] * (W @ effects["dense_crosstalk"]["C"][l])
+        if "last_layer_weight_error" in effects and l == len(Ws) - 1:
+            We = We + effects["last_layer_weight_error"]["E"]
         Weffs.append(We)
     if "ar1_gain" in effects:
         rank = np.argsort(np.argsort(t.ravel(), kind="stable"), kind="stable").reshape(n, r)
         laser = 1.0 + effects["ar1_gain"]["c"] * ar1_path(rng, n * r, effects["ar1_gain"]["tau"])[rank]
 
-    def act(z):
+    def act(z, layer):
         if "activation_gain" in effects:
             z = effects["activation_gain"]["kappa"] * z
-        h = activation(z)
+        h = np.sin(z) if "sin_modulator" in effects else activation(z)
         if "activation_shape" in effects:
             h = h + effects["activation_shape"]["a2"] * h ** 2
+        if "dead_neuron" in effects and layer == effects["dead_neuron"]["layer"]:
+            h = h.copy()
+            h[..., effects["dead_neuron"]["neuron"]] = 0.0
         return h
 
-    def readout(v):
+    def readout(v, layer):
+        if "detector_gain_offset" in effects:
+            det = effects["detector_gain_offset"]
+            v = det["gain"][layer - 1] * v + det["offset"][layer - 1]
         if "saturation" in effects:
             vm = effects["saturation"]["v_max"]
             v = vm * np.tanh(v / vm)
@@ -270,16 +370,22 @@ def simulate_contract(rng, widths, Ws, bs, x, r, s, effects: dict, activation=np
             g = g * (1 + effects["common_mode"]["c"] * rng.standard_normal(u.shape[:2] + (1,)))
         if "drift" in effects:
             g = g * (1 + effects["drift"]["r"] * t[:, :, None])
+        if "layer_gain" in effects:
+            g = g * effects["layer_gain"]["g"][l]
         if "ar1_gain" in effects:
             g = g * laser[:, :, None]
         b = bs[l] + effects["bias_offset"]["delta"][l] if "bias_offset" in effects else bs[l]
-        noise = additive(u.shape)
+        if "bias_drift" in effects and l == 0:
+            b = b + effects["bias_drift"]["c"] * t[:, :, None]
+        noise = additive(u.shape, l + 1)
         if "signal_noise" in effects and l < L - 1:
             noise = noise * (1 + effects["signal_noise"]["beta"] * np.abs(u))
+        if "common_noise" in effects:
+            noise = noise + effects["common_noise"]["c"] * rng.standard_normal(u.shape[:2] + (1,))
         z = g * u + b + noise
         if l < L - 1:
-            a = readout(act(z) + additive(u.shape))
+            a = readout(act(z, l + 1) + additive(u.shape, l + 1), l + 1)
             taps.append(a)
         else:
-            a = readout(z ** 2 if "square_law" in effects else z)
+            a = readout(z ** 2 if "square_law" in effects else z, l + 1)
     return a, taps, t

@@ -158,10 +158,11 @@ def test_every_open_physics_declares_a_contract_class_and_catalogue_names(name):
     from studies.contract_sim import CATALOGUE, MECHANISMS
 
     spec = OPEN_PHYSICS[name]
-    assert spec.mechanism in MECHANISMS
+    assert spec.mechanism in MECHANISMS and set(spec.classes()) <= set(MECHANISMS)
     assert set(spec.expressible_by) <= set(CATALOGUE) | {"bias_offset", "activation_gain"}
     assert set(spec.contained_in) <= set(CATALOGUE)
-    assert spec.layers(4) and set(spec.layers(4)) <= {1, 2, 3, 4}
+    layers = spec.layers(4, spec.draw(np.random.default_rng(0), (5, 7, 6, 4, 3), 10, 2))
+    assert layers and set(layers) <= {1, 2, 3, 4}
 
 
 def test_builtin_labels_come_from_the_file(tmp_path):
@@ -200,3 +201,43 @@ def test_score_loop_seeds_labels_match_and_errors(tmp_path, monkeypatch):
     seen.clear()
     blind.score(str(tmp_path), out=io.StringIO(), match="square")
     assert seen == [("square_law_0.npz", 2)]
+
+
+def test_a_rejected_effect_first_is_counted_with_status_or_p_values():
+    """Without ``status``: ranking[0] below 0.01 while another entry is at or above it; with it:
+    ranking[0] "fails" while another "passes" or is "refused" (CONTRACTS §6's ordering rule)."""
+    lab = _label("activation_gain")
+    assert blind.score_row(_out(ranking=[("drift", 1e-40), ("weight_error", 0.3)]), lab, taps=True)["rejected_first"]
+    assert not blind.score_row(_out(ranking=[("drift", 1e-40), ("weight_error", 1e-9)]), lab,
+                               taps=True)["rejected_first"]
+    assert not blind.score_row(_out(ranking=[("weight_error", 0.3), ("drift", 1e-40)]), lab,
+                               taps=True)["rejected_first"]
+    out = _out(ranking=[("drift", 1e-40), ("weight_error", 0.3)])
+    out["ranking"][0]["status"], out["ranking"][1]["status"] = "fails", "refused"
+    row = blind.score_row(out, lab, taps=True)
+    assert row["rejected_first"] and row["status_first"] == "fails"
+    out["ranking"][1]["status"] = "fails"                  # the status rule wins over the p-values
+    assert blind.score_row(out, lab, taps=True)["rejected_first"] is False
+    assert blind.score_row(_out(ranking=()), lab, taps=True)["rejected_first"] is None
+
+
+def test_rescore_and_table_read_kept_answers(tmp_path, capsys):
+    """rescore scores kept diagnose JSONs with no gift run; table prints one row per file and the set's counts."""
+    import io
+
+    folder = tmp_path / "study"
+    blind.write_open(str(folder), 1, seed=4, taps=True, physics=("square_law",), nulls=1, setting="reference")
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / "square_law_0.json").write_text(json.dumps(_out(ranking=[("saturation", 1e-40), ("shot", 0.2)],
+                                                            explained=False, failing=[3],
+                                                            mechanisms=["readout_nonlinearity"])))
+    buf = io.StringIO()
+    summary = blind.rescore(str(folder), str(kept), out=buf)
+    assert summary["errors"] == 1 and summary["rejected_first"] == 1 and summary["mechanism_first"] == 1
+    path = tmp_path / "rows.jsonl"
+    path.write_text(buf.getvalue())
+    blind.table([str(path)])
+    text = capsys.readouterr().out
+    assert "| square_law_0.npz | readout_nonlinearity; [3] | yes" in text
+    assert "| rows.jsonl | 1 (+1 errors) | 1/1 | - | 0/1 | 1/1 | 1/1 | 1/1 |" in text

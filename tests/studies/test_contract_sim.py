@@ -31,7 +31,14 @@ SETTINGS = {
     "awgn": {}, "laplace": {}, "uniform": {},
     "multiplicative": {"m": 0.3}, "common_mode": {"c": 0.3}, "drift": {"r": 0.8}, "crosstalk": {"k": 0.3},
     "shot": {"q": 0.05}, "saturation": {"v_max": 0.5}, "quantization": {"bits": 4.0, "v_range": 1.0},
+    "layer_gain": {"g": [0.6, 1.3, 0.8]},
 }
+
+
+def _needs_gift(name):
+    """CONTRACTS §2 names ahead of gift (added to the contract, not yet implemented) skip gift's side."""
+    if name not in gt.EFFECT_NAMES:
+        pytest.skip(f"gift has no {name!r} yet (CONTRACTS §2, 2026-11-25)")
 
 
 def _network(rng):
@@ -44,6 +51,8 @@ def _gift(seed, Ws, bs, x, t, name, params, shots=SHOTS):
     """gift's outputs of every layer, concatenated: (n, shots, d_1 + .. + d_L)."""
     arch = gt.Architecture(WIDTHS)
     arrays = {f"W{l}": W for l, W in enumerate(Ws, 1)} | {f"b{l}": b for l, b in enumerate(bs, 1)}
+    if name == "layer_gain":  # gift holds a per-layer value as a (1,)-array per layer
+        params = {"g": tuple((float(g),) for g in params["g"])}
     kw = {} if name == "awgn" else {name: params or True}
     physics = gt.Physics.create(s=S, **kw)
     out = gt.simulate(jax.random.PRNGKey(seed), gt.params_from_arrays(arrays), x, physics, arch, shots, t=t, taps=True)
@@ -104,11 +113,13 @@ def _setting():
 
 
 def test_the_study_names_every_builtin_effect():
-    assert set(SETTINGS) | {"weight_error"} == set(CATALOGUE) == set(gt.EFFECT_NAMES)
+    """Every name of gift's catalogue is in the contract's (the contract may be ahead of gift)."""
+    assert set(SETTINGS) | {"weight_error"} == set(CATALOGUE) >= set(gt.EFFECT_NAMES)
 
 
 @pytest.mark.parametrize("name", sorted(SETTINGS))
 def test_builtin_effect_agrees_in_distribution(name):
+    _needs_gift(name)
     seed, Ws, bs, x, t = _setting()
     A = _gift(seed, Ws, bs, x, t, name, SETTINGS[name])
     B = _contract(seed + 1, Ws, bs, x, t, name, SETTINGS[name])
@@ -195,16 +206,24 @@ def _open_net(rng, widths=(5, 7, 6, 3)):
     return list(widths), Ws, bs, rng.normal(0.0, 1.0, (6, widths[0]))
 
 
-def _noiseless(widths, Ws, bs, x, act=np.tanh, kappa=1.0, a2=0.0, Weff=None, delta=None, square=False):
-    """The stated formulas, one layer at a time, without noise: [a_1 .. a_L]."""
+def _noiseless(widths, Ws, bs, x, act=np.tanh, kappa=1.0, a2=0.0, Weff=None, delta=None, square=False,
+              dead=None, det=None):
+    """The stated formulas, one layer at a time, without noise: [a_1 .. a_L].
+
+    dead : (layer, neuron) whose activation is 0; det : (gains, offsets) per layer applied to each output
+    """
     outs, a = [], x
     for l, (W, b) in enumerate(zip(Ws, bs)):
         z = a @ (W if Weff is None else Weff[l]).T + b + (0.0 if delta is None else delta[l])
         if l < len(Ws) - 1:
             h = act(kappa * z)
             a = h + a2 * h ** 2
+            if dead is not None and dead[0] == l + 1:
+                a[..., dead[1]] = 0.0
         else:
             a = z ** 2 if square else z
+        if det is not None:
+            a = det[0][l] * a + det[1][l]
         outs.append(a)
     return outs
 
@@ -230,13 +249,20 @@ def test_open_physics_follow_their_formulas_without_noise():
     widths, Ws, bs, x = _open_net(rng)
     L = len(Ws)
     for name, spec in OPEN_PHYSICS.items():
-        if name in ("signal_noise", "ar1_gain"):
+        if name in ("signal_noise", "ar1_gain", "common_noise", "student_t_layer"):
             continue  # noise effects: statistical checks below
         p = spec.draw(rng, widths, 6, 1)
-        y, taps, _ = simulate_contract(np.random.default_rng(0), widths, Ws, bs, x, 1, 0.0, {name: p})
+        t = np.full((6, 1), 0.7)
+        y, taps, _ = simulate_contract(np.random.default_rng(0), widths, Ws, bs, x, 1, 0.0, {name: p}, t=t)
         kw = {"activation_gain": lambda: {"kappa": p["kappa"]}, "activation_shape": lambda: {"a2": p["a2"]},
               "bias_offset": lambda: {"delta": p["delta"]}, "square_law": lambda: {"square": True},
-              "dense_crosstalk": lambda: {"Weff": [W + p["k"] * W @ C for W, C in zip(Ws, p["C"])]}}[name]()
+              "dense_crosstalk": lambda: {"Weff": [W + p["k"] * W @ C for W, C in zip(Ws, p["C"])]},
+              "sin_modulator": lambda: {"act": np.sin},
+              "bias_drift": lambda: {"delta": [np.full(d, p["c"] * 0.7 if l == 0 else 0.0)
+                                               for l, d in enumerate(widths[1:])]},
+              "dead_neuron": lambda: {"dead": (p["layer"], p["neuron"])},
+              "detector_gain_offset": lambda: {"det": (p["gain"], p["offset"])},
+              "last_layer_weight_error": lambda: {"Weff": Ws[:-1] + [Ws[-1] + p["E"]]}}[name]()
         want = _noiseless(widths, Ws, bs, x, **kw)
         for got, w in zip(taps + [y], want):
             np.testing.assert_allclose(got[:, 0], w, rtol=1e-12, atol=1e-12, err_msg=name)
@@ -245,7 +271,7 @@ def test_open_physics_follow_their_formulas_without_noise():
         fed = [np.tanh(a @ W.T + b) if l < L - 1 else a @ W.T + b
                for l, (a, W, b) in enumerate(zip([x] + want[:-1], Ws, bs))]
         acts = [l + 1 for l in range(L) if not np.allclose(fed[l], want[l], atol=1e-9)]
-        assert acts == spec.layers(L), (name, acts)
+        assert acts == spec.layers(L, p), (name, acts)
         assert plain is not None
     C = OPEN_PHYSICS["dense_crosstalk"].draw(rng, widths, 6, 1)["C"]
     for c in C:
@@ -286,3 +312,39 @@ def test_ar1_path_has_unit_variance_and_its_lag_correlation():
     assert abs(xi.var() - 1) < 5 * np.sqrt(2 / n_eff)
     lag = np.corrcoef(xi[:-1], xi[1:])[0, 1]
     assert abs(lag - rho) < 5 * np.sqrt((1 - rho ** 2) / N)  # Bartlett's standard error of the lag-1 estimate
+
+
+def test_common_noise_is_shared_by_the_neurons_of_a_layer():
+    """Zero weights and biases, identity activation: a_1 = n_w + c xi + n_a, so two neurons of
+    layer 1 have covariance c^2 and each has variance 2 s^2 + c^2 (5 standard errors; Bonferroni-safe
+    for these 9 cells)."""
+    s, c, R = 0.1, 0.15, 40000
+    Ws, bs = [np.zeros((3, 2)), np.zeros((1, 3))], [np.zeros(3), np.zeros(1)]
+    x = np.zeros((1, 2))
+    y, taps, _ = simulate_contract(np.random.default_rng(np.random.randint(2 ** 31)), [2, 3, 1], Ws, bs, x, R, s,
+                                   {"common_noise": {"c": c}}, activation=lambda z: z)
+    a = taps[0][0]                                       # (R, 3)
+    i, j = np.triu_indices(3, 1)
+    prod = a[:, i] * a[:, j]
+    z_cov = (prod.mean(0) - c ** 2) / (prod.std(0) / np.sqrt(R))
+    z_var = ((a ** 2).mean(0) - (2 * s ** 2 + c ** 2)) / ((a ** 2).std(0) / np.sqrt(R))
+    assert np.all(np.abs(z_cov) < 5) and np.all(np.abs(z_var) < 5), (z_cov, z_var)
+    yv = y[0, :, 0]                                      # the output layer: its own xi, s^2 + c^2
+    assert abs((yv ** 2).mean() - (s ** 2 + c ** 2)) < 5 * (yv ** 2).std() / np.sqrt(R)
+
+
+def test_student_t_noise_acts_in_its_layer_only():
+    """Zero weights, identity activation: layer 1's values are Gaussian (kurtosis 3), layer 2's
+    (the output, n_w2 alone) Student-t with nu = 6 (kurtosis 3 + 6 / (nu - 4) = 6), both of
+    standard deviation s in the output and sqrt(2) s in layer 1."""
+    s, nu, R = 0.1, 6.0, 200000
+    Ws, bs = [np.zeros((2, 2)), np.zeros((1, 2))], [np.zeros(2), np.zeros(1)]
+    y, taps, _ = simulate_contract(np.random.default_rng(np.random.randint(2 ** 31)), [2, 2, 1], Ws, bs,
+                                   np.zeros((1, 2)), R, s, {"student_t_layer": {"nu": nu, "layer": 2}},
+                                   activation=lambda z: z)
+    a1, yv = taps[0][0], y[0, :, 0]
+    kurt = lambda v: np.mean(v ** 4) / np.mean(v ** 2) ** 2  # noqa: E731
+    assert np.all(np.abs([kurt(a1[:, k]) - 3 for k in range(2)]) < 5 * np.sqrt(24 / R))
+    # standard errors of a sample standard deviation: sd sqrt((kurtosis - 1) / (4 R))
+    assert kurt(yv) > 3 + 1.5 and abs(yv.std() - s) < 5 * s * np.sqrt((6 - 1) / (4 * R))
+    assert np.all(np.abs(a1.std(0) - np.sqrt(2) * s) < 5 * np.sqrt(2) * s * np.sqrt(2 / (4 * R)))

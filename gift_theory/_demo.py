@@ -7,7 +7,8 @@ arguments, calls them and prints):
   against a simulated chip with GIFT and its rivals under one chip budget; each row says why
   a line search kept w0 (:func:`why_kept`); :func:`gift_line` measures the loss along GIFT's
   line (predicted against true) and :func:`plot_finetune` draws it with every method's loss;
-* :func:`theory_part` -- some of the paper's claims as computed verdicts;
+* the theory part -- some of the paper's claims as computed verdicts -- belongs to the
+  checks (``proofs_checks._cli.demo_part``, found through the ``check`` command's registration);
 * :func:`lab_part` -- a chip with a hidden physical effect, measured with taps, diagnosed.
 
 Progress: every function takes ``progress(i, n, label)``, called before item ``i`` (0-based)
@@ -25,8 +26,6 @@ from ._errors import GiftInputError
 
 #: the parts of the demo, in order
 PARTS = ("finetune", "theory", "lab")
-#: the claims the theory part shows: a symbolic one and a closed-form one (seconds each)
-THEORY_CHECKS = ("score_function_identity", "linear_example_bound")
 
 
 def load_demo_setting(dataset: str, arch, s0: float, seed: int = 0, data_folder: str | None = None):
@@ -236,31 +235,6 @@ def plot_finetune(rows, curve, *, s0: float, st: float, ax=None):
     if ax is None:
         fig.tight_layout()
     return fig
-
-
-def theory_part(seed: int = 0, ids=THEORY_CHECKS, progress=None) -> dict:
-    """The claims ``ids`` as computed verdicts, and how many checks ``gift check`` runs in all.
-
-    Returns
-    -------
-    dict ``checks`` (CONTRACTS §4 records) and ``total_checks`` (the registry's size).
-    """
-    from proofs_checks import CHECK_IDS, run_checks
-
-    out = []
-    for i, cid in enumerate(ids):
-        if progress:
-            progress(i, len(ids), cid)
-        out += run_checks((cid,), seed=seed, log=_Null())
-    return {"checks": out, "total_checks": len(CHECK_IDS)}
-
-
-class _Null:
-    def write(self, _):
-        pass
-
-    def flush(self):
-        pass
 
 
 def parse_hidden(spec: str):

@@ -2,7 +2,9 @@
 ``gift check theorem1 --family FILE.py --s0 S0 --st ST``: Theorem 1 on one's own J_s family
 (CONTRACTS §5b).
 
-Prints a table (id, verdict, hypotheses verified, one-line evidence) or, with ``--json``, one
+Prints a table (id, verdict, hypotheses -- computed-true out of those a refutation needs, then the
+counts of assumed hypotheses and of out-of-hypothesis findings --, one-line evidence) or, with
+``--json``, one
 object ``{"checks": [{id, claim, verdict, evidence, correction, counterexample, hypotheses},
 ...]}``, and writes a markdown report with the full evidence, hypotheses, corrections and
 counterexamples.

@@ -114,7 +114,12 @@ def run(args):
             if not args.no_figure:
                 result["figure"] = _save_figure(args, part["rows"], part["curve"])
     if "theory" in parts:
-        result["theory"] = _demo.theory_part(args.seed, progress=Progress("gift demo: theory", args.quiet))
+        from ._main import command_module
+
+        check = command_module("check")   # the checks are a package on top of the core
+        if check is None:
+            raise GiftInputError("--parts theory: the checks are not installed (no 'check' command)")
+        result["theory"] = check.demo_part(args.seed, progress=Progress("gift demo: theory", args.quiet))
     if "lab" in parts:
         path = None if args.no_figure else os.path.join(args.out, "demo_chip.npz")
         result["lab"] = _demo.lab_part(hidden, args.seed, save_to=path, progress=Progress("gift demo: lab", args.quiet))

@@ -22,21 +22,65 @@ import sys
 
 from .._errors import GiftInputError
 
-#: subcommand -> (module, one-line help)
+#: the core's subcommands -> (module, one-line help); packages on top register theirs through
+#: the entry-point group ``gift.commands`` (:func:`commands`)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("_demo", "the main job: train, fine-tune with GIFT and its rivals, print a table, draw a figure"),
-    "train": ("_train", "train an ONN in silico at noise level s0 (cached)"),
-    "finetune": ("_finetune", "fine-tune trained weights against a simulated chip (GIFT and rivals)"),
-    "bench": ("_bench", "benchmarks: estimator speed against the machine's matmul rate"),
-    "check": ("_check", "every claim of the paper as a computed verdict"),
-    "simulate": ("_simulate", "write a measurement file from a simulated chip"),
-    "compare": ("_compare", "compare a model with a measurement file"),
-    "diagnose": ("_diagnose", "find the physical effect the model is missing"),
-    "fit": ("_fit", "add effects to the model, fit them, report the error before and after"),
-    "import": ("_import", "convert a measurement file (npz, long or wide CSV, netCDF/HDF5) to npz, netCDF or CSV"),
-    "export": ("_import", "the same as import: write a measurement file as netCDF (.nc), wide CSV or npz"),
-    "figures": ("_figures", "regenerate the paper's figures (sweeps, then drawing)"),
+    "demo": ("gift_theory.cli._demo", "the main job: train, fine-tune with GIFT and its rivals, print a table, draw a figure"),
+    "train": ("gift_theory.cli._train", "train an ONN in silico at noise level s0 (cached)"),
+    "finetune": ("gift_theory.cli._finetune", "fine-tune trained weights against a simulated chip (GIFT and rivals)"),
+    "bench": ("gift_theory.cli._bench", "benchmarks: estimator speed against the machine's matmul rate"),
+    "simulate": ("gift_theory.cli._simulate", "write a measurement file from a simulated chip"),
+    "compare": ("gift_theory.cli._compare", "compare a model with a measurement file"),
+    "diagnose": ("gift_theory.cli._diagnose", "find the physical effect the model is missing"),
+    "fit": ("gift_theory.cli._fit", "add effects to the model, fit them, report the error before and after"),
+    "import": ("gift_theory.cli._import", "convert a measurement file (npz, long or wide CSV, netCDF/HDF5) to npz, netCDF or CSV"),
+    "export": ("gift_theory.cli._import", "the same as import: write a measurement file as netCDF (.nc), wide CSV or npz"),
 }
+
+#: the entry-point group through which other packages add commands (proofs_checks: check,
+#: paper_figures: figures; see pyproject.toml)
+GROUP = "gift.commands"
+
+
+def registered() -> dict[str, str]:
+    """Commands other packages register: name -> module (entry-point group :data:`GROUP`)."""
+    from importlib.metadata import entry_points
+
+    return {ep.name: ep.value.split(":")[0] for ep in entry_points(group=GROUP) if ep.name not in COMMANDS}
+
+
+def commands() -> dict[str, str]:
+    """Every command: name -> module, the core's first."""
+    return {name: mod for name, (mod, _) in COMMANDS.items()} | registered()
+
+
+def command_module(name: str):
+    """The module of command ``name`` (None when no installed package provides it)."""
+    mod = commands().get(name)
+    return None if mod is None else importlib.import_module(mod)
+
+
+def _help_line(name: str, module_name: str) -> str:
+    """The command's one-line help; a registered module's ``HELP`` is read from its source
+    (importing the package would make ``gift --help`` wait for jax and sympy)."""
+    if name in COMMANDS:
+        return COMMANDS[name][1]
+    import ast
+    import importlib.util
+
+    try:
+        top, _, rest = module_name.partition(".")
+        spec = importlib.util.find_spec(top)   # a top-level spec imports nothing
+        folder = (spec.submodule_search_locations or [os.path.dirname(spec.origin)])[0]
+        path = os.path.join(folder, *rest.split(".")) + ".py" if rest else spec.origin
+        with open(path, encoding="utf-8") as fh:
+            tree = ast.parse(fh.read())
+        for node in tree.body:
+            if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "HELP" for t in node.targets):
+                return ast.literal_eval(node.value)
+    except Exception:  # a broken add-on must not break gift --help
+        pass
+    return f"(from {module_name})"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -82,10 +126,11 @@ def emit(result, as_json: bool, render=None) -> None:
 
 
 def _top_help() -> str:
-    width = max(len(n) for n in COMMANDS)
+    cmds = commands()
+    width = max(len(n) for n in cmds)
     lines = ["usage: gift COMMAND [options]   (gift COMMAND --help for a command's options)", "",
              "Verify, reproduce and use GIFT (in situ fine-tuning of in silico trained ONNs).", "", "commands:"]
-    lines += [f"  {n:<{width}}  {h}" for n, (_, h) in COMMANDS.items()]
+    lines += [f"  {n:<{width}}  {_help_line(n, m)}" for n, m in cmds.items()]
     lines += ["", "An effect is NAME=VALUE (shot=0.01), NAME=V1,V2 (quantization=6,1.0) or NAME (laplace); the built-in names",
               "(plugins add their own, --plugin FILE.py):", "  " + ", ".join(_effect_names()),
               "", "Exit status: 0 done, 1 the work failed, 2 bad input (one line, no traceback).",
@@ -115,16 +160,11 @@ def main(argv=None) -> int:
 
     use_compilation_cache()  # compiled programs persist on disk across gift runs (GIFT_COMPILATION_CACHE=off: not)
     try:
-        if name not in COMMANDS:
-            raise GiftInputError(f"gift: unknown command {name!r}; commands: {', '.join(COMMANDS)}")
-        module_name, help_text = COMMANDS[name]
-        try:
-            module = importlib.import_module(f"gift_theory.cli.{module_name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"gift_theory.cli.{module_name}":
-                sys.stderr.write(f"gift {name}: not available in this version\n")
-                return 1
-            raise
+        cmds = commands()
+        if name not in cmds:
+            raise GiftInputError(f"gift: unknown command {name!r}; commands: {', '.join(cmds)}")
+        module = importlib.import_module(cmds[name])
+        help_text = _help_line(name, cmds[name])
         parser = _Parser(prog=f"gift {name}", description=help_text)
         parser.add_argument("--json", action="store_true", help="print one JSON object on stdout, nothing else")
         module.add_arguments(parser)

@@ -122,19 +122,17 @@ def test_did_you_mean_says_nothing_when_nothing_is_close():
 
 
 def _commands():
-    from gift_theory.cli._main import COMMANDS
+    from gift_theory.cli._main import commands
 
-    return list(COMMANDS)
+    return list(commands())
 
 
 @pytest.mark.parametrize("command", _commands())
 def test_every_flag_has_help_and_help_points_to_the_reference_page(capsys, command):
-    import importlib
-
-    from gift_theory.cli._main import COMMANDS, _Parser
+    from gift_theory.cli._main import _Parser, command_module
 
     parser = _Parser(prog=f"gift {command}")
-    importlib.import_module(f"gift_theory.cli.{COMMANDS[command][0]}").add_arguments(parser)
+    command_module(command).add_arguments(parser)
     missing = [a.option_strings or a.dest for a in parser._actions if not a.help]
     assert not missing, f"gift {command}: flags without help: {missing}"
     with pytest.raises(SystemExit):
@@ -201,9 +199,9 @@ def test_demo_text_prints_evidence_whole_says_why_gift_kept_w0_and_counts_checks
 def test_demo_theory_part_counts_the_registry():
     from proofs_checks import CHECK_IDS
 
-    from gift_theory._demo import theory_part
+    from gift_theory.cli._main import command_module
 
-    out = theory_part(ids=("score_function_identity",))
+    out = command_module("check").demo_part(ids=("score_function_identity",))
     assert out["total_checks"] == len(CHECK_IDS) and [c["id"] for c in out["checks"]] == ["score_function_identity"]
 
 
@@ -246,3 +244,28 @@ def test_finetune_reads_mnist_from_the_data_folder(capsys, tmp_path, monkeypatch
     assert code == 0, err
     obj = json.loads(out)
     assert obj["dataset"] == "mnist" and obj["arch"] == [784, 4, 10] and obj["loss_after"] == obj["loss_before"]
+
+
+def test_gift_theory_never_imports_the_packages_on_top():
+    """proofs_checks and paper_figures register their commands (entry-point group gift.commands);
+    no module of gift_theory names them in an import."""
+    import ast
+    import os
+
+    from gift_theory.cli._main import GROUP, registered
+
+    root = os.path.dirname(gt.__file__)
+    upward = []
+    for folder, _, files in os.walk(root):
+        for f in files:
+            if f.endswith(".py"):
+                path = os.path.join(folder, f)
+                with open(path, encoding="utf-8") as fh:
+                    tree = ast.parse(fh.read())
+                for node in ast.walk(tree):
+                    names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                             [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+                    upward += [f"{path}:{node.lineno} {n}" for n in names
+                               if n.split(".")[0] in ("proofs_checks", "paper_figures", "studies", "linear_case")]
+    assert not upward, upward
+    assert {"check", "figures"} <= set(registered()), f"pip install -e . registers the {GROUP} entry points"

@@ -1,4 +1,4 @@
-"""``gift figures [--scale quick|paper] [--only NAME] [--scheduler ADDRESS] [--mnist-folder DIR]``.
+"""``gift figures`` (registered by paper_figures) ``[--scale quick|paper] [--only NAME] [--scheduler ADDRESS] [--mnist-folder DIR]``.
 
 Runs the sweeps behind the paper's figures (resumable: a killed run continues where it
 stopped) and draws every figure from the saved data. The JSON object: ``scale``, ``seconds``,
@@ -8,17 +8,21 @@ stopped) and draws every figure from the saved data. The JSON object: ``scale``,
 
 from __future__ import annotations
 
+#: the one-line help ``gift --help`` lists (registered through the entry-point group
+#: ``gift.commands`` in pyproject.toml, so gift_theory never imports this package)
+HELP = "regenerate the paper's figures (sweeps, then drawing)"
+
 
 def add_arguments(parser) -> None:
-    from paper_figures._build import add_arguments as add
+    from ._build import add_arguments as add
 
     add(parser)
 
 
 def run(args):
-    from paper_figures._build import failed, run_args
+    from gift_theory.cli import emit
 
-    from ._main import emit
+    from ._build import failed, run_args
 
     result = run_args(args)
     if failed(result):
@@ -28,6 +32,6 @@ def run(args):
 
 
 def render(result) -> str:
-    from paper_figures._build import render as r
+    from ._build import render as r
 
     return r(result)

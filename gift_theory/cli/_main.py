@@ -1,14 +1,17 @@
-"""``gift``: the console entry point (CONTRACTS §4).
+"""``gift``: the console entry point (docs/reference.md §4).
 
-Each subcommand lives in its own module ``gift_theory.cli._<name>`` with two functions::
+Each subcommand lives in its own module -- the core's in ``gift_theory.cli._<name>``
+(:data:`COMMANDS`), those of the packages on top registered through the entry-point group
+``gift.commands`` (``check``: proofs_checks, ``figures``: paper_figures) -- with two functions::
 
     add_arguments(parser)      # add the subcommand's options to an argparse parser
     run(args) -> dict | int    # do the work; return the JSON object (or an exit code)
 
-and an optional ``render(result) -> str`` for the human-readable form. Only the module
-of the command that runs is imported, so ``gift --help`` stays fast. Every subcommand
-takes ``--json``: one JSON object on stdout and nothing else there; progress goes to
-stderr. Exit status: 0 done, 1 the work failed, 2 bad input -- one line, no traceback.
+an optional ``render(result) -> str`` for the human-readable form and, for a registered
+module, its one-line ``HELP``. Only the module of the command that runs is imported, so
+``gift --help`` stays fast. Every subcommand takes ``--json``: one JSON object on stdout and
+nothing else there; progress goes to stderr. Exit status: 0 done, 1 the work failed, 2 bad
+input -- one line, no traceback, with "did you mean" for a near miss.
 """
 
 from __future__ import annotations

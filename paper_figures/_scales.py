@@ -198,7 +198,8 @@ def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict
                              "st": scale.under_st, "seed": scale.under_seeds}, job, deep)
         out["undertrained_ceiling"] = Sweep(
             "undertrained_ceiling", {"train_epochs": scale.under_epochs, "s0": scale.under_s0, "st": scale.under_st,
-                                     "seed": scale.under_seeds}, ceil, dict(deep, kinds=("pathwise", "gradient")))
+                                     "seed": scale.under_seeds}, ceil,
+            dict(deep, kinds=("pathwise", "score_paper", "gradient")))
     out["estimators"] = Sweep(
         "estimators", {"method": scale.est_methods, "K1": scale.est_K1, "K2": scale.est_K2,
                        "rep": tuple(range(scale.est_reps))},

@@ -7,11 +7,12 @@ On the deeper net, w0 is trained for a few epochs (``train_epochs`` short) and f
 30; at each (s0, st, seed) we run GIFT (the line search along the pathwise d/ds grad J_s0) and
 the same line search along the plain gradient grad J_s0 with the same chip budget, and the
 referee's ceiling of both lines (best step chosen on training data, reported on test data),
-with the cosine of the two directions (the component of GIFT's direction along the gradient).
+with the cosine of the two directions (the component of GIFT's direction along the gradient),
+and the printed D^[0]'s cosine with the gradient.
 Left: relative test accuracy gain per method and training length (mean over cells and seeds,
 95 % CI); right: |cos(GIFT direction, gradient)| per point.
 Data: sweeps ``undertrained`` (gift_job, dims method, train_epochs, s0, st, seed) and
-``undertrained_ceiling`` (ceiling_job with kinds pathwise and gradient).
+``undertrained_ceiling`` (ceiling_job with kinds pathwise, score_paper and gradient).
 Run: ``python -m paper_figures.undertrained --scale paper``.
 """
 
@@ -74,9 +75,10 @@ def summarise(under, ceil) -> dict:
             r[label] = {"mean": m, "ci95": h, "n": n}
         base = ceil["test_accuracy_before"].sel(train_epochs=e).values
         r["baseline_test_accuracy"] = float(np.nanmean(base))
-        if "cos_pathwise_gradient" in ceil:
-            m, h, n = _ci(np.abs(ceil["cos_pathwise_gradient"].sel(train_epochs=e).values))
-            r["abs_cos_gift_gradient"] = {"mean": m, "ci95": h, "n": n}
+        for kind, key in (("pathwise", "abs_cos_gift_gradient"), ("score_paper", "abs_cos_printed_gradient")):
+            if f"cos_{kind}_gradient" in ceil:
+                m, h, n = _ci(np.abs(ceil[f"cos_{kind}_gradient"].sel(train_epochs=e).values))
+                r[key] = {"mean": m, "ci95": h, "n": n}
         rows[str(e)] = r
     d_more = (cp.sel(train_epochs=short) - cp.sel(train_epochs=long_)).values
     d_src = (cp.sel(train_epochs=short) - cg.sel(train_epochs=short)).values

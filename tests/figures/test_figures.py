@@ -55,6 +55,7 @@ def fake_run_ceiling(dataset, arch, s0, st, true_effects, seed, kinds, train_epo
                     f"{k}_rel_step_acc": 1e-3, f"{k}_at_edge": False})
     if "gradient" in kinds:
         out["cos_pathwise_gradient"] = -0.3
+        out["cos_score_paper_gradient"] = 0.05
     out["scan"] = {}
     return out
 
@@ -83,6 +84,26 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
             assert f.read(8) == b"\x89PNG\r\n\x1a\n"
     for s in res["sweeps"]:
         assert s["points_done"] == s["points_total"] and s["failed"] == 0
+    # issue 25's figure functions take ax= and return that Figure, choosing no backend
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    from paper_figures import ceiling, gain_vs_baseline, performance_gift, undertrained
+    from paper_figures._sweep import open_dataset
+
+    use = matplotlib.use
+    monkeypatch.setattr(matplotlib, "use", lambda *a, **k: pytest.fail("a figure function called matplotlib.use"))
+    saved = {n: open_dataset(os.path.join(data, f"{n}.nc")) for n in (
+        "gift_awgn_deep", "gift_regime", "variants", "rivals_regime", "ceiling_deep", "ceiling_shallow", "undertrained",
+        "undertrained_ceiling")}
+    for mod, shape in ((gain_vs_baseline, (1, 2)), (performance_gift, (1, 2)), (undertrained, (1, 2)),
+                       (ceiling, (2, 2))):
+        fig, axes = plt.subplots(*shape)
+        assert mod.draw(saved, ax=axes if shape[0] > 1 else list(axes)) is fig
+        plt.close(fig)
+    points = gain_vs_baseline.cell_points(saved["gift_regime"], "train")  # one (s0, st) cell: 20 + 40 * 0.3 + 0.25
+    assert len(points) == 1 and points[0]["gain_pct"] == pytest.approx(32.25) and points[0]["baseline"] == 0.8
+    monkeypatch.setattr(matplotlib, "use", use)  # build (the batch driver) chooses agg
     # drawing again from saved data only gives the same figures without running a job
     monkeypatch.setattr(_jobs, "_run_finetune", lambda: pytest.fail("--draw-only ran a job"))
     again = build("tiny", data_dir=data, figure_dir=figs, compute=False, progress=False, only="performance_gift")
@@ -123,6 +144,7 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
     assert u["ceiling_gift_minus_gradient_short_pct"]["mean"] == pytest.approx(-1.0, abs=1e-9)
     assert u["verdict"] == "gradient step" and "rule" in u
     assert u["per_epochs"]["2"]["abs_cos_gift_gradient"]["mean"] == pytest.approx(0.3)
+    assert u["per_epochs"]["30"]["abs_cos_printed_gradient"]["mean"] == pytest.approx(0.05)
 
 
 def test_figures_without_their_inputs_say_what_they_need(tmp_path, monkeypatch):
@@ -185,3 +207,10 @@ def test_real_jobs_on_a_tiny_net():
     # score_paper targets -(s/2) d/ds grad J: rescaled, its error is measured against the same reference
     assert e["rel_error"] > 0 and e["rel_error_rescaled"] > 0 and e["ref_rel_se"] > 0
     assert 0 <= e["rel_error_debiased"] <= e["rel_error_rescaled"]
+
+
+def test_heatmap_colour_is_the_intervals_end_nearest_zero():
+    from paper_figures._plot import interval_colour
+
+    c = interval_colour([2.0, -3.0, 1.0, np.nan, 0.5], [1.0, 1.0, 2.0, 1.0, np.nan])
+    np.testing.assert_allclose(c, [1.0, -2.0, 0.0, np.nan, 0.5])  # no interval (one seed): the mean

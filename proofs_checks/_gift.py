@@ -500,9 +500,13 @@ def algorithm1_stopping_rule(key=None, precise: bool = False) -> dict:
     p_stop1 = float(stats.norm.cdf(rise_lo / sig_eval)) if sig_eval > 0 else math.nan
     line_ok = (ex["printed"]["iterations"], ex["printed"]["chosen"]) == (1, (1, 1)) and ex["both"]["chosen"] == (13, 1)
     far = c_star_lo >= 2
-    # holds where stopping at i = 1 loses nothing: the line minimum within one step (c* < 2 at the confidence)
+    # fails: the printed rule stops at i = 1 in more than half of the runs (computed bound), while points further
+    # along the ray are significantly better (the 'both sides' rule's result beats it, paired test); holds: the
+    # printed rule's result is significantly better, or the line minimum lies within one step (c* < 2)
     c_star_hi = (C1["hi"] / (2 * C2["lo"])) / (eta * dv) if C2["lo"] > 0 else math.inf
-    verdict = decide(fails=first_resolved and far and convex, holds=convex and c_star_hi < 2)
+    stops_early = math.isfinite(p_stop1) and p_stop1 > 0.5
+    verdict = decide(fails=convex and stops_early and better == "holds",
+                     holds=better == "fails" or (convex and c_star_hi < 2))
     corrected_ok = line_ok and bool(np.median(stops[:, 1]) >= 2)
     b_sym = next(x for x in ex["avg_minus_f0"].free_symbols if x.name == "b")
     hyps = [hypothesis("require", "Require of alg:GIFT: s0 > 0, eta > 0, K1, K2 >= 1",
@@ -512,19 +516,15 @@ def algorithm1_stopping_rule(key=None, precise: bool = False) -> dict:
                        next(h["verified"] for h in th1["hypotheses"] if h["name"] == "w0_critical"),
                        "from the Theorem-1 check of the same w0 at the same (s0, st)"),
             hypothesis("convex_ray", "J_st convex along -v at w0 (C2 > 0), the case of the line argument", convex,
-                       f"C2 at alpha -> 0 in [{fmt(C2['lo'])}, {fmt(C2['hi'])}] (Theorem-1 intervals)"),
-            hypothesis("K_large", "K1, K2 >= 1 as Required; the refutation uses Eval precise enough to resolve the "
-                       "first step", first_resolved, f"true rise of the ascent side at i = 1: J_st(w0 -+ eta D) - "
-                       f"J_st(w0) = {fmt(rise)} +- {fmt(rise_se)} (lower bound {fmt(rise_lo)}) against {lev.z1:.2f} x "
-                       f"the largest standard error of Eval's difference over the runs ({fmt(sig_eval)})")]
+                       f"C2 at alpha -> 0 in [{fmt(C2['lo'])}, {fmt(C2['hi'])}] (Theorem-1 intervals)")]
     evidence = (f"tanh ONN at s0 = {st_.s0:g}, st = {st_.st:g}, eta set so that the quadratic model's line minimum "
-                f"along +-D^[0] is c* = {fmt(c_star)} steps out (lower confidence bound {fmt(c_star_lo)}: at least 2 "
-                f"steps: {far}), Eval with K2 = {K2e} on all {p.x.shape[0]} points: the ascent side's true rise at "
-                f"i = 1 is {fmt(rise)} +- {fmt(rise_se)}, against Eval's standard error {fmt(sig_eval)}, so the printed "
-                f"rule 'until L+ v L- >= L0' stops at i = 1 with probability >= Phi(rise_lo / se) = {fmt(p_stop1)} in "
-                f"every run (resolved at z1 = {lev.z1:.2f}: {first_resolved}); observed in {one_step}/{R} runs (median "
-                f"stop {float(np.median(stops[:, 0])):g}); the rule "
-                f"'until L+ ^ L- >= L0' stopped at median i = {float(np.median(stops[:, 1])):g} and chose median c = "
+                f"along +-D^[0] is c* = {fmt(c_star)} steps out (confidence bounds [{fmt(c_star_lo)}, {fmt(c_star_hi)}]"
+                f"), Eval with K2 = {K2e} on all {p.x.shape[0]} points: the ascent side's true rise at i = 1 is "
+                f"{fmt(rise)} +- {fmt(rise_se)}, against Eval's standard error {fmt(sig_eval)} (largest over the runs), "
+                f"so the printed rule 'until L+ v L- >= L0' stops at i = 1 in each run with probability >= "
+                f"Phi(rise_lo / se) = {fmt(p_stop1)} (> 1/2: {stops_early}; resolved at z1 = {lev.z1:.2f}: "
+                f"{first_resolved}); observed in {one_step}/{R} runs (median stop {float(np.median(stops[:, 0])):g}); "
+                f"the rule 'until L+ ^ L- >= L0' stopped at median i = {float(np.median(stops[:, 1])):g} and chose median c = "
                 f"{float(np.median(stops[:, 2])):g}; J_st(corrected) - J_st(printed) = {fmt(float(d.mean()))} +- "
                 f"{fmt(float(d.std(ddof=1) / math.sqrt(R)))} (paired, fresh draws; z = {z:.1f}: {better}). Why (sympy): "
                 f"for a line function f(c) = a c + b c^2, max(f(eta), f(-eta)) - f(0) >= (f(eta) + f(-eta))/2 - f(0) = "

@@ -62,6 +62,9 @@ def render(out) -> str:
         name = " + ".join(r.get("with", []) + [r["effect"]])
         lines.append(f"  {i:2d}. {name:<28s} {r.get('status', ''):<8s} {r['discrepancy_after']:10.4g}  "
                      f"p = {r['p_value_after']:<9.3g} [{r.get('mechanism', '')}] {ps}")
+    if out.get("not_fitted"):
+        lines.append("not fitted: " + ", ".join(r["effect"] for r in out["not_fitted"]) + " -- "
+                     + out["not_fitted"][0]["reason"])
     if any("net_discrepancy_after" in r for r in out["ranking"]):
         lines.append("  (fitted offsets: p against the refit null, i.e. net of the offsets' estimation error)")
         if not out.get("refit_null_calibrated", True):

@@ -30,6 +30,13 @@ the refused and the rejected by the held-out discrepancy itself. So ranking[0] i
 verdict line names, and an effect the data reject at 0.01 is never first while another entry
 passes or is refused.
 
+**Which candidates are fitted.** The closed-form identification (:mod:`._identify`, every
+class a test with a Holm-adjusted p-value) runs first. The candidates of the classes it flags
+(a test rejecting at 0.01) are fitted first; when one of them passes every check, the others --
+whose classes no test flags -- are not fitted and are listed under ``not_fitted`` with that
+reason (an explanation has been found, and the data show nothing of their physics). When none
+passes, every candidate is fitted, as if the identification had said nothing.
+
 **Pure.** A :class:`Session` is immutable: what it computes for a model -- its refit null, the
 checks of its fitted values -- depends on the model (its name and fitted values) and the
 session's named subkeys only, never on what was scored before it or on how many threads
@@ -393,6 +400,7 @@ class Diagnosis:
     failing_layers: tuple | None = None
     mechanisms: tuple = ()
     evidence: tuple = ()
+    not_fitted: tuple = ()
 
     @property
     def missing_effect_detected(self) -> bool:
@@ -407,6 +415,7 @@ class Diagnosis:
                 "missing_effect_detected": self.missing_effect_detected,
                 **as_json_fields(self.explained, self.reasons, self.verdict, self.failing_layers, self.mechanisms),
                 "ranking": [cand.as_json() for cand in self.ranking],
+                "not_fitted": [dict(r) for r in self.not_fitted],
                 "evidence": list(self.evidence),
                 "where": list(self.one_step),
                 "signatures": self.signatures,
@@ -470,14 +479,52 @@ def _check_candidates(names, meas: Measurement) -> list:
 SECOND = 4
 
 
-def _rank(session: Session, names, second, verbose: bool) -> list:
-    """Every candidate fitted and scored, ranked; a second stage on top of the best one when it
-    still fails (see :func:`diagnose`)."""
-    singles = [tuple(n.split("+")) for n in names]
-    ranking = session.candidates([(effects, None, effects, effects) for effects in singles])
-    for name, cand in zip(names, ranking):
+def flagged_classes(ident) -> dict:
+    """``{class: smallest Holm-adjusted p}`` of the identification's tests that reject at 0.01: the
+    mechanism classes the closed-form identification sees in the data."""
+    out: dict = {}
+    for row in ([] if ident is None else ident.rows()):
+        if row.get("p_adj", 1.0) < ALPHA:
+            out[row["class"]] = min(out.get(row["class"], 1.0), float(row["p_adj"]))
+    return out
+
+
+def _classes(name: str) -> set:
+    return {REGISTRY[e].mechanism for e in name.split("+")}
+
+
+def _rank(session: Session, names, second, verbose: bool, ident=None) -> tuple[list, list]:
+    """The candidates fitted, scored, checked and ranked; a second stage on top of the best one
+    when every one still fails (see :func:`diagnose`). Returns ``(ranking, not_fitted)``.
+
+    First the candidates of a class the identification flags (:func:`flagged_classes`) are
+    fitted; when one of them passes every check, the others are not fitted (the identification
+    clears their classes, and an explanation has been found) and are listed in ``not_fitted``
+    with that reason. Otherwise every candidate is fitted."""
+    flagged = flagged_classes(ident)
+    first = [n for n in names if _classes(n) & set(flagged)]
+    rest = [n for n in names if n not in first]
+    todo = first if first and rest else list(names)
+    ranking = session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")), tuple(n.split("+")))
+                                  for n in todo])
+    not_fitted = []
+    if todo is first:
+        if any(c.status == "passes" for c in ranking):
+            not_fitted = [{"effect": n, "mechanism": "+".join(sorted(_classes(n))),
+                           "reason": "the identification clears its class (no test of it rejects at 0.01) and "
+                                     "awgn + " + " + ".join(min((c for c in ranking if c.status == "passes"),
+                                                               key=rank_key).effects)
+                                     + " passes every check"} for n in rest]
+        else:
+            ranking += session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")), tuple(n.split("+")))
+                                           for n in rest])
+            todo = first + rest
+    for name, cand in zip(todo, ranking):
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
-             f"p = {cand.comparison.p_value:.3g} ({cand.seconds:.1f} s)", verbose)
+             f"p = {cand.comparison.p_value:.3g} [{cand.status}] ({cand.seconds:.1f} s)", verbose)
+    if not_fitted:
+        _log(f"  not fitted (the identification clears their classes): {', '.join(r['effect'] for r in not_fitted)}",
+             verbose)
     ranking.sort(key=search_key)
     if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
         first = ranking[0]
@@ -487,8 +534,8 @@ def _rank(session: Session, names, second, verbose: bool) -> list:
         for cand in stage2:
             _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
                  f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
-        return _merge_second_stage(first, stage2, ranking[1:])
-    return ranked(ranking)
+        return _merge_second_stage(first, stage2, ranking[1:]), not_fitted
+    return ranked(ranking), not_fitted
 
 
 def _localise(session: Session, base: Model, meas: Measurement, shots):
@@ -526,7 +573,9 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     key : PRNG key (split into ``split``, ``fit``, ``compare``, ``floor``, ``step`` subkeys)
     meas : Measurement
     candidates : effect names to try (default :func:`default_candidates`: every registered effect but
-        awgn; those that need acquisition times only when the file has them)
+        awgn; those that need acquisition times only when the file has them); those of a class
+        the identification flags are fitted first, the others only when none of those passes
+        (see the module)
     shots : model shots per input (default 4 r)
     second : when the best single effect still fails (p < 0.01), the best ``second``
         runners-up (default 4; None: all) are each fitted on top of it (a greedy forward step,
@@ -548,20 +597,23 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     with concurrent.futures.ThreadPoolExecutor(max_workers=1) as side:
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
                  if session.workers > 1 else None)
-        ranking = _rank(session, names, second, verbose)
+        # the layer-wise identification (closed form): the mechanisms' backbone, and which
+        # candidates to fit first
+        ident = identify(meas)
+        ranking, not_fitted = _rank(session, names, second, verbose, ident)
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))
     taps = meas.has_taps
     # name mechanisms, then the verdict
     ctx = Context({row["layer"]: row for row in evidence}, meas.arch.depth, taps, failing,
                   fit_gains(ranking, base_cmp, session.prior), {r["layer"]: (r["s"], r["level_z"]) for r in steps},
-                  ident=identify(meas))  # the layer-wise identification: the mechanisms' backbone
+                  ident=ident)
     mechs = mechanisms(ctx)
     explained, reasons, line = verdict(session, ranking, meas, mechs, failing)
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),
-                     tuple(evidence))
+                     tuple(evidence), tuple(not_fitted))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -143,9 +143,11 @@ def test_null_reports_nothing_missing(tmp_path, capsys):
     assert out["baseline"]["effects"] == ["awgn"] and abs(out["baseline"]["params"]["s"] - 0.1) < 0.02
     for r in out["ranking"]:
         assert set(r) >= {"effect", "discrepancy_after", "p_value_after", "params"}
-    # every built-in effect is ranked (drift too: the file has times), each with its mechanism class
+    # every built-in effect is ranked or said not fitted (drift too: the file has times), each
+    # with its mechanism class
     assert all(r["mechanism"] == gt.effects.REGISTRY[r["effect"]].mechanism for r in out["ranking"])
-    assert sorted(r["effect"] for r in out["ranking"]) == sorted(e for e in gt.effects.BUILTIN if e != "awgn")
+    tried = [r["effect"] for r in out["ranking"]] + [r["effect"] for r in out["not_fitted"]]
+    assert sorted(tried) == sorted(e for e in gt.effects.BUILTIN if e != "awgn")
 
 
 def test_fit_command_contract(tmp_path, capsys):
@@ -205,6 +207,29 @@ def test_order_of_candidates_and_threads_change_no_number():
     one = run(cands, 1)
     assert run(cands[::-1], 3) == one
     assert run([cands[2], cands[0], cands[3], cands[1]], 2) == one
+
+
+def test_candidates_the_identification_clears_are_not_fitted_and_change_nothing(monkeypatch):
+    """With taps and shot noise the identification flags input_dependent_noise; shot passes every
+    check, so the candidates of the classes no test flags are not fitted (listed with the
+    reason). Every candidate that is fitted has the numbers it has when all are (a candidate is
+    a pure function of its own request), and the verdict is the same."""
+    from gift_theory.lab import _diagnose
+
+    meas = _chip(HIDDEN["shot"], seed=4, n=80, r=24)
+    cands = ["shot", "multiplicative", "crosstalk", "layer_gain", "bias_offset"]
+    staged = diagnose(jax.random.PRNGKey(8), meas, candidates=cands)
+    assert staged.ranking[0].effects == ("shot",) and staged.ranking[0].status == "passes"
+    assert staged.not_fitted and all("identification clears" in r["reason"] for r in staged.not_fitted)
+    fitted = {c.name for c in staged.ranking}
+    assert fitted | {r["effect"] for r in staged.not_fitted} == set(cands)
+    monkeypatch.setattr(_diagnose, "flagged_classes", lambda ident: {})
+    full = diagnose(jax.random.PRNGKey(8), meas, candidates=cands)
+    assert not full.not_fitted and {c.name for c in full.ranking} == set(cands)
+    by_name = {c.name: c.as_json() for c in full.ranking}
+    for c in staged.ranking:
+        assert c.as_json() == by_name[c.name]
+    assert staged.verdict == full.verdict and staged.explained == full.explained
 
 
 # ---- the ranking's order and the verdict (CONTRACTS §6, 2026-11-25) ----------------------------

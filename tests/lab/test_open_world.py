@@ -296,3 +296,23 @@ def test_plugin_flag_on_simulate_compare_and_diagnose(tmp_path, capsys):
     assert main(["diagnose", str(path), "--plugin", str(bad), "--json"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(str(bad)) and "no laser" in err[0]
+
+
+def test_layer_gain_is_a_name_on_every_command(tmp_path, capsys):
+    """CONTRACTS §4: layer_gain in simulate --effect, fit --add, diagnose --candidates and
+    finetune --true-effect (parsed by the same catalogue); the fit recovers a uniform loss."""
+    from gift_theory.finetune._run import true_physics
+
+    assert float(true_physics(0.1, ("layer_gain=0.7",)).get("layer_gain").g) == 0.7
+    path = tmp_path / "loss.npz"
+    assert main(["simulate", "--arch", "4-8-3", "--inputs", "60", "--shots", "16", "--effect", "awgn=0.05",
+                 "--effect", "layer_gain=0.6", "--taps", "--out", str(path), "--json"]) == 0
+    capsys.readouterr()
+    assert main(["fit", str(path), "--add", "layer_gain", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["effects"] == ["awgn", "layer_gain"] and len(out["params"]["g"]) == 2
+    assert out["p_value_after"] >= 0.01 > out["p_value_before"]
+    assert np.allclose(out["params"]["g"], 0.6, atol=0.05), out["params"]
+    assert main(["diagnose", str(path), "--candidates", "layer_gain,shot", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["ranking"][0]["effect"] == "layer_gain" and out["ranking"][0]["mechanism"] == "gain_error"

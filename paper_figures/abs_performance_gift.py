@@ -16,9 +16,10 @@ LABEL = "fig:abs_performance_gift"
 SWEEPS = ("gift_awgn_deep",)
 
 
-def draw(data: dict):
+def draw(data: dict, ax=None):
+    """``ax``: two axes to draw into (default a new figure)."""
     return improvement_heatmaps(data["gift_awgn_deep"], "train", "abs",
-                                "fig:abs_performance_gift -- absolute improvements, deeper net, training data")
+                                "fig:abs_performance_gift -- absolute improvements, deeper net, training data", ax=ax)
 
 
 if __name__ == "__main__":

@@ -52,6 +52,7 @@ def test_help_lists_every_contract_command(capsys):
         assert name in out
 
 
+@pytest.mark.slow
 def test_train_json_is_one_object(capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("GIFT_CACHE_DIR", str(tmp_path))
     code, out, err = run(capsys, "train", "--dataset", "teacher", "--arch", "4-3-2", "--epochs", "1", "--json")
@@ -196,6 +197,7 @@ def test_demo_text_prints_evidence_whole_says_why_gift_kept_w0_and_counts_checks
     assert "gift check runs all 21" in text and "twelve" not in text
 
 
+@pytest.mark.slow
 def test_demo_theory_part_counts_the_registry():
     from proofs_checks import CHECK_IDS
 

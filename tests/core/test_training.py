@@ -85,6 +85,7 @@ def test_optax_variant_trains():
     assert hist[-1] < 0.5 * hist[0]
 
 
+@pytest.mark.slow
 def test_digits_training_quality():
     """Noise-aware training at s0 = 0.1 on digits (shortened recipe) gives > 90 % test accuracy."""
     ds = load_dataset("digits")

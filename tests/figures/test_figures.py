@@ -68,6 +68,7 @@ def fake_finetune(monkeypatch):
     monkeypatch.setattr(paper_figures._build, "unavailable", lambda job, fixed=None: None)
 
 
+@pytest.mark.slow
 def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(tmp_path, fake_finetune,
                                                                                  monkeypatch):
     # the estimator job is exercised for real in test_real_jobs; here a stand-in with the -1/2 law

@@ -1,6 +1,7 @@
 """What keeps the sweep fast and honest: the persistent compilation cache, the same-numbers
 check between two runs, and the scope label of a claim's verdict."""
 
+import pytest
 import json
 import os
 import subprocess
@@ -42,6 +43,7 @@ print(jax.config.jax_compilation_cache_dir, len(hits))
 """
 
 
+@pytest.mark.slow
 def test_a_second_process_loads_the_compiled_sampler_from_disk(tmp_path):
     env = dict(os.environ, GIFT_COMPILATION_CACHE=str(tmp_path / "xla"))
     env.pop("JAX_COMPILATION_CACHE_DIR", None)

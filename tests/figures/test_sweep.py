@@ -128,6 +128,7 @@ def test_killed_sweep_continues_where_it_stopped(tmp_path):
     assert len([f for f in os.listdir(pdir) if f.startswith(".tmp-")]) <= 1  # at most the one being written at the kill
 
 
+@pytest.mark.slow
 def test_local_dask_cluster_runs_the_same_sweep(tmp_path):
     sw = Sweep("dask", {"a": (1, 2, 3), "b": (2.0,)}, TOY)
     ds = run_sweep(sw, str(tmp_path), n_workers=1, progress=False)

@@ -91,6 +91,7 @@ def test_different_inputs_are_different_entries(memo_dir):
     assert len(os.listdir(memo_dir)) == 4
 
 
+@pytest.mark.slow
 def test_a_stored_entry_serves_another_process(memo_dir):
     code = ("import jax, numpy as np; from gift_theory import _memo; _memo.use_folder(%r);"
             "v = _memo.memoized('t', (np.arange(3.0), 0.5), lambda: (jax.numpy.arange(4.0) * 0.1, {'n': 1.5}));"

@@ -78,6 +78,7 @@ def test_noise_law_shows_in_its_signature(law):
     assert sig[law]["z"] > 3 and sig[law]["stands_out"]
 
 
+@pytest.mark.slow
 def test_weight_error_is_named_first_and_passes_against_its_refit_null():
     """Fitted offsets E_hat: ranked on the raw held-out discrepancy (their estimation error
     is part of their cost), tested against the refit null (a correct offset model passes)."""
@@ -92,6 +93,7 @@ def test_weight_error_is_named_first_and_passes_against_its_refit_null():
     assert all(c.comparison.replicates == 0 for c in d.ranking[1:])
 
 
+@pytest.mark.slow
 def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     """Rule b' of the verdict: drift explains a drifting chip only because its trend in time
     does -- the same model with every time at the mean fails the held-out test."""
@@ -121,6 +123,7 @@ def test_weight_offsets_are_fitted_at_the_data_s_noise_level_not_the_default():
     assert min(r["p_value"] for r in steps) > 0.01 / len(steps), steps
 
 
+@pytest.mark.slow
 def test_two_hidden_effects_both_in_top_three():
     meas = _chip({"shot": 0.05, "crosstalk": 0.3})
     d = diagnose(jax.random.PRNGKey(12), meas)
@@ -133,6 +136,7 @@ def test_two_hidden_effects_both_in_top_three():
     assert abs(fit.after.physics.params()["k"] - 0.3) < 0.1
 
 
+@pytest.mark.slow
 def test_null_reports_nothing_missing(tmp_path, capsys):
     meas = _chip({})
     path = tmp_path / "null.npz"
@@ -177,6 +181,7 @@ def test_signatures_point_at_the_effect():
 
 
 @pytest.mark.parametrize("taps", [True, False])
+@pytest.mark.slow
 def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, taps):
     """The refit null is calibrated with taps only (docs/lab.md section 6): a fitted-offset
     model on a file without taps says so, in the JSON and in the text."""
@@ -190,6 +195,7 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
     assert ("no taps" in capsys.readouterr().out) is (not taps)
 
 
+@pytest.mark.slow
 def test_order_of_candidates_and_threads_change_no_number():
     """The session is pure: refit nulls keyed by the model's name and content, no memo keyed by
     id(), ties broken by name. Shuffling the candidates and changing the number of threads give
@@ -209,6 +215,7 @@ def test_order_of_candidates_and_threads_change_no_number():
     assert run([cands[2], cands[0], cands[3], cands[1]], 2) == one
 
 
+@pytest.mark.slow
 def test_candidates_the_identification_clears_are_not_fitted_and_change_nothing(monkeypatch):
     """With taps and shot noise the identification flags input_dependent_noise; shot passes every
     check, so the candidates of the classes no test flags are not fitted (listed with the
@@ -291,6 +298,7 @@ def test_reasons_wording_follows_the_p_value(p, words):
     assert "barely" not in p_words(1e-37) and "consistent" in p_words(0.5)
 
 
+@pytest.mark.slow
 def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
     """On a file with a hidden effect the catalogue lacks at this strength alone (two effects):
     every entry carries its mechanism class and a status that matches its p-value; the verdict
@@ -342,6 +350,7 @@ def test_fit_recovers_each_layer_s_gain():
     assert np.all(np.abs(g - np.ravel(GAINS)) < tol), (g, tol)
 
 
+@pytest.mark.slow
 def test_diagnose_names_layer_gain_first_on_a_lossy_chip():
     """A chip whose every layer has W_eff = g_l W_l (uniform optical loss), with taps: layer_gain
     passes and is ranked first, its class gain_error."""

@@ -229,6 +229,7 @@ def test_signatures_are_standard_normal_on_null_files():
 
 # ---- the JSON of CONTRACTS §6 ------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_diagnose_json_says_explained_failing_layers_and_mechanisms(tmp_path, capsys):
     arch = gt.Architecture((5, 8, 6, 3))
     params = gt.init_params(jax.random.PRNGKey(5), arch, gain=1.5)
@@ -273,6 +274,7 @@ class ActShapeCli(Effect):
 '''
 
 
+@pytest.mark.slow
 def test_plugin_flag_on_simulate_compare_and_diagnose(tmp_path, capsys):
     plugin = tmp_path / "act_shape_cli.py"
     plugin.write_text(PLUGIN)

@@ -1,6 +1,7 @@
 """Every code block of docs/theory.md runs: python blocks in order in one namespace, shell
 blocks line by line (`gift ...` through the CLI in-process, `python -m linear_case DIR`)."""
 
+import pytest
 import os
 import re
 import runpy
@@ -16,6 +17,7 @@ def _blocks(text):
     return re.findall(r"```(python|bash)\n(.*?)```", text, flags=re.S)
 
 
+@pytest.mark.slow
 def test_theory_md_code_blocks_run(tmp_path, monkeypatch, x64, capsys):
     with open(os.path.join(ROOT, "docs", "theory.md")) as fh:
         blocks = _blocks(fh.read())

@@ -219,27 +219,50 @@ def _design(lay: _Layer, g, tt):
     return np.concatenate([X, np.stack(cols, axis=-1)], axis=2)
 
 
-def _fit_map(lay: _Layer, act: str, s2: float, tt=None, iters: int = 15, W0=None, b0=None):
-    """Gauss-Newton on the per-input means: W_eff, b_eff (and the time trends) and what the
-    tests read."""
+def _fit_map(lay: _Layer, act: str, s2: float, tt=None, iters: int = 40, W0=None, b0=None):
+    """Levenberg-Marquardt on the per-input means, neuron by neuron (each neuron's loss is its
+    own): W_eff, b_eff (and the time trends) and what the tests read. A step that does not lower
+    a neuron's loss is refused and that neuron's damping raised (a saturated neuron's Jacobian
+    is nearly singular: undamped Gauss-Newton runs away there, e.g. on heater crosstalk that
+    scrambles W)."""
     n, r, d = lay.Y.shape
     p = lay.W.shape[1]
-    W = (lay.W if W0 is None else W0).copy()
-    b = (lay.b if b0 is None else b0).copy()
-    drift = None if tt is None else (np.zeros(d), np.zeros(d))
+    k = p + 1 + (2 if tt is not None else 0)
+    th = np.zeros((d, k))
+    th[:, :p] = lay.W if W0 is None else W0
+    th[:, p] = lay.b if b0 is None else b0
     Ybar = lay.Y.mean(1)
-    for _ in range(iters):
-        Czu = _unit_cov(lay, W)
-        z, m, g, _ = _mean_model(lay, act, W, b, s2, Czu, tt, drift, want_var=False)
-        X = _design(lay, g, tt)
+
+    def evaluate(th):
+        drift = None if tt is None else (th[:, p + 1], th[:, p + 2])
+        Czu = _unit_cov(lay, th[:, :p])
+        z, m, g, _ = _mean_model(lay, act, th[:, :p], th[:, p], s2, Czu, tt, drift, want_var=False)
         e = Ybar - m.mean(1)
-        B = np.einsum("nip,niq->ipq", X, X) + 1e-12 * np.eye(X.shape[2])
-        step = np.linalg.solve(B, np.einsum("nip,ni->ip", X, e)[..., None])[..., 0]
-        W, b = W + step[:, :p], b + step[:, p]
-        if tt is not None:
-            drift = (drift[0] + step[:, p + 1], drift[1] + step[:, p + 2])
-        if np.max(np.abs(step)) < 1e-7 * (1 + np.max(np.abs(W))):
-            break
+        return e, g
+
+    e, g = evaluate(th)
+    loss = np.sum(e * e, 0)
+    mu = np.full(d, 1e-6)
+    for _ in range(iters):
+        X = _design(lay, g, tt)
+        B = np.einsum("nip,niq->ipq", X, X)
+        dg = np.einsum("ipp->ip", B)
+        A = B + (mu[:, None] * np.maximum(dg, 1e-12 * np.max(dg)))[:, :, None] * np.eye(k) + 1e-12 * np.eye(k)
+        step = np.linalg.solve(A, np.einsum("nip,ni->ip", X, e)[..., None])[..., 0]
+        new = th + step
+        e_n, g_n = evaluate(new)
+        loss_n = np.sum(e_n * e_n, 0)
+        ok = loss_n <= loss
+        th = np.where(ok[:, None], new, th)
+        e = np.where(ok[None, :], e_n, e)
+        g = np.where(ok[None, None, :], g_n, g) if g_n.shape == g.shape else g_n
+        loss = np.where(ok, loss_n, loss)
+        mu = np.where(ok, np.maximum(mu / 10.0, 1e-9), mu * 10.0)
+        if np.all(~ok | (np.max(np.abs(step), 1) < 1e-7 * (1 + np.max(np.abs(th[:, :p]))))) and np.all(mu < 1e6):
+            if np.all(ok | (mu > 1e3)):
+                break
+    W, b = th[:, :p], th[:, p]
+    drift = None if tt is None else (th[:, p + 1], th[:, p + 2])
     Czu = _unit_cov(lay, W)
     z, m, g, var = _mean_model(lay, act, W, b, s2, Czu, tt, drift)
     X = _design(lay, g, tt)

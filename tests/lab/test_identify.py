@@ -129,6 +129,45 @@ def test_without_taps_the_output_is_identified_and_says_what_folds_into_it():
     assert m and "without taps" in m[0]["evidence"]
 
 
+def test_a_weight_error_as_large_as_W_is_identified_and_the_noise_level_stays_the_chips():
+    # E of the size of W itself on every layer (a scrambled W): the map is still read off, each
+    # entry within its standard error, and the layer's noise level within 5 % of s
+    Ws, bs = _net(21)
+    rng = np.random.default_rng(22)
+    E = [rng.normal(0, 1.0, W.shape) * np.sqrt(np.mean(W ** 2)) for W in Ws]
+    meas = sim(21, n=80, r=16)
+    x = meas.x
+    a = x[:, None, :] + 0.05 * rng.normal(size=(80, 16, 6))
+    outs = []
+    for l, (W, b, e) in enumerate(zip(Ws, bs, E), start=1):
+        z = np.einsum("nkp,ip->nki", a, W + e) + b + 0.05 * rng.normal(size=(80, 16, W.shape[0]))
+        a = np.tanh(z) + 0.05 * rng.normal(size=z.shape) if l < 3 else z
+        outs.append(a)
+    big = Measurement(x=x, y=outs[-1], params=meas.params, taps=tuple(outs[:-1]), t=None)
+    ident = identify(big)
+    for li, W, e in zip(ident.layers, Ws, E):
+        zerr = (li.W_eff - W - e) / li.theta_se[:, :W.shape[1]]
+        assert np.mean(zerr ** 2) < 1.0 + 6 * np.sqrt(2.0 / zerr.size), (li.layer, np.mean(zerr ** 2))
+        assert abs(li.s / 0.05 - 1) < 0.05, (li.layer, li.s)
+        assert li.choice == "general"
+
+
+def test_a_gross_outlier_among_offsets_is_refused_and_named():
+    from gift_theory.lab._fit_offsets import outlier_test, refusing
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(0, 0.05, 16)
+    d[5] = -2.25  # a dead neuron seen through its bias: not a draw of N(0, e^2)
+    i, z, p = outlier_test(d)
+    assert i == 5 and p < 1e-6
+    rows = [{"layer": 2, "test": "b_outlier", "z": z, "p": p, "neuron": "2:5", "value": d[5], "what": "..."}]
+    assert refusing(rows) == rows
+    # under the null (normal offsets) its p-value is not too small: at 0.01 within a binomial bound
+    ps = np.array([outlier_test(rng.normal(0, 0.05, 16))[2] for _ in range(400)])
+    assert np.sum(ps < 0.01) <= stats.binom.isf(1e-3, 400, 0.01)
+    assert np.sum(ps < 0.05) <= stats.binom.isf(1e-3, 400, 0.05)
+
+
 def _null_family_wise(seeds, taps):
     """Per file, the smallest Holm-adjusted p over every test (family-wise) and every raw p."""
     fw, raw = [], []

@@ -178,3 +178,16 @@ def test_report_table_counts_assumed_hypotheses():
     r = record("x", "c", "holds", "e", hypotheses=[hypothesis("a", "s", True, "d"), assumed("b", "s", "why")])
     t = render_table([r])
     assert "1/2 1 assumed" in t and "assumed" in t.splitlines()[-1]
+
+
+def test_a_real_check_cannot_fail_on_an_assumed_hypothesis(monkeypatch):
+    """hierarchical_borel_cantelli refutes the proof step inside its (computed) hypothesis; with that
+    hypothesis replaced by an assumed one, the same check can only say "inconclusive"."""
+    from proofs_checks import _sampling_proofs
+    from proofs_checks._record import assumed
+
+    assert _sampling_proofs.hierarchical_borel_cantelli()["verdict"] == "fails"
+    monkeypatch.setattr(_sampling_proofs, "normal_moments",
+                        lambda *a, **k: assumed("integrability", "E|f| < inf, E f^2 < inf", "not computed"))
+    r = _sampling_proofs.hierarchical_borel_cantelli()
+    assert r["verdict"] == "inconclusive" and "integrability" in r["evidence"]

@@ -114,7 +114,13 @@ def estimate(data_dir: str, target: str = "paper", source: str = "paper-subset",
     sc = get_scale(target)
     sws = sweeps(sc)
     rows, work, groups = [], 0.0, set()
+    unestimated = []
     for name, sw in sws.items():
+        if name != "estimators" and m["counts"].get(name, 0) == 0:
+            # no point of it measured in the source (e.g. issue 25's sweeps): said so, not summed as NaN
+            unestimated.append(name)
+            rows.append({"sweep": name, "points": sw.size, "seconds": float("nan"), "estimated": False})
+            continue
         if name != "estimators":
             for p in sw.points():
                 groups.add((sw.fixed.get("net"), p.get("method", sw.fixed.get("method")), p["s0"], p["seed"]))
@@ -145,12 +151,15 @@ def estimate(data_dir: str, target: str = "paper", source: str = "paper-subset",
             "shared_groups": {nm: {"groups": n, "seconds_per_group": v} for nm, (n, v) in sorted(per_group.items())},
             "shared_seconds": shared_s, "shared_found_done": m.get("shared_found_done", []),
             "compile_seconds_per_worker": m["compile_per_worker"], "work_seconds": total,
-            "wall_hours": total / workers / 3600, "measured_points": m["counts"]}
+            "wall_hours": total / workers / 3600, "measured_points": m["counts"], "not_estimated": unestimated}
 
 
 def render(r: dict) -> str:
     lines = [f"{r['target']} scale estimated from {r['source']} job seconds, {r['workers']} workers:"]
     for s in r["sweeps"]:
+        if s.get("estimated") is False:
+            lines.append(f"  {s['sweep']:18s} {s['points']:5d} points  not estimated: no point of it measured")
+            continue
         lines.append(f"  {s['sweep']:18s} {s['points']:5d} points  {s['seconds'] / 3600:7.2f} h of work")
         for meth, v in s.get("per_method_seconds_per_point", {}).items():
             lines.append(f"      {meth:18s} {v:7.1f} s per point")
@@ -162,7 +171,8 @@ def render(r: dict) -> str:
     lines.append(f"  trainings {sum(r['trainings'].values())} ({', '.join(f'{k} {v:.0f} s' for k, v in r['training_seconds_per_net'].items())} each): "
                  f"{r['training_seconds'] / 3600:.2f} h")
     lines.append(f"  compiling: {r['compile_seconds_per_worker']:.0f} s per worker")
-    lines.append(f"  total {r['work_seconds'] / 3600:.1f} h of work = {r['wall_hours']:.1f} h wall")
+    lines.append(f"  total {r['work_seconds'] / 3600:.1f} h of work = {r['wall_hours']:.1f} h wall"
+                 + (f" (without {', '.join(r['not_estimated'])})" if r.get("not_estimated") else ""))
     return "\n".join(lines)
 
 

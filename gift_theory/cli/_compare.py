@@ -3,10 +3,15 @@ against a measurement file, with its noise floor and p-value.
 
 With ``--effect`` the model is exactly the physics given (nothing fitted, every input
 scored); without, the awgn model is fitted on half the inputs and scored on the other half.
+
+Next to the verdict, ``power_notes`` say in words which classes the test could not see at
+this file's size (inputs, shots, taps or not), from the power computed on the file
+(:func:`gift_theory.lab._compare.power_of`; ``power`` holds the figures).
 """
 
 from __future__ import annotations
 
+from .._errors import require
 from ._labargs import add_common, figure_dir, key, load
 
 
@@ -14,12 +19,16 @@ def add_arguments(parser):
     add_common(parser)
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
                         help="the model's physics (CONTRACTS §2), e.g. awgn=0.1 shot=0.01; default: fit awgn")
+    parser.add_argument("--power-replicates", type=int, default=20, metavar="B",
+                        help="simulated files behind the power figures next to the verdict (default 20; 0: none)")
 
 
 def run(args):
     import gift_theory as gt
+    from .._model import named_subkey
     from ..lab import compare_measurement, where_it_fails
-    from ..lab._figures import heatmaps
+    from ..lab._compare import power_notes, power_of, predictive_moments
+    from ..lab._figures import moments_figure, save_figures, where_figure
 
     meas = load(args)  # plugins first: --effect may name one
     physics = None
@@ -41,9 +50,17 @@ def run(args):
            "channel_z": c.as_dict()["channel_z"], "where": res["where"]}
     where = where_it_fails(key(args), model, res["scored"])
     out["worst_cells"] = where["worst"][:10]
+    require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
+    out["power"] = (power_of(named_subkey(key(args), "power"), model, res["scored"], replicates=args.power_replicates)
+                    if args.power_replicates else [])
+    out["power_notes"] = power_notes(out["power"], verdict_passes=c.p_value >= 0.01)
     folder = figure_dir(args)
     if folder:
-        out["figures"] = [heatmaps(where, f"{folder}/where.png")]
+        mom = predictive_moments(named_subkey(key(args), "figure_moments"), model, res["scored"],
+                                 label=" + ".join(model.effects) + (" (fitted)" if res["fitted"] else ""))
+        figs = {"where.png": where_figure(where, title=f"{' + '.join(model.effects)}: where it fails"),
+                **{f"moments_layer{l}.png": moments_figure(mom, l) for l in res["scored"].layer_ids()}}
+        out["figures"] = save_figures(figs, folder)
     return out
 
 
@@ -54,6 +71,7 @@ def render(out) -> str:
              f"discrepancy {out['discrepancy']:.4g} +- {out['se']:.2g} on {out['inputs_scored']} inputs; "
              f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}; p = {out['p_value']:.3g}"
              + ("  -> the model FAILS (p < 0.01)" if out["p_value"] < 0.01 else "  -> consistent with the data"),
+             *["  " + n for n in out.get("power_notes", [])],
              "per layer (its part of the discrepancy): " + ", ".join(f"{k} {v:.3g}" for k, v in out["per_layer"].items())]
     if out.get("channel_z"):
         lines.append("channel z per layer (> 3: this aspect of the layer's shots is off):")

@@ -28,7 +28,7 @@ def run(args):
     out = res.as_json()
     folder = figure_dir(args)
     if folder:
-        out["figures"] = diagnosis_figures(res, folder)
+        out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args))
     return out
 
 

@@ -30,14 +30,17 @@ def add_arguments(parser):
     parser.add_argument("--taps", action="store_true", help="also record the hidden layers a1..a{L-1}")
     parser.add_argument("--times", action="store_true", help="also record acquisition times t (drift needs them)")
     parser.add_argument("--csv", action="store_true", help="write the long CSV format (weights go to OUT.weights.npz)")
-    parser.add_argument("--out", required=True, help="the measurement file to write (.npz)")
+    parser.add_argument("--out", required=True,
+                        help="the measurement file to write: .npz, .nc / .h5 (netCDF-4), or .csv (wide; long with "
+                             "--csv; the weights then go to OUT.weights.npz)")
 
 
 def run(args):
     import gift_theory as gt
     from .._io import atomic_write
     from .._model import named_subkey
-    from ..lab import load_weights, save_csv, save_measurement, simulate_measurement
+    from ..lab import load_weights, save_csv, simulate_measurement
+    from ..lab._io import NETCDF_EXTENSIONS, save_file
 
     load_plugins(args)
     require(args.inputs >= 1, f"--inputs {args.inputs}: needs at least 1")
@@ -45,6 +48,9 @@ def run(args):
     out = args.out
     folder = os.path.dirname(os.path.abspath(out))
     require(os.path.isdir(folder), f"--out {out}: folder {folder} does not exist")
+    ext = os.path.splitext(out)[1].lower()
+    require(ext in (".npz", ".csv") + NETCDF_EXTENSIONS or args.csv,
+            f"--out {out}: unknown extension {ext or '(none)'!r}; write .npz, .csv or netCDF (.nc, .h5)")
     specs = list(args.effect) or ["awgn=0.1"]
     if not any(s.strip().split("=")[0].strip() == "awgn" for s in specs):
         specs = ["awgn=0.1"] + specs
@@ -75,7 +81,7 @@ def run(args):
         arrays = {k: v for k, v in meas.arrays().items() if k[:1] in "Wb" or k == "activation"}
         atomic_write(wpath, lambda fh: np.savez(fh, **arrays))
     else:
-        save_measurement(out, meas)
+        save_file(out, meas)  # the format its extension names
     return {"out": out, "n": meas.n, "r": meas.r, "arch": list(meas.arch.widths), "activation": activation,
             "effects": list(physics.names), "params": physics.params_json(), "taps": bool(args.taps),
             "times": bool(args.times)}

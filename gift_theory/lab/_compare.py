@@ -19,6 +19,7 @@ from scipy import optimize
 
 from .._measurement import Measurement
 from .._model import named_subkey
+from ..chips import simulate_measurement
 from ._channels import (
     Reference,
     cell_statistic,
@@ -28,7 +29,7 @@ from ._channels import (
     reference,
 )
 from ._qtest import over_inputs, q_test, replicate_null
-from ._shots import Model, one_step_shots
+from ._shots import Model, model_shots, one_step_shots
 
 
 @dataclasses.dataclass(frozen=True)
@@ -184,3 +185,153 @@ def failing_layers(rows, alpha: float = 0.01) -> list[int]:
     if not rows:
         return []
     return sorted(int(r["layer"]) for r in rows if r["p_value"] < alpha / len(rows))
+
+
+@dataclasses.dataclass(frozen=True)
+class Moments:
+    """Per measured layer, each neuron's mean and variance over shots, measured and the model's
+    (the numbers of a posterior-predictive check; :func:`gift_theory.lab._figures.moments_figure`).
+
+    layer_ids : the 1-based layer of each entry below
+    mean, var : lists of (n, d_l): the measured shots' mean and variance (ddof 1) per input and neuron
+    model_mean, model_var : lists of (n, d_l): the same of K model shots at the same inputs
+    r, K : measured and model shots per input (they set the error bars)
+    label : the model's name
+    """
+
+    layer_ids: tuple
+    mean: list
+    var: list
+    model_mean: list
+    model_var: list
+    r: int
+    K: int
+    label: str
+
+    def mean_z(self, li: int) -> np.ndarray:
+        """(n, d) standardised mean residual, N(0, 1) per cell under the model (shot-count errors)."""
+        se2 = self.var[li] / self.r + self.model_var[li] / self.K
+        return (self.mean[li] - self.model_mean[li]) / np.sqrt(np.maximum(se2, 1e-300))
+
+    def log_var_ratio(self, li: int) -> tuple[np.ndarray, float]:
+        """(n, d) log(measured / model variance) and its standard deviation under the model
+        (sqrt(2/(r-1) + 2/(K-1)), Gaussian shots)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lr = np.log(np.maximum(self.var[li], 1e-300) / np.maximum(self.model_var[li], 1e-300))
+        return lr, float(np.sqrt(2.0 / (self.r - 1) + 2.0 / (self.K - 1)))
+
+
+def predictive_moments(key, model: Model, meas: Measurement, *, shots: int | None = None,
+                       label: str | None = None) -> Moments:
+    """The measured and the model's per-neuron mean and variance at every input of ``meas``.
+
+    Parameters
+    ----------
+    key : PRNG key of the model's shots
+    model : Model
+    meas : Measurement (use the held-out inputs for a fitted model)
+    shots : model shots per input K (default 4 r, at least 16)
+    label : the model's name in the figures (default: its effects joined by " + ")
+    """
+    K = max(4 * meas.r, 16) if shots is None else int(shots)
+    outs = model_shots(key, model, meas, K)
+    ms = [np.asarray(M, np.float64) for M in outs]
+    Ys = meas.layers()
+    return Moments(layer_ids=tuple(meas.layer_ids()), mean=[Y.mean(1) for Y in Ys], var=[Y.var(1, ddof=1) for Y in Ys],
+                   model_mean=[M.mean(1) for M in ms], model_var=[M.var(1, ddof=1) for M in ms], r=meas.r,
+                   K=int(ms[0].shape[1]), label=label or " + ".join(model.effects))
+
+
+# ---- power: what a "consistent" verdict can and cannot rule out on this file ---------------------
+
+def _power_on(key, model: Model, big: Measurement, n: int, alpha: float) -> tuple[float, float]:
+    """The rejection rate of :func:`compare`'s test of ``model`` over the B = big.n / n files of
+    n inputs that ``big`` holds one after another, and its standard error."""
+    k_ref, k_model = jax.random.split(key)
+    ref = reference(k_ref, big)
+    C = channel_values(k_model, model, big, ref)
+    B = big.n // n
+    p = np.array([q_test(C[g * n:(g + 1) * n].reshape(n, -1))[1] for g in range(B)])
+    rate = float(np.mean(p < alpha))
+    return rate, float(np.sqrt(max(rate * (1 - rate), 1.0 / B) / B))
+
+
+def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, replicates: int = 20) -> list[dict]:
+    """The power of :func:`compare`'s test of ``model`` against chips that differ from it by one
+    effect, on files of this file's size: its inputs, shot count r, and taps or not.
+
+    ``replicates`` files are simulated at the file's inputs with the file's weights under each
+    probe chip, all in one batch, and scored against ``model`` by the same channels and Q test as
+    :func:`compare` (the model as given: not refitted on each file). The power is the fraction
+    rejected at ``alpha``, with its binomial standard error. Probes (on the awgn baseline, at the
+    model's own noise level s):
+
+    ``noise_law``
+        the Laplace law at the same s (the law changed at equal variance);
+    ``input_dependent_noise``
+        shot noise carrying half the output variance averaged over the inputs, awgn s / sqrt(2)
+        the other half (q from the model's shots): the same mean variance as the model, growing
+        with the signal -- what is left for the test once the noise level is fitted.
+
+    For a file without taps, each figure is also computed as if the hidden layers were tapped
+    (``power_with_taps``: the same simulated files, hidden layers kept).
+
+    Returns
+    -------
+    list of dict: {"mechanism", "probe", "power", "se", "power_with_taps" (None with taps),
+    "replicates", "n", "r", "taps", "layers", "probe_params"}; empty for a model with more than
+    awgn (no probe is defined on top of it).
+    """
+    if set(model.physics.names) != {"awgn"}:
+        return []
+    s = float(model.physics.s)
+    Physics = type(model.physics)
+    # shot noise alone at a trial q: the share of the output variance it carries scales with q
+    q0 = s * s / max(float(np.median(np.abs(meas.y))), 1e-12)
+    k_v = named_subkey(key, "power_variance")
+    v_model = float(np.mean(np.var(np.asarray(model_shots(k_v, model, meas, 2 * meas.r)[-1]), axis=1)))
+    v_shot = float(np.mean(np.var(np.asarray(model_shots(
+        k_v, Model(Physics.parse(["awgn=1e-9", f"shot={q0}"]), model.params, model.offsets), meas, 2 * meas.r)[-1]),
+        axis=1)))
+    q = q0 * 0.5 * v_model / max(v_shot, 1e-300)
+    probes = [("noise_law", "laplace", Physics.parse([f"awgn={s}", "laplace"])),
+              ("input_dependent_noise", "shot", Physics.parse([f"awgn={s / np.sqrt(2.0)}", f"shot={q}"]))]
+    params = model.weights(meas)
+    x = np.tile(meas.x, (replicates, 1))
+    hidden = len(meas.params) > 1
+    common = {"replicates": replicates, "n": meas.n, "r": meas.r, "taps": meas.has_taps,
+              "layers": list(meas.layer_ids())}
+    out = []
+    for mech, name, phys in probes:
+        k = named_subkey(key, f"power_{name}")
+        big = simulate_measurement(named_subkey(k, "files"), params, x, phys, shots=meas.r,
+                                   activation=meas.activation, taps=hidden)
+        if meas.t is not None:
+            big = dataclasses.replace(big, t=np.tile(meas.t, (replicates, 1)))
+        seen = big if meas.has_taps else dataclasses.replace(big, taps=None)
+        p, se = _power_on(named_subkey(k, "score"), model, seen, meas.n, alpha)
+        pt = None
+        if not meas.has_taps and hidden:
+            pt, _ = _power_on(named_subkey(k, "score"), model, big, meas.n, alpha)
+        out.append({"mechanism": mech, "probe": name, "power": p, "se": se, "power_with_taps": pt,
+                    "probe_params": phys.params_json(), **common})
+    return out
+
+
+def power_notes(power: list[dict], verdict_passes: bool, threshold: float = 0.8) -> list[str]:
+    """Plain sentences, next to a verdict, for the classes :func:`power_of` finds the test weak on
+    (power below ``threshold``); empty when it sees them all."""
+    notes = []
+    lead = "'consistent' does not rule out" if verdict_passes else "this test is weak on"
+    what = {"noise_law": "a noise law changed at equal variance (Laplace at the same s)",
+            "input_dependent_noise": "input-dependent noise (shot noise carrying half the output variance)"}
+    for p in power:
+        if p["power"] >= threshold:
+            continue
+        size = f"{p['n']} inputs x {p['r']} shots, " + ("with taps" if p["taps"] else "outputs only")
+        taps = ("" if p["power_with_taps"] is None else
+                f"; with taps on the hidden layers: {p['power_with_taps']:.2f}")
+        notes.append(f"power: {lead} {what.get(p['mechanism'], p['mechanism'])}: on files of this size ({size}) "
+                     f"the test rejects it in {p['power']:.2f} +- {p['se']:.2f} of {p['replicates']} simulated "
+                     f"files{taps}")
+    return notes

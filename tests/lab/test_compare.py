@@ -1,5 +1,7 @@
 """The discrepancy: an unbiased U-statistic, a readable floor and a calibrated p-value."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -290,3 +292,78 @@ def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
         for name, v in want.items():
             ref = _random.normal(named_subkey(key, name), v.shape, jnp.float32)
             np.testing.assert_allclose(np.asarray(v), np.asarray(ref), rtol=1e-5, atol=1e-6)
+
+
+# ---- power stated ------------------------------------------------------------------------------
+
+def test_power_notes_say_what_is_weak_in_the_file_s_numbers():
+    from gift_theory.lab._compare import power_notes
+
+    rows = [{"mechanism": "noise_law", "power": 0.05, "se": 0.05, "power_with_taps": 0.95, "replicates": 20,
+             "n": 60, "r": 16, "taps": False},
+            {"mechanism": "input_dependent_noise", "power": 0.9, "se": 0.07, "power_with_taps": 1.0,
+             "replicates": 20, "n": 60, "r": 16, "taps": False}]
+    notes = power_notes(rows, verdict_passes=True)
+    assert len(notes) == 1 and notes[0].startswith("power: 'consistent' does not rule out a noise law")
+    assert "60 inputs x 16 shots, outputs only" in notes[0] and "0.05 +- 0.05 of 20" in notes[0]
+    assert "with taps on the hidden layers: 0.95" in notes[0]
+    assert power_notes(rows, verdict_passes=False)[0].startswith("power: this test is weak on")
+    assert power_notes([{**rows[0], "power": 0.85}], True) == []
+
+
+@pytest.fixture(scope="module")
+def deep_setup():
+    arch = gt.Architecture((3, 8, 6, 2))
+    params = gt.init_params(jax.random.PRNGKey(7), arch, gain=1.5)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(8), (40, 3)))
+    return params, x
+
+
+@pytest.mark.slow
+def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup):
+    """The rate is the real test's on simulated files: at the model itself it is the level; shot
+    noise is seen; a law change at equal variance on 40 inputs x 16 shots is not, with or
+    without taps; an outputs-only file gets the with-taps figure of the same simulated files."""
+    from gift_theory.lab._compare import _power_on, power_of
+
+    params, x = deep_setup
+    model = Model(gt.Physics.create(s=0.1))
+    meas = simulate_measurement(jax.random.PRNGKey(9), params, x, gt.Physics.create(s=0.1), shots=16, taps=True)
+    B = 10
+    null = simulate_measurement(jax.random.PRNGKey(10), params, np.tile(x, (B, 1)), model.physics, shots=16, taps=True)
+    rate, se = _power_on(jax.random.PRNGKey(11), model, null, meas.n, 0.01)
+    assert rate <= 0.2  # P(>= 3 of 10 false alarms at level 0.01) = 1e-4
+    with_taps = {p["mechanism"]: p for p in power_of(jax.random.PRNGKey(1), model, meas, replicates=B)}
+    without = {p["mechanism"]: p for p in power_of(jax.random.PRNGKey(1), model,
+                                                   dataclasses.replace(meas, taps=None), replicates=B)}
+    assert with_taps["noise_law"]["taps"] and with_taps["noise_law"]["power_with_taps"] is None
+    assert with_taps["noise_law"]["layers"] == [1, 2, 3] and without["noise_law"]["layers"] == [3]
+    assert (without["noise_law"]["n"], without["noise_law"]["r"], without["noise_law"]["replicates"]) == (40, 16, B)
+    for mech in with_taps:
+        assert without[mech]["power_with_taps"] == with_taps[mech]["power"]  # the same simulated files
+    assert with_taps["input_dependent_noise"]["power"] >= 0.8
+    assert with_taps["noise_law"]["power"] <= 0.5 and without["noise_law"]["power"] <= 0.5
+    # a model with more than awgn: no probe defined on top of it, no figure made up
+    assert power_of(jax.random.PRNGKey(1), Model(gt.Physics.parse(["awgn=0.1", "shot=0.01"])), meas) == []
+
+
+@pytest.mark.slow
+def test_power_of_agrees_with_compare_run_file_by_file(deep_setup):
+    """Validation against compare itself, one file at a time (not the batched scoring): the
+    outputs-only shot probe, whose power here is neither 0 nor 1."""
+    from gift_theory.lab._compare import power_of
+
+    params, x = deep_setup
+    model = Model(gt.Physics.create(s=0.1))
+    meas = simulate_measurement(jax.random.PRNGKey(9), params, x, model.physics, shots=16)
+    B = 20
+    row = {p["mechanism"]: p for p in power_of(jax.random.PRNGKey(2), model, meas, replicates=B)}
+    pp = row["input_dependent_noise"]["probe_params"]
+    probe = gt.Physics.parse([f"awgn={pp['s']}", f"shot={pp['q']}"])
+    hits = [compare(jax.random.PRNGKey(300 + b), model,
+                    simulate_measurement(jax.random.PRNGKey(200 + b), params, x, probe, shots=16)).p_value < 0.01
+            for b in range(B)]
+    rate = float(np.mean(hits))
+    p = row["input_dependent_noise"]["power"]
+    pooled = (rate + p) / 2
+    assert abs(rate - p) <= 3 * np.sqrt(max(pooled * (1 - pooled), 0.05) * 2 / B)

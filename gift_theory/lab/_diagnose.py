@@ -158,6 +158,8 @@ class Candidate:
             out["with"] = list(self.effects[:-1])
         if self.refused_because:
             out["refused_because"] = list(self.refused_because)
+        from ._intervals import per_neuron_json  # CONTRACTS §2b: per-neuron values and their standard errors
+        out.update(per_neuron_json(self.model))
         if self.comparison.replicates:
             out["net_discrepancy_after"] = self.comparison.net_discrepancy
             out["refit_null_replicates"] = self.comparison.replicates

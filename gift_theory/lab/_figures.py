@@ -51,7 +51,7 @@ def error_ladder(rungs, noise_floor: float, floor_se: float, *, title: str = "er
     matplotlib.figure.Figure
     """
     if ax is None:
-        ax = _new_figure((1.8 + 1.4 * len(rungs), 3.8)).add_subplot()
+        ax = _new_figure((3.4 + 1.4 * len(rungs), 3.8)).add_subplot()  # + the legend beside the axes
     xs = np.arange(len(rungs))
     d = np.array([r[1] for r in rungs], float)
     se = np.array([r[2] for r in rungs], float)
@@ -67,7 +67,8 @@ def error_ladder(rungs, noise_floor: float, floor_se: float, *, title: str = "er
     ax.set_xlabel("model")
     ax.set_ylabel("held-out discrepancy")
     ax.set_title(title + "  (red: rejected, p < 0.01)", fontsize=10)
-    ax.legend(fontsize=8, loc="best")
+    ax.set_xlim(-0.5, len(rungs) - 0.2)  # room for the last p-value
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside: never over a point or label
     return _root(ax)
 
 
@@ -164,10 +165,9 @@ def moments_figure(moments, layer: int, *, fig=None, title: str | None = None):
                   label=f"{m.label}: rms z = {np.sqrt(np.mean(z ** 2)):.2f}")
         a_rv.plot(mu, lr.ravel(), "o", ms=2.5, color=c, alpha=0.6,
                   label=f"{m.label}: mean = {np.mean(lr):+.2f}")
-    for ax in (a_mean, a_var):
-        lo, hi = ax.get_xlim()
-        lo2, hi2 = ax.get_ylim()
-        lo, hi = min(lo, lo2), max(hi, hi2)
+    for ax, pts in ((a_mean, [Y] + [m.model_mean[li].ravel() for m in mlist]),
+                    (a_var, [V] + [m.model_var[li].ravel() for m in mlist])):
+        lo, hi = min(float(np.min(p)) for p in pts), max(float(np.max(p)) for p in pts)  # the points, not the bars
         ax.plot([lo, hi], [lo, hi], color="k", lw=0.8, ls="--", label="identity")
     from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter
 

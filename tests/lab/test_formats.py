@@ -217,3 +217,26 @@ def test_same_diagnosis_from_every_format(tmp_path, capsys):
         out.pop("seconds", None)
         results.append(out)
     assert results[0]["ranking"] and results[0] == results[1] == results[2]
+
+
+def test_bad_netcdf_one_line_exit_2(meas, tmp_path, capsys):
+    good = tmp_path / "good.nc"
+    save_netcdf(good, meas)
+    cut = tmp_path / "cut.nc"
+    cut.write_bytes(good.read_bytes()[:200])  # an HDF5 signature, then nothing readable
+    ds = meas.to_xarray()
+    no_y = tmp_path / "no_y.nc"
+    ds.drop_vars("y").to_netcdf(no_y, engine="h5netcdf")
+    odd = tmp_path / "odd.nc"
+    ds.assign(y=(("input", "repeat", "d2"), meas.y)).to_netcdf(odd, engine="h5netcdf")
+    named = tmp_path / "named.nc"  # a .nc extension on a text file
+    named.write_text("x,y\n1,2\n")
+    for path, needle in ((cut, "not a readable netCDF / HDF5 file"), (no_y, "missing key 'y'"),
+                         (odd, "variable y has dimensions ('input', 'repeat', 'd2'), no 'shot'"),
+                         (named, "not a netCDF / HDF5 file")):
+        with pytest.raises(gt.GiftInputError) as err:
+            load_measurement(path)
+        assert needle in str(err.value) and str(path) in str(err.value) and "\n" not in str(err.value)
+        assert main(["compare", str(path), "--json"]) == 2
+        cap = capsys.readouterr()
+        assert cap.out == "" and len(cap.err.strip().splitlines()) == 1 and "Traceback" not in cap.err

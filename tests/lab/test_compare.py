@@ -1,6 +1,7 @@
 """The discrepancy: an unbiased U-statistic, a readable floor and a calibrated p-value."""
 
 import dataclasses
+import os
 
 import jax
 import jax.numpy as jnp
@@ -367,3 +368,28 @@ def test_power_of_agrees_with_compare_run_file_by_file(deep_setup):
     p = row["input_dependent_noise"]["power"]
     pooled = (rate + p) / 2
     assert abs(rate - p) <= 3 * np.sqrt(max(pooled * (1 - pooled), 0.05) * 2 / B)
+
+
+@pytest.mark.slow
+def test_compare_command_states_power_next_to_the_verdict(deep_setup, tmp_path, capsys):
+    import json
+
+    from gift_theory.cli._compare import render
+    from gift_theory.cli._main import main
+    from gift_theory.lab import save_measurement
+
+    params, x = deep_setup
+    meas = simulate_measurement(jax.random.PRNGKey(12), params, x[:24], gt.Physics.create(s=0.1), shots=8)
+    path = tmp_path / "outputs_only.npz"
+    save_measurement(path, meas)
+    assert main(["compare", str(path), "--json", "--power-replicates", "4", "--figures", str(tmp_path / "figs")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [p["mechanism"] for p in out["power"]] == ["noise_law", "input_dependent_noise"]
+    assert all(p["replicates"] == 4 and p["n"] == out["inputs_scored"] and p["r"] == 8 and not p["taps"]
+               for p in out["power"])
+    weak = [p for p in out["power"] if p["power"] < 0.8]
+    assert len(out["power_notes"]) == len(weak)
+    text = render(out).splitlines()
+    verdict = next(i for i, l in enumerate(text) if "p = " in l and "->" in l)
+    assert text[verdict + 1: verdict + 1 + len(weak)] == ["  " + n for n in out["power_notes"]]
+    assert sorted(os.listdir(tmp_path / "figs")) == ["moments_layer3.png", "where.png"]

@@ -122,10 +122,11 @@ def did_you_mean(message: str) -> str:
 class Progress:
     """``progress(i, n, label)`` callbacks that print ``prog: [i+1/n] label (t s, ~left s left)``
     on stderr before item i starts; silent when ``quiet``. The time left is the mean time of the
-    items done so far times the items left (shown from the second item on)."""
+    items done so far times the items left (shown from the second item on; ``eta=False`` for
+    items of very different lengths, where that mean would mislead)."""
 
-    def __init__(self, prog: str, quiet: bool = False, stream=None):
-        self.prog, self.quiet = prog, quiet
+    def __init__(self, prog: str, quiet: bool = False, stream=None, eta: bool = True):
+        self.prog, self.quiet, self.eta = prog, quiet, eta
         self.stream = stream
         self.t0 = None
         self.first = 0
@@ -138,7 +139,7 @@ class Progress:
             self.t0, self.first = now, i
         done = i - self.first
         elapsed = now - self.t0
-        left = f", ~{elapsed / done * (n - i):.0f} s left" if done > 0 else ""
+        left = f", ~{elapsed / done * (n - i):.0f} s left" if done > 0 and self.eta else ""
         out = self.stream or sys.stderr
         out.write(f"{self.prog}: [{i + 1}/{n}] {label} ({elapsed:.0f} s{left})\n")
         out.flush()

@@ -122,7 +122,7 @@ def run(args):
         result["theory"] = check.demo_part(args.seed, progress=Progress("gift demo: theory", args.quiet))
     if "lab" in parts:
         path = None if args.no_figure else os.path.join(args.out, "demo_chip.npz")
-        result["lab"] = _demo.lab_part(hidden, args.seed, save_to=path, progress=Progress("gift demo: lab", args.quiet))
+        result["lab"] = _demo.lab_part(hidden, args.seed, save_to=path, progress=Progress("gift demo: lab", args.quiet, eta=False))
     result["seconds"] = time.perf_counter() - t0
     return result
 

@@ -103,6 +103,7 @@ def test_every_effect_matches_numpy(x64):
 
 @given(widths=st.lists(st.integers(1, 5), min_size=2, max_size=4), seed=st.integers(0, 10_000),
        s=st.floats(0.0, 1.0))
+@pytest.mark.slow
 def test_random_architectures_match_numpy(widths, seed, s):
     with jax.enable_x64(True):
         arch = gt.Architecture(tuple(widths))

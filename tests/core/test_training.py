@@ -47,6 +47,7 @@ class TeacherSampler:
         return isinstance(other, TeacherSampler) and other.t == self.t
 
 
+@pytest.mark.slow
 def test_projected_sgd_stays_in_the_box_and_lowers_J():
     t = teacher_sampler_factory()
     arch = gt.Architecture((3, 4, 2))
@@ -96,6 +97,7 @@ def test_digits_training_quality():
     assert float(acc.mean) > 0.90
 
 
+@pytest.mark.slow
 def test_cache_reuses_and_writes_atomically(tmp_path):
     arch = gt.Architecture((4, 5, 2))  # the default teacher is 4 -> 2
     cfg = TrainConfig(epochs=2, batch_size=64)

@@ -135,6 +135,7 @@ def test_hvp_is_the_derivative_of_the_gradient(x64):
     np.testing.assert_allclose(hv, (gp - gm) / (2 * eps), rtol=1e-6, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_groups_and_chunks_do_not_change_a_deterministic_mean(x64):
     """At s = 0 the gradient is deterministic: any grouping and chunking gives the full-batch gradient."""
     params, x, y = _data(ARCH, seed=6, n=37)

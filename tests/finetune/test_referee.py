@@ -57,6 +57,7 @@ def test_without_noise_accuracy_is_the_argmax_of_the_deterministic_output():
     np.testing.assert_array_equal(correct[0], np.asarray(jnp.argmax(out, -1) == lab, float))
 
 
+@pytest.mark.slow
 def test_directional_derivative_is_the_central_difference_on_common_draws(x64):
     x, y, _ = _data(80)
     w = cast(_weights(4), jnp.float64)
@@ -69,6 +70,7 @@ def test_directional_derivative_is_the_central_difference_on_common_draws(x64):
     assert est.n == x.shape[0] and est.se > 0
 
 
+@pytest.mark.slow
 def test_first_order_prediction_agrees_with_the_realised_change_at_a_small_step():
     """The chip's physics is the model's (AWGN at st): at a step where the quadratic term is
     negligible, a <grad J_st, u> predicts the referee's paired change within their errors."""

@@ -70,6 +70,7 @@ def test_hidden_effect_is_named_first_and_fit_passes(hidden):
 
 
 @pytest.mark.parametrize("law", ["laplace", "uniform"])
+@pytest.mark.slow
 def test_noise_law_shows_in_its_signature(law):
     """Besides the discrepancy's shape channel, the kurtosis signature names the law."""
     meas = _chip(HIDDEN[law], seed=8)
@@ -154,6 +155,7 @@ def test_null_reports_nothing_missing(tmp_path, capsys):
     assert sorted(tried) == sorted(e for e in gt.effects.BUILTIN if e != "awgn")
 
 
+@pytest.mark.slow
 def test_fit_command_contract(tmp_path, capsys):
     meas = _chip(HIDDEN["shot"], seed=4)
     path = tmp_path / "shot.npz"
@@ -170,6 +172,7 @@ def test_fit_command_contract(tmp_path, capsys):
     assert "error ladder" in text and (tmp_path / "figs" / "ladder.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_signatures_point_at_the_effect():
     meas = _chip(HIDDEN["quantization"], seed=5)
     base = fit_effects(jax.random.PRNGKey(13), meas, []).before
@@ -330,6 +333,7 @@ def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
 GAINS = ((0.6,), (0.8,), (1.3,))
 
 
+@pytest.mark.slow
 def test_fit_recovers_each_layer_s_gain():
     """fit --add layer_gain on W_eff = g_l W_l: each g_l within 5 standard errors of the truth,
     and the fitted model passes."""

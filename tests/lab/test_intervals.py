@@ -55,6 +55,7 @@ def shot_file():
     return simulate_measurement(jax.random.PRNGKey(5), params, x, physics, shots=24, taps=True)
 
 
+@pytest.mark.slow
 def test_every_fitted_scalar_has_an_interval_around_its_estimate(shot_file):
     key = jax.random.PRNGKey(0)
     res = fit_effects(key, shot_file, ["shot"])

@@ -171,6 +171,7 @@ def test_bias_offsets_need_mixed_signs_and_no_evidence_lists_nothing():
 
 # ---- a plugin's per-neuron parameter is fitted like offsets -------------------------------------
 
+@pytest.mark.slow
 def test_per_neuron_plugin_parameter_is_fitted_and_passes():
     @register
     class NeuronShift(Effect):

@@ -130,6 +130,7 @@ def _measurement(name, seed=0, n=48, r=24):
 
 
 @pytest.mark.parametrize("name", list(PLUGINS))
+@pytest.mark.slow
 def test_plugin_fits_to_the_floor_and_recovers_its_parameter(tmp_path, name):
     _load(tmp_path, name)
     meas = _measurement(name)

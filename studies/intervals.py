@@ -136,6 +136,17 @@ def _rows(path):
     return rows
 
 
+def _unbounded(cell, interval) -> bool:
+    """The interval is the parameter's whole range (the fit's loss is flat or concave there)."""
+    from gift_theory.effects import REGISTRY
+
+    lo, hi = (math.inf if v is None else float(v) for v in interval)
+    effect, name = CELLS[cell]
+    param = {"s": "s", "q": "q", "kappa": "kappa", "sigma": "sigma"}[cell]
+    blo, bhi = REGISTRY[effect or "awgn"].bounds.get(param, (-math.inf, math.inf))
+    return not math.isfinite(hi) or (lo <= blo and hi >= bhi)
+
+
 def summary(out, cells, taps_list) -> dict:
     table = []
     for cell in cells:
@@ -145,7 +156,10 @@ def summary(out, cells, taps_list) -> dict:
             n = len(rows)
             p = float(np.mean([r["covered"] for r in rows])) if n else float("nan")
             ps = float(np.mean([r["s_covered"] for r in rows])) if n else float("nan")
-            table.append({"cell": cell, "taps": taps, "files": n, "failed": len(every) - n, "coverage": p,
+            # an interval as wide as the bounds covers by construction: counted apart
+            unbounded = sum(1 for r in rows if _unbounded(cell, r["interval"]))
+            table.append({"cell": cell, "taps": taps, "files": n, "failed": len(every) - n, "unbounded": unbounded,
+                          "coverage": p,
                           "se": math.sqrt(p * (1 - p) / n) if n else float("nan"),
                           "coverage_s": ps, "se_s": math.sqrt(ps * (1 - ps) / n) if n else float("nan"),
                           "median_seconds": float(np.median([r["seconds"] for r in rows])) if n else float("nan")})
@@ -153,9 +167,9 @@ def summary(out, cells, taps_list) -> dict:
 
 
 def render(summ) -> str:
-    lines = ["cell    taps   files  coverage (95 % nominal)   coverage of s in the same fits"]
+    lines = ["cell    taps   files  unbounded  coverage (95 % nominal)   coverage of s in the same fits"]
     for row in summ["table"]:
-        lines.append(f"{row['cell']:<7s} {'yes' if row['taps'] else 'no':<5s} {row['files']:6d}  "
+        lines.append(f"{row['cell']:<7s} {'yes' if row['taps'] else 'no':<5s} {row['files']:6d}  {row['unbounded']:9d}  "
                      f"{row['coverage']:.3f} +- {row['se']:.3f}            {row['coverage_s']:.3f} +- {row['se_s']:.3f}")
     return "\n".join(lines)
 

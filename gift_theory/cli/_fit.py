@@ -29,6 +29,9 @@ def run(args):
     from ..lab._figures import fit_figures
     from ..lab._fit import fit_uncertainty
 
+    from .._errors import require
+
+    require(args.replicates is None or args.replicates >= 2, f"--replicates {args.replicates}: needs at least 2")
     meas = load(args)
     res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()

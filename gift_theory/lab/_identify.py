@@ -17,7 +17,8 @@ Per layer (float64 numpy, closed form or a few Gauss-Newton steps, all neurons a
   neurons of one input are not), so every test below on it needs no assumed noise law;
 * **restricted maps** on ``(W_eff - W, b_eff - b)`` by generalised least squares under that
   covariance: a gain (``W_eff = g W``), per-neuron bias shifts, a transfer of z (``g (W, b) + c``)
-  and their combinations; the smallest one the data do not reject names the deviation;
+  and their combinations, and each neuron's own gain and shift of z (a detector's or
+  modulator's gain and offset); the smallest one the data do not reject names the deviation;
 * **dead or stuck neurons**: a row of W_eff indistinguishable from 0 where the programmed
   row is rejected;
 * **the activation's shape**: binned means of the residual against the fitted z, shared by the
@@ -332,7 +333,7 @@ class LayerIdentity:
     gain, gain_se : the best common gain g (W_eff ~ g W, biases free) and its standard error
     dead : neurons (0-based) whose effective row is 0 while the programmed one is not
     choice : the smallest restricted map the data do not reject: "programmed", "gain",
-        "transfer", "bias", "gain+bias" or "general"
+        "transfer", "bias", "gain+bias", "rows" (per-neuron gain and shift of z) or "general"
     z_bins : (B,) centres of the bins of z; shape : (B,) the binned mean residual shared by the
         neurons beyond their affine maps (the activation's shape deviation); curve : (d, B) per
         neuron the binned mean residual against the programmed z (a flat neuron is dead)
@@ -372,8 +373,13 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     if t is not None:
         # the map is identified at t = 0, the start of the acquisition (CONTRACTS §2's drift is
         # g = 1 + r t): a trend's time average is not a fixed error
+        # the map's trends come from the inputs' mean times (a within-input trend would make the
+        # model's mean move inside an input by a coefficient read off the means); they are fitted
+        # only where those spread over a tenth of the campaign (not with an interleaved order,
+        # where the within-input test below sees the trend)
         t = np.asarray(t, np.float64)
-        tt = t if np.std(t) > 0 else None
+        tbar = t.mean(1, keepdims=True)
+        tt = tbar if np.std(tbar) >= 0.1 else None
     k = p + 1 + (2 if tt is not None else 0)
     # noise level: two passes (the smoothing of sigma depends on it, only at second order)
     s2 = s_guess ** 2
@@ -445,8 +451,12 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     Rg = np.concatenate([Wa, np.zeros((da, 1)), pad], axis=1).reshape(-1, 1)
     Rb = unit(p)
     Rt = np.stack([np.concatenate([Wa, ba[:, None], pad], axis=1).ravel(), Rb.sum(1)], axis=1)
+    Rr = np.zeros((da * k, da))  # per-neuron gain on the whole pre-activation (W and b of that row)
+    for a_ in range(da):
+        Rr[a_ * k:a_ * k + p + 1, a_] = np.concatenate([Wa[a_], [ba[a_]]])
     models = {"programmed": free, "gain": np.concatenate([Rg, free], 1), "transfer": np.concatenate([Rt, free], 1),
-              "bias": np.concatenate([Rb, free], 1), "gain+bias": np.concatenate([Rg, Rb, free], 1)}
+              "bias": np.concatenate([Rb, free], 1), "gain+bias": np.concatenate([Rg, Rb, free], 1),
+              "rows": np.concatenate([Rr, Rb, free], 1)}
     gain, gain_se = 1.0, float("inf")
     choice = "general"
     rel = 0.0
@@ -456,7 +466,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
         pfit = {name: _chi2(f[2], th.size - models[name].shape[1], nu)[0] for name, f in fits.items()}
         q0 = fits["programmed"][2]
         p_omni, z_omni = _chi2(q0, th.size - free.shape[1], nu)
-        for name in ("programmed", "gain", "transfer", "bias", "gain+bias"):
+        for name in ("programmed", "gain", "transfer", "bias", "gain+bias", "rows"):
             if pfit[name] >= ALPHA:
                 choice = name
                 break
@@ -497,6 +507,16 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
                              f"z scaled as a whole at layer {l}: {1 + phi_t[0]:.3f} (W, b) + {phi_t[1]:.3g} "
                              f"(a {'slope/shift of the activation' if lay.hidden else 'gain/offset of the readout'}; "
                              f"fits, p = {pfit['transfer']:.2g})"))
+        elif choice == "rows":
+            phi_r, Fi_r, _ = fits["rows"]
+            qr = float(phi_r[:2 * da] @ _solve_psd(Fi_r[:2 * da, :2 * da], phi_r[:2 * da]))
+            pr, zr = _chi2(qr, 2 * da, nu)
+            gi = phi_r[:da]
+            rows.append(_row(transfer_cls, "neuron_transfer", floor(pr), zr, float(np.sqrt(np.mean(gi ** 2))),
+                             f"each neuron's z at layer {l} scaled and shifted on its own: gains "
+                             f"{1 + gi.min():.3f}..{1 + gi.max():.3f} on (W, b) of its row, shifts rms "
+                             f"{np.sqrt(np.mean(phi_r[da:2 * da] ** 2)):.3g} (a "
+                             f"{'modulator' if lay.hidden else 'detector'}'s gain and offset; fits, p = {pfit['rows']:.2g})"))
         elif choice in ("bias", "gain+bias", "general"):
             if choice in ("gain+bias", "general"):
                 rows.append(_row("gain_error", "gain", floor(_two_sided(z_gain)), abs(z_gain), g_at - 1.0,
@@ -643,8 +663,37 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
         rows.append(_row("correlated_noise", "correlation", min(1.0, 3 * stats.norm.sf(zc_)), zc_, zc_,
                          f"noise correlated across the neurons of layer {l} {what} (z = {z1:.1f} common, "
                          f"{z_u:.1f} any pattern)"))
-    if tt is not None:
-        tc = tt.mean(1) - tt.mean()
+    if t is not None and r > 2 and np.std(t - t.mean(1, keepdims=True)) > 0:
+        # trends within an input's shots (acquisition order interleaved across inputs): the
+        # within-input residuals against t - its input's mean, additive per neuron and a gain
+        tw = t - t.mean(1, keepdims=True)
+        Ed = E - E.mean(1, keepdims=True)
+        gk = np.broadcast_to(g, E.shape)
+        rows_t = []
+        for name, D in (("additive", gk * tw[:, :, None]), ("gain", gk * np.broadcast_to(u[:, None, :], E.shape)
+                                                              * tw[:, :, None])):
+            S_ = np.sum(D * D, axis=(0, 1))
+            beta = np.sum(D * Ed, axis=(0, 1)) / np.maximum(S_, 1e-300)
+            M = np.einsum("nki,nkj->nij", D, D)
+            Cb = np.einsum("nij,nij->ij", M, Chat) / np.maximum(np.outer(S_, S_), 1e-300)
+            if name == "additive":
+                q = float(beta @ _solve_psd(Cb, beta))
+                rows_t.append((name, *_chi2(q, d), beta, Cb))
+            else:  # one relative gain trend shared by the neurons: the precision-weighted mean
+                wv = 1.0 / np.maximum(np.diag(Cb), 1e-300)
+                wv = wv / wv.sum()
+                kb = float(wv @ beta)
+                zk = kb / np.sqrt(max(float(wv @ Cb @ wv), 1e-300))
+                rows_t.append((name, _two_sided(zk), abs(zk), beta, Cb))
+        best = min(rows_t, key=lambda x: x[1])
+        zc_ = best[3] / np.sqrt(np.maximum(np.diag(best[4]), 1e-300))
+        wi = int(np.argmax(np.abs(zc_)))
+        rows.append(_row("time_drift", "time_within", min(1.0, 2 * best[1]), best[2], float(best[3][wi]),
+                         f"within the inputs' shots, layer {l} moves with acquisition time: {best[0]} trend "
+                         f"{best[3][wi]:+.3g} per unit t at {l}:{wi} (z = {zc_[wi]:.1f}; the layer's z = {best[2]:.1f})",
+                         [wi]))
+    if t is not None and np.std(t.mean(1)) > 0:
+        tc = t.mean(1) - t.mean()
         z_vt = over_inputs(tc * rho.mean(1))
         rows.append(_row("time_drift", "time_noise", _two_sided(z_vt), abs(z_vt), z_vt,
                          f"the noise level at layer {l} moves over acquisition time (z = {z_vt:.1f})"))

@@ -367,7 +367,7 @@ def gift_never_worse(key=None, precise: bool = False) -> dict:
     # (no candidate is better) and at a misspecified st_mis (candidates are better and get accepted)
     delta = 0.1
     R = 240 if precise else 120
-    st_mis, K2m = 0.3, 64
+    st_mis, K2m = 0.3, 32
     acc0, worse0, _ = _corrected_runs(jax.random.fold_in(key, 4), st_, D.mean, eta, s0, R, K2e, delta)
     Rm = R
     accm, worsem, truthm = _corrected_runs(jax.random.fold_in(key, 5), st_, D.mean, eta, st_mis, Rm, K2m, delta)
@@ -462,8 +462,8 @@ def algorithm1_stopping_rule(key=None, precise: bool = False) -> dict:
     convex = C2["lo"] > 0
     c_star = th1["alpha"] / (eta * dv)
     c_star_lo = (C1["lo"] / (2 * C2["hi"])) / (eta * dv) if (C1["lo"] > 0 and C2["hi"] > 0) else 0.0
-    R = 16 if precise else 8
-    K2e = 512
+    R = 16 if precise else 6
+    K2e = 256
     phys = p.physics.replace(s=st_.st)
     stops, diffs, resolved = [], [], []
     for r in range(R):

@@ -99,7 +99,7 @@ def d0_limit(key=None, precise: bool = False) -> dict:
     zc_coord = float(stats.norm.isf(lev.alpha / (2 * P)))
     zs = np.abs(cm) / np.where(cse > 0, cse, np.inf)
     coord_power = float(np.max(zc_coord * cse) / norm)
-    v_coord = decide(fails=bool(np.any(zs > zc_coord)), holds=coord_power < rel_tol)
+    v_coord = decide(fails=bool(np.any(zs > zc_coord)), holds=coord_power < 2 * rel_tol)
     v_c = combine(v_c1, v_coord)
     r, r_se = res["ratio"]
     s = float(prob.physics.s)
@@ -114,7 +114,7 @@ def d0_limit(key=None, precise: bool = False) -> dict:
         f"(-2/s0) D^[0] vs d/ds grad J: z = {z_c:.1f}, the test sees a relative departure of {fmt(power)} "
         f"(required <= {rel_tol:g}): {v_c1}; along each of the {P} coordinate directions: max |z| = "
         f"{fmt(float(np.max(zs)))} vs {zc_coord:.2f} (Bonferroni over the coordinates), each test sees a departure of "
-        f"{fmt(coord_power)} of ||d/ds grad J|| (required <= {rel_tol:g}): {v_coord}; {lev.text()}",
+        f"{fmt(coord_power)} of ||d/ds grad J|| (required <= {2 * rel_tol:g}): {v_coord}; {lev.text()}",
         correction=("D^[0](K1,K2) -> -(s0/2) d/ds grad J_s0(w0) a.s.; the estimator "
                     "-(2/s0) D^[0] (i.e. weight (s0^-2|N|^2 - d)/s0 times the loss gradient) converges to "
                     f"d/ds grad J_s0(w0) (verified here along the estimated direction within {fmt(power)} relative and along "

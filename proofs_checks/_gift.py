@@ -462,7 +462,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False) -> dict:
     convex = C2["lo"] > 0
     c_star = th1["alpha"] / (eta * dv)
     c_star_lo = (C1["lo"] / (2 * C2["hi"])) / (eta * dv) if (C1["lo"] > 0 and C2["hi"] > 0) else 0.0
-    R = 16 if precise else 6
+    R = 16 if precise else 8
     K2e = 256
     phys = p.physics.replace(s=st_.st)
     stops, diffs, resolved = [], [], []

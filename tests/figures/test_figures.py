@@ -148,6 +148,7 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
     assert u["per_epochs"]["30"]["abs_cos_printed_gradient"]["mean"] == pytest.approx(0.05)
 
 
+@pytest.mark.slow
 def test_figures_without_their_inputs_say_what_they_need(tmp_path, monkeypatch):
     monkeypatch.setattr(paper_figures._build, "unavailable", lambda job, fixed=None: "needs gift_theory.finetune.run_finetune")
     res = build("tiny", only="performance_gift", data_dir=str(tmp_path), figure_dir=str(tmp_path), progress=False)

@@ -79,6 +79,7 @@ def teacher_weights(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_run_finetune_reports_gift_info_and_the_retrain_control(teacher_weights):
     common = dict(dataset="teacher", arch="4-3-2", s0=0.05, st=0.2, seed=0, weights=teacher_weights, budget=6,
                   K1=200, referee_K2=4)

@@ -466,7 +466,11 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
         pfit = {name: _chi2(f[2], th.size - models[name].shape[1], nu)[0] for name, f in fits.items()}
         q0 = fits["programmed"][2]
         p_omni, z_omni = _chi2(q0, th.size - free.shape[1], nu)
-        for name in ("programmed", "gain", "transfer", "bias", "gain+bias", "rows"):
+        # where both fit (biases near 0: a gain on W is a gain on z), a hidden layer's is read as
+        # its activation's slope, the output's as a gain on its weighted sum
+        order = (("programmed", "transfer", "gain") if lay.hidden else ("programmed", "gain", "transfer")) \
+            + ("bias", "gain+bias", "rows")
+        for name in order:
             if pfit[name] >= ALPHA:
                 choice = name
                 break

@@ -124,6 +124,7 @@ def test_identify_noise_level_recovers_st():
     assert problem.evaluations_used() == 1
 
 
+@pytest.mark.slow
 def test_identify_physics_finds_a_hidden_effect_from_chip_measurements():
     """identify-retrain measures the chip at w0 (4 evaluations), and the measurement lab names
     the hidden shot noise and fits its q: the physics that retraining then uses."""

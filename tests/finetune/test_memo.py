@@ -50,6 +50,7 @@ def _run(ds, w0, st, effects=(), seed=0):
                        predict_s=st, referee_K2=4)
 
 
+@pytest.mark.slow
 def test_runs_that_differ_only_in_the_chip_share_the_in_silico_work(memo_dir):
     ds, w0 = _DS(), gt.init_params(jax.random.PRNGKey(1), ARCH)
     c0 = _memo.counters()

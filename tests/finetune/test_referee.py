@@ -29,6 +29,7 @@ def _weights(seed):
     return gt.init_params(jax.random.PRNGKey(seed), ARCH)
 
 
+@pytest.mark.slow
 def test_weight_sets_share_draws_and_match_the_single_set_functions():
     x, y, lab = _data()
     a, b = _weights(0), _weights(1)

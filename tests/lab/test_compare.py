@@ -147,6 +147,7 @@ def test_refit_null_allows_for_a_shared_estimation_error():
     assert q_test(data(excess=2.0), shift, extra)[1] < 1e-3
 
 
+@pytest.mark.slow
 def test_a_law_change_at_equal_variance_is_detected():
     """Laplace noise of the same s: the energy channels barely move, the shape channel does."""
     arch = gt.Architecture((3, 6, 2))

@@ -9,6 +9,7 @@ The stages, one module each, in the order one :func:`diagnose` runs them::
     _channels    the channels of a cell and the measurement's noise floor
     _qtest       the discrepancy test
     _compare     one model against one measurement; the one-step check per layer
+    _identify    each layer's transfer and noise read off the shots; a test per mechanism class
     _fit*        fitting a model: moments, per-device offsets, values read off the data
     _localise    where a model fails; each effect's signature
     _diagnose    the pipeline: split, fit, score, rank
@@ -19,6 +20,7 @@ Public API (a notebook can do everything ``gift simulate/compare/diagnose/fit`` 
     res = diagnose(key, meas)                           # baseline, p-value, ranking of effects
     fit = fit_effects(key, meas, ["shot"])              # before/after, fitted parameters
     cmp = compare(key, Model(physics), meas)            # discrepancy, floor, p-value
+    ident = identify(meas)                              # per layer: W_eff, noise, class tests
 """
 
 from .._measurement import Measurement as Measurement
@@ -31,6 +33,9 @@ from ._channels import reference as reference
 from ._compare import Comparison as Comparison
 from ._compare import compare as compare
 from ._compare import one_step_check as one_step_check
+from ._compare import power_notes as power_notes
+from ._compare import power_of as power_of
+from ._compare import predictive_moments as predictive_moments
 from ._diagnose import Candidate as Candidate
 from ._diagnose import Diagnosis as Diagnosis
 from ._diagnose import FitResult as FitResult
@@ -42,10 +47,20 @@ from ._diagnose import penalised_score as penalised_score
 from ._diagnose import ranked as ranked
 from ._diagnose import split_inputs as split_inputs
 from ._fit import fit_model as fit_model
+from ._identify import Identification as Identification
+from ._identify import identify as identify
+from ._figures import error_ladder as error_ladder
+from ._figures import moments_figure as moments_figure
+from ._figures import where_figure as where_figure
 from ._io import load_csv as load_csv
+from ._io import load_netcdf as load_netcdf
+from ._io import load_wide_csv as load_wide_csv
 from ._io import load_measurement as load_measurement
 from ._io import load_weights as load_weights
 from ._io import save_csv as save_csv
+from ._io import save_file as save_file
+from ._io import save_netcdf as save_netcdf
+from ._io import save_wide_csv as save_wide_csv
 from ._io import save_measurement as save_measurement
 from ._io import validate_arrays as validate_arrays
 from ._localise import Residuals as Residuals

@@ -128,8 +128,12 @@ def test_weight_offsets_are_fitted_at_the_data_s_noise_level_not_the_default():
 def test_two_hidden_effects_both_in_top_three():
     meas = _chip({"shot": 0.05, "crosstalk": 0.3})
     d = diagnose(jax.random.PRNGKey(12), meas)
-    names = [c.effects[-1] for c in d.ranking]
-    assert d.missing_effect_detected and {"shot", "crosstalk"} <= set(names[:3]), names
+    # the blind study's rule: the top entry is the pair, or both singles are among the top three
+    hidden = {"shot", "crosstalk"}
+    top_pair = set(d.ranking[0].effects) == hidden
+    singles_top3 = {c.effects[0] for c in d.ranking[:3] if len(c.effects) == 1}
+    assert d.missing_effect_detected and (top_pair or hidden <= singles_top3), [c.effects for c in d.ranking]
+    assert d.ranking[0].as_json()["status"] == "passes"
     fit = fit_effects(jax.random.PRNGKey(12), meas, ["crosstalk", "shot"])
     ladder = [c.discrepancy for _, c in fit.ladder]
     # the error falls rung by rung, and the final model passes

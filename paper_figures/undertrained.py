@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import matplotlib.pyplot as plt
 import numpy as np
-from scipy import stats
 
 from ._plot import grid_note, improvements
+from .claims import _ci  # one t-interval for the claims and this figure
 from .gain_vs_baseline import ceiling_as_finetune
 
 NAME = "undertrained"
@@ -37,17 +37,6 @@ RULE = ("over the points (s0, st, seed) paired by training length, with 95 % Stu
         "'gradient step' (a plain gradient step of the same kind gains as much or more). The realised gains of "
         "gift and of the gradient line search with the same chip budget are reported beside them, and the mean "
         "|cos| of the GIFT direction with the gradient")
-
-
-def _ci(v) -> tuple[float, float, int]:
-    v = np.asarray(v, float).ravel()
-    v = v[np.isfinite(v)]
-    n = v.size
-    if n == 0:
-        return float("nan"), float("nan"), 0
-    if n == 1:
-        return float(v[0]), float("nan"), 1
-    return float(v.mean()), float(stats.t.ppf(0.975, n - 1) * v.std(ddof=1) / np.sqrt(n)), n
 
 
 def _side(m, h) -> int:

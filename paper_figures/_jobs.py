@@ -158,13 +158,7 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
         flat["accepted"] = bool(info["accepted"])
     out = {k: v for k, v in flat.items()
            if isinstance(v, (int, float, bool, np.number)) and not isinstance(v, str) and k not in ("s0", "st")}
-    out["s_true"] = s_true
-    for name, p in clock.phases.items():
-        if "/" not in name:
-            out[f"seconds_{name}"] = p["seconds"]
-    out["seconds_compiling"] = sum(p["compile_seconds"] for n, p in clock.phases.items() if "/" not in n)
-    out.update(shared_work(memo_before, _memo.counters()))
-    return out
+    return _with_costs(out, s_true, clock, memo_before)
 
 
 #: the memo tags of in-silico work at s0 that every point with the same (net, s0, seed, method)
@@ -218,13 +212,7 @@ def ceiling_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_k
                           kinds=tuple(kinds), train_epochs=train_epochs, **opts)
     out = {k: v for k, v in res.items()
            if isinstance(v, (int, float, bool, np.number)) and k not in ("s0", "st")}
-    out["s_true"] = s_true
-    for name, p in clock.phases.items():
-        if "/" not in name:
-            out[f"seconds_{name}"] = p["seconds"]
-    out["seconds_compiling"] = sum(p["compile_seconds"] for n, p in clock.phases.items() if "/" not in n)
-    out.update(shared_work(memo_before, _memo.counters()))
-    return out
+    return _with_costs(out, s_true, clock, memo_before)
 
 
 # ----------------------------------------------------------------------------- estimators
@@ -320,3 +308,17 @@ def unavailable(job: str, fixed: dict | None = None) -> str | None:
         except ImportError:
             return "needs gift_theory.estimators.d_ds_grad"
     return None
+
+
+def _with_costs(out: dict, s_true: float, clock, memo_before) -> dict:
+    """A point's numbers plus the chip's true s, each top-level phase's seconds, the compile
+    seconds and the in-silico work it shared with earlier points."""
+    from gift_theory import _memo  # imported in the job, as the workers do
+
+    out["s_true"] = s_true
+    for name, p in clock.phases.items():
+        if "/" not in name:
+            out[f"seconds_{name}"] = p["seconds"]
+    out["seconds_compiling"] = sum(p["compile_seconds"] for n, p in clock.phases.items() if "/" not in n)
+    out.update(shared_work(memo_before, _memo.counters()))
+    return out

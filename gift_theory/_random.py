@@ -137,7 +137,7 @@ def _normal32(words):
     return (np.float32(np.sqrt(2.0)) * (a - 1.0)) * _estrin8(c, t)
 
 
-def normal(key, shape, dtype=jnp.float32) -> jax.Array:
+def _normal(key, shape, dtype=jnp.float32) -> jax.Array:
     """Standard normal draws: the inverse CDF sqrt(2) erfinv(u) of :func:`uniform`'s u.
 
     float32 (and narrower): Giles' single-precision erfinv written out in fused array operations
@@ -153,12 +153,36 @@ def normal(key, shape, dtype=jnp.float32) -> jax.Array:
     return _normal32(bits(key, shape)).astype(dtype)
 
 
-def laplace(key, shape, dtype=jnp.float32) -> jax.Array:
+def _laplace(key, shape, dtype=jnp.float32) -> jax.Array:
     """Laplace draws with unit variance (scale 1/sqrt(2))."""
     v = uniform(key, shape, dtype)
     return (-jnp.sign(v) * jnp.log1p(-jnp.abs(v)) * np.sqrt(0.5)).astype(dtype)
 
 
-def uniform_law(key, shape, dtype=jnp.float32) -> jax.Array:
+def _uniform_law(key, shape, dtype=jnp.float32) -> jax.Array:
     """Uniform draws with unit variance, on (-sqrt 3, sqrt 3)."""
     return (np.sqrt(3.0) * uniform(key, shape, dtype)).astype(dtype)
+
+
+# The public draws are jitted with the shape and dtype static: traced inside a caller's program,
+# each (shape, dtype) is traced once per process and its jaxpr reused (the cipher and erfinv
+# are some 150 operations; a diagnosis traces its samplers for ~10 sites x dozens of programs,
+# and in a fresh process tracing them again cost ~2.6 s of the one-step checks alone). The
+# nested program is inlined by XLA: the same operations, the same numbers.
+_jit_draw = lambda f: jax.jit(f, static_argnames=("shape", "dtype"))  # noqa: E731
+_normal_jit, _laplace_jit, _uniform_law_jit = (_jit_draw(f) for f in (_normal, _laplace, _uniform_law))
+
+
+def normal(key, shape, dtype=jnp.float32) -> jax.Array:
+    return _normal_jit(key, shape=tuple(int(d) for d in shape), dtype=jnp.dtype(dtype))
+
+
+def laplace(key, shape, dtype=jnp.float32) -> jax.Array:
+    return _laplace_jit(key, shape=tuple(int(d) for d in shape), dtype=jnp.dtype(dtype))
+
+
+def uniform_law(key, shape, dtype=jnp.float32) -> jax.Array:
+    return _uniform_law_jit(key, shape=tuple(int(d) for d in shape), dtype=jnp.dtype(dtype))
+
+
+normal.__doc__, laplace.__doc__, uniform_law.__doc__ = _normal.__doc__, _laplace.__doc__, _uniform_law.__doc__

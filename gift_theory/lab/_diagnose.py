@@ -591,17 +591,19 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     """
     t0 = time.time()
     names = default_candidates(meas) if candidates is None else _check_candidates(candidates, meas)
-    session = Session(key, meas, shots, workers)
-    base, base_cmp = session.baseline, session.baseline_comparison
-    _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
-         f"(floor {session.ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
-    # localising needs only the baseline: with threads to spare it runs beside the candidates
-    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as side:
+    threads = default_workers() if workers is None else max(1, int(workers))
+    # the layer-wise identification (closed form, numpy: the mechanisms' backbone, and which
+    # candidates to fit first) needs only the data: with threads to spare it runs beside the
+    # baseline's fit, and localising -- which needs only the baseline -- beside the candidates
+    with concurrent.futures.ThreadPoolExecutor(max_workers=2) as side:
+        ident_f = side.submit(identify, meas) if threads > 1 else None
+        session = Session(key, meas, shots, workers)
+        base, base_cmp = session.baseline, session.baseline_comparison
+        _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
+             f"(floor {session.ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
-                 if session.workers > 1 else None)
-        # the layer-wise identification (closed form): the mechanisms' backbone, and which
-        # candidates to fit first
-        ident = identify(meas)
+                 if threads > 1 else None)
+        ident = ident_f.result() if ident_f is not None else identify(meas)
         ranking, not_fitted = _rank(session, names, second, verbose, ident)
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))

@@ -281,7 +281,7 @@ def _fit_map(lay: _Layer, act: str, s2: float, tt=None, iters: int = 40, W0=None
         # of W are refused as often as taken and raise the damping without end, so the
         # damping is no stopping criterion
         small = np.max(np.abs(step), 1) < 1e-7 * (1 + np.max(np.abs(th[:, :p]), 1))
-        flat = np.einsum("ip,ip->i", step, Xte) <= 1e-10 * np.maximum(loss, 1e-300)
+        flat = np.einsum("ip,ip->i", step, Xte) <= 1e-8 * np.maximum(loss, 1e-300)
         if np.all(small | flat):
             break
     W, b = th[:, :p], th[:, p]

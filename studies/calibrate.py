@@ -80,7 +80,9 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
     from gift_theory.lab._diagnose import Session
     from gift_theory.lab._fit_offsets import prior_check, refusing
 
-    ps, refused = [], []
+    from gift_theory.lab import identify
+
+    ps, refused, ident_p = [], [], []
     t0 = time.time()
     for i in range(sets):
         arch, params = _network(1000 + i, widths)
@@ -96,11 +98,17 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
             c = session.baseline_comparison if effect is None else session.score(model)
             if model is not None and model.offsets:  # the verdict's check of the fitted values (rule b)
                 prior = prior_check(model, session.fit_meas)
+            if effect is None:  # the identification's smallest Holm-adjusted p over every class and layer
+                rows = identify(meas).rows()
+                ident_p.append(min((r.get("p_adj", 1.0) for r in rows), default=1.0))
+                flagged = sorted({r["class"] for r in rows if r.get("p_adj", 1.0) < 0.05})
         else:
             c = compare(key, Model(phys), meas)
         ps.append(c.p_value)
         row = {"study": "null", "set": i, "p_value": c.p_value, "discrepancy": c.discrepancy, "se": c.se,
                "noise_floor": c.noise_floor, "taps": taps, "fitted": fitted, "effect": effect}
+        if ident_p and effect is None and fitted:
+            row["identify_min_p_adj"], row["identify_flagged_0.05"] = ident_p[-1], flagged
         if prior is not None:
             row["prior_refused"] = [f"{r['test']}@{r['layer']}" for r in refusing(prior)]
             row["coupling_p"] = [r["p"] for r in prior if r["test"] == "w_coupling"]
@@ -118,6 +126,9 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
             "ks_uniform_p": float(stats.kstest(ps, "uniform").pvalue),
             # fitted offsets of the true effect refused as not its own (the verdict's rule b): a false refusal
             **({"prior_refusal_rate": float(np.mean(refused))} if refused else {}),
+            # the identification names a class on null data (any test, Holm-adjusted over classes x layers)
+            **({"identify_flag_rate_0.01": float(np.mean(np.array(ident_p) < 0.01)),
+                "identify_flag_rate_0.05": float(np.mean(np.array(ident_p) < 0.05))} if ident_p else {}),
             "seconds": time.time() - t0}
 
 

@@ -16,16 +16,32 @@ def add_arguments(parser):
     parser.add_argument("--candidates", default=None,
                         help="comma-separated effects to try (default: every registered effect but awgn)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--power-replicates", type=int, default=20, metavar="B",
+                        help="when nothing is found missing: simulated files behind the power figures next to "
+                             "that verdict (default 20; 0: none)")
 
 
 def run(args):
+    from .._errors import require
+    from .._model import named_subkey
     from ..lab import diagnose
+    from ..lab._compare import power_notes, power_of
     from ..lab._figures import diagnosis_figures
 
+    require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
-    res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet)
+    from ._common import Progress
+
+    res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
+                   progress=Progress("gift diagnose: candidates", args.quiet))
     out = res.as_json()
+    if not res.missing_effect_detected:
+        # "nothing missing" is only as strong as the test's power at this file's size (the
+        # held-out half gift compare scores too): say which classes it could not have seen
+        out["power"] = (power_of(named_subkey(key(args), "power"), res.baseline, meas.subset(res.held_out),
+                                 replicates=args.power_replicates) if args.power_replicates else [])
+        out["power_notes"] = power_notes(out["power"], verdict_passes=True)
     folder = figure_dir(args)
     if folder:
         out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args))
@@ -38,7 +54,8 @@ def render(out) -> str:
              f"baseline awgn (s = {b['params'].get('s', float('nan')):.4g}): held-out discrepancy "
              f"{b['discrepancy']:.4g} +- {b['se']:.2g}, noise floor {b['noise_floor']:.4g} +- {b['floor_se']:.2g}, "
              f"p = {b['p_value']:.3g}",
-             "missing effect detected: " + ("YES (p < 0.01)" if out["missing_effect_detected"] else "no (the baseline passes)")]
+             "missing effect detected: " + ("YES (p < 0.01)" if out["missing_effect_detected"] else "no (the baseline passes)"),
+             *["  " + n for n in out.get("power_notes", [])]]
     if out.get("failing_layers") is not None:
         fl = out["failing_layers"]
         lines.append("failing layers (one-step check, 0.01 with Bonferroni over the layers): "

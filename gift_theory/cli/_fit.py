@@ -20,6 +20,9 @@ def add_arguments(parser):
     parser.add_argument("--replicates", type=int, default=None, metavar="B",
                         help="parametric replicates behind the 95 %% intervals of the moment-fitted parameters "
                              "(default 30)")
+    parser.add_argument("--power-replicates", type=int, default=20, metavar="B",
+                        help="simulated files behind the power figures next to the verdict on the fitted model "
+                             "(default 20; 0: none)")
 
 
 def run(args):
@@ -31,7 +34,11 @@ def run(args):
 
     from .._errors import require
 
+    from .._model import named_subkey
+    from ..lab._compare import power_notes, power_of
+
     require(args.replicates is None or args.replicates >= 2, f"--replicates {args.replicates}: needs at least 2")
+    require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
     meas = load(args)
     res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
@@ -42,6 +49,11 @@ def run(args):
             sys.stderr.flush()
 
     out.update(fit_uncertainty(key(args), meas, res.after, shots=args.shots, B=args.replicates, progress=progress))
+    # the verdict on the fitted model is only as strong as its test's power at this file's size
+    # (the held-out half it was scored on): what the test could not have seen on top of it
+    out["power"] = (power_of(named_subkey(key(args), "power"), res.after, meas.subset(res.held_out),
+                             replicates=args.power_replicates) if args.power_replicates else [])
+    out["power_notes"] = power_notes(out["power"], verdict_passes=res.comparison_after.p_value >= 0.01)
     folder = figure_dir(args)
     if folder:
         out["figures"] = fit_figures(res, folder, meas=meas, key=key(args))
@@ -91,7 +103,8 @@ def render(out) -> str:
     lines = [f"model: {' + '.join(out['effects'])} ({ps})" + ("  [95 % intervals]" if intervals else ""),
              f"held-out discrepancy: before {out['discrepancy_before']:.4g} (p = {out['p_value_before']:.3g}) -> "
              f"after {out['discrepancy_after']:.4g} +- {out['se_after']:.2g} (p = {out['p_value_after']:.3g}); "
-             f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}"]
+             f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}",
+             *["  " + n for n in out.get("power_notes", [])]]
     if "net_discrepancy_after" in out:
         lines.append(f"fitted offsets: p against the refit null ({out['refit_null_replicates']} replicates); "
                      f"discrepancy net of their estimation error {out['net_discrepancy_after']:.4g}")

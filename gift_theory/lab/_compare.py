@@ -263,15 +263,17 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
     ``replicates`` files are simulated at the file's inputs with the file's weights under each
     probe chip, all in one batch, and scored against ``model`` by the same channels and Q test as
     :func:`compare` (the model as given: not refitted on each file). The power is the fraction
-    rejected at ``alpha``, with its binomial standard error. Probes (on the awgn baseline, at the
-    model's own noise level s):
+    rejected at ``alpha``, with its binomial standard error. Probes (on top of the model's own
+    physics -- the awgn baseline, or a fitted model -- at its own noise level s):
 
     ``noise_law``
-        the Laplace law at the same s (the law changed at equal variance);
+        the Laplace law at the same s (the law changed at equal variance); not probed when the
+        model's law is already not Gaussian;
     ``input_dependent_noise``
         shot noise carrying half the output variance averaged over the inputs, awgn s / sqrt(2)
         the other half (q from the model's shots): the same mean variance as the model, growing
-        with the signal -- what is left for the test once the noise level is fitted.
+        with the signal -- what is left for the test once the noise level is fitted; not probed
+        when the model has shot noise already.
 
     For a file without taps, each figure is also computed as if the hidden layers were tapped
     (``power_with_taps``: the same simulated files, hidden layers kept).
@@ -279,23 +281,27 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
     Returns
     -------
     list of dict: {"mechanism", "probe", "power", "se", "power_with_taps" (None with taps),
-    "replicates", "n", "r", "taps", "layers", "probe_params"}; empty for a model with more than
-    awgn (no probe is defined on top of it).
+    "replicates", "n", "r", "taps", "layers", "probe_params"}; empty for a model without awgn
+    or one that already has both probes' physics.
     """
-    if set(model.physics.names) != {"awgn"}:
+    phys = model.physics
+    if "awgn" not in phys.names:
         return []
-    s = float(model.physics.s)
-    Physics = type(model.physics)
-    # shot noise alone at a trial q: the share of the output variance it carries scales with q
-    q0 = s * s / max(float(np.median(np.abs(meas.y))), 1e-12)
-    k_v = named_subkey(key, "power_variance")
-    v_model = float(np.mean(np.var(np.asarray(model_shots(k_v, model, meas, 2 * meas.r)[-1]), axis=1)))
-    v_shot = float(np.mean(np.var(np.asarray(model_shots(
-        k_v, Model(Physics.parse(["awgn=1e-9", f"shot={q0}"]), model.params, model.offsets), meas, 2 * meas.r)[-1]),
-        axis=1)))
-    q = q0 * 0.5 * v_model / max(v_shot, 1e-300)
-    probes = [("noise_law", "laplace", Physics.parse([f"awgn={s}", "laplace"])),
-              ("input_dependent_noise", "shot", Physics.parse([f"awgn={s / np.sqrt(2.0)}", f"shot={q}"]))]
+    s = float(phys.s)
+    Physics = type(phys)
+    probes = []
+    if phys.law == "gaussian":
+        probes.append(("noise_law", "laplace", phys.with_effect("laplace")))
+    if "shot" not in phys.names:
+        # shot noise alone at a trial q: the share of the output variance it carries scales with q
+        q0 = s * s / max(float(np.median(np.abs(meas.y))), 1e-12)
+        k_v = named_subkey(key, "power_variance")
+        v_model = float(np.mean(np.var(np.asarray(model_shots(k_v, model, meas, 2 * meas.r)[-1]), axis=1)))
+        v_shot = float(np.mean(np.var(np.asarray(model_shots(
+            k_v, Model(Physics.parse(["awgn=1e-9", f"shot={q0}"]), model.weights(meas)), meas, 2 * meas.r)[-1]),
+            axis=1)))
+        q = q0 * 0.5 * v_model / max(v_shot, 1e-300)
+        probes.append(("input_dependent_noise", "shot", phys.replace(s=s / np.sqrt(2.0)).with_effect("shot", q=q)))
     params = model.weights(meas)
     x = np.tile(meas.x, (replicates, 1))
     hidden = len(meas.params) > 1

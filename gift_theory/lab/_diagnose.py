@@ -358,22 +358,33 @@ class Session:
         cmp = self.score(model)
         return model, cmp, n_free, nominal, time.time() - t0
 
-    def candidates(self, requests) -> list:
+    def candidates(self, requests, progress=None) -> list:
         """Fit, score and check ``requests``: (effects, start model or None, the effects to fit
         on top of it, the effects whose parameters the candidate is charged for), ... Returned
         in the order of ``requests``, each with its status (:meth:`checks`).
 
         Each candidate is a pure function of its request, so the session's ``workers`` threads
         run them at once (JAX's programs and numpy's sorts run without the GIL): same numbers
-        for any number of threads and any order of ``requests``."""
+        for any number of threads and any order of ``requests``.
+
+        ``progress(i, n, label)``: called as each candidate is done (i counts them from 0)."""
         requests = list(requests)
+        done = [0]
+        lock = threading.Lock()
+
+        def report(cand):
+            if progress is not None:
+                with lock:
+                    progress(done[0], len(requests), f"{cand.name}: {cand.status}")
+                    done[0] += 1
+            return cand
 
         def one(r):
             effects, *rest = r
             model, cmp, n_free, nominal, seconds = self._prepare(*rest)
             cand = Candidate(tuple(effects), model, cmp, penalised_score(cmp, n_free, self.baseline_comparison),
                              seconds, float(n_free), int(nominal))
-            return self.checks(cand)
+            return report(self.checks(cand))
 
         if self.workers > 1 and len(requests) > 1:
             with concurrent.futures.ThreadPoolExecutor(max_workers=self.workers) as pool:
@@ -495,7 +506,7 @@ def _classes(name: str) -> set:
     return {REGISTRY[e].mechanism for e in name.split("+")}
 
 
-def _rank(session: Session, names, second, verbose: bool, ident=None) -> tuple[list, list]:
+def _rank(session: Session, names, second, verbose: bool, ident=None, progress=None) -> tuple[list, list]:
     """The candidates fitted, scored, checked and ranked; a second stage on top of the best one
     when every one still fails (see :func:`diagnose`). Returns ``(ranking, not_fitted)``.
 
@@ -508,7 +519,7 @@ def _rank(session: Session, names, second, verbose: bool, ident=None) -> tuple[l
     rest = [n for n in names if n not in first]
     todo = first if first and rest else list(names)
     ranking = session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")), tuple(n.split("+")))
-                                  for n in todo])
+                                  for n in todo], progress)
     not_fitted = []
     if todo is first:
         if any(c.status == "passes" for c in ranking):
@@ -519,7 +530,7 @@ def _rank(session: Session, names, second, verbose: bool, ident=None) -> tuple[l
                                      + " passes every check"} for n in rest]
         else:
             ranking += session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")), tuple(n.split("+")))
-                                           for n in rest])
+                                           for n in rest], progress)
             todo = first + rest
     for name, cand in zip(todo, ranking):
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
@@ -532,7 +543,7 @@ def _rank(session: Session, names, second, verbose: bool, ident=None) -> tuple[l
         first = ranking[0]
         rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
         stage2 = session.candidates([(first.effects + (name,), first.model, (name,), first.effects + (name,))
-                                     for name in rest])
+                                     for name in rest], progress)
         for cand in stage2:
             _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
                  f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
@@ -567,7 +578,7 @@ def default_workers() -> int:
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
-             verbose: bool = False, workers: int | None = None) -> Diagnosis:
+             verbose: bool = False, workers: int | None = None, progress=None) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
     Parameters
@@ -584,6 +595,9 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         for two missing effects) and ranked with the rest
     workers : threads fitting the candidates at once (default :func:`default_workers`); the
         numbers do not depend on it
+    progress : ``progress(i, n, label)``, called as each candidate of a batch is done (the
+        candidates of the flagged classes, the others if none of those passes, the second
+        stage: each batch counts from 0 to its own n)
 
     Returns
     -------
@@ -604,7 +618,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
                  if threads > 1 else None)
         ident = ident_f.result() if ident_f is not None else identify(meas)
-        ranking, not_fitted = _rank(session, names, second, verbose, ident)
+        ranking, not_fitted = _rank(session, names, second, verbose, ident, progress)
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))
     taps = meas.has_taps
@@ -630,6 +644,7 @@ class FitResult:
     comparison_after: Comparison
     ladder: tuple  # ((label, Comparison), ...) one rung per added effect
     has_taps: bool = False
+    held_out: np.ndarray | None = None  # the inputs scored (indices into the measurement)
 
     def as_json(self) -> dict:
         """The CONTRACTS §4 object of ``gift fit --json`` (plus a few extra keys)."""
@@ -675,7 +690,7 @@ def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, ve
         cmp = session.score(model)
         ladder.append(("awgn + " + " + ".join(added), cmp))
         _log(f"+{e}: {model.describe()} discrepancy {cmp.discrepancy:.3g} p = {cmp.p_value:.3g}", verbose)
-    return FitResult(base, model, base_cmp, cmp, tuple(ladder), meas.has_taps)
+    return FitResult(base, model, base_cmp, cmp, tuple(ladder), meas.has_taps, session.test)
 
 
 def compare_measurement(key, meas: Measurement, physics=None, *, shots: int | None = None) -> dict:

@@ -345,8 +345,12 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
         assert without[mech]["power_with_taps"] == with_taps[mech]["power"]  # the same simulated files
     assert with_taps["input_dependent_noise"]["power"] >= 0.8
     assert with_taps["noise_law"]["power"] <= 0.5 and without["noise_law"]["power"] <= 0.5
-    # a model with more than awgn: no probe defined on top of it, no figure made up
-    assert power_of(jax.random.PRNGKey(1), Model(gt.Physics.parse(["awgn=0.1", "shot=0.01"])), meas) == []
+    # on top of a fitted model: only the probes it does not have already (no figure made up)
+    shot = power_of(jax.random.PRNGKey(1), Model(gt.Physics.parse(["awgn=0.1", "shot=0.01"])), meas, replicates=2)
+    assert [p["mechanism"] for p in shot] == ["noise_law"]
+    assert shot[0]["probe_params"]["q"] == pytest.approx(0.01)  # the model's own shot noise kept
+    both = Model(gt.Physics.parse(["awgn=0.1", "shot=0.01", "laplace"]))
+    assert power_of(jax.random.PRNGKey(1), both, meas) == []
 
 
 @pytest.mark.slow

@@ -102,8 +102,11 @@ def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     from gift_theory.lab._verdict import time_free
 
     meas = _chip(HIDDEN["drift"])
-    d = diagnose(jax.random.PRNGKey(11), meas, candidates=["drift"], second=0)
+    calls = []
+    d = diagnose(jax.random.PRNGKey(11), meas, candidates=["drift"], second=0,
+                 progress=lambda i, n, label: calls.append((i, n, label)))
     assert d.ranking[0].effects == ("drift",) and d.explained, d.reasons
+    assert calls == [(0, 1, "drift: passes")]  # one progress line per candidate, as it is done
     session = Session(jax.random.PRNGKey(11), meas)
     twin = session.score(d.ranking[0].model, held_out=time_free(session.test_meas))
     assert twin.p_value < 0.01 < d.ranking[0].comparison.p_value
@@ -146,9 +149,13 @@ def test_null_reports_nothing_missing(tmp_path, capsys):
     meas = _chip({})
     path = tmp_path / "null.npz"
     save_measurement(path, meas)
-    assert main(["diagnose", str(path), "--json", "--quiet"]) == 0
+    assert main(["diagnose", str(path), "--json", "--quiet", "--power-replicates", "8"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["missing_effect_detected"] is False and out["baseline"]["p_value"] >= 0.01
+    # "nothing missing" comes with the test's power at this size: a note for each class it is weak on
+    assert [p["mechanism"] for p in out["power"]] == ["noise_law", "input_dependent_noise"]
+    assert all(p["replicates"] == 8 and 0 <= p["power"] <= 1 for p in out["power"])
+    assert len(out["power_notes"]) == sum(p["power"] < 0.8 for p in out["power"])
     assert out["baseline"]["effects"] == ["awgn"] and abs(out["baseline"]["params"]["s"] - 0.1) < 0.02
     for r in out["ranking"]:
         assert set(r) >= {"effect", "discrepancy_after", "p_value_after", "params"}
@@ -164,14 +171,19 @@ def test_fit_command_contract(tmp_path, capsys):
     meas = _chip(HIDDEN["shot"], seed=4)
     path = tmp_path / "shot.npz"
     save_measurement(path, meas)
-    assert main(["fit", str(path), "--add", "shot", "--json", "--quiet"]) == 0
+    assert main(["fit", str(path), "--add", "shot", "--json", "--quiet", "--power-replicates", "6"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out) >= {"effects", "params", "discrepancy_before", "discrepancy_after", "noise_floor", "p_value_after"}
+    # next to the verdict, the power against what the fitted model lacks: a changed law (the
+    # model has shot noise already, so that probe is not made)
+    assert [p["mechanism"] for p in out["power"]] == ["noise_law"] and out["power"][0]["replicates"] == 6
+    assert len(out["power_notes"]) == (out["power"][0]["power"] < 0.8)
     assert out["effects"] == ["awgn", "shot"]
     assert out["discrepancy_after"] < out["discrepancy_before"] and out["p_value_after"] >= 0.01
     assert abs(out["params"]["q"] - 0.05) < 0.02
     # without --json: a text report and a figure folder
-    assert main(["fit", str(path), "--add", "shot", "--quiet", "--figures", str(tmp_path / "figs")]) == 0
+    assert main(["fit", str(path), "--add", "shot", "--quiet", "--figures", str(tmp_path / "figs"),
+                 "--power-replicates", "0"]) == 0
     text = capsys.readouterr().out
     assert "error ladder" in text and (tmp_path / "figs" / "ladder.png").stat().st_size > 1000
 
@@ -195,10 +207,10 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
     meas = _chip(HIDDEN["weight_error"], seed=5, n=60, r=16, taps=taps)
     path = tmp_path / "we.npz"
     save_measurement(path, meas)
-    assert main(["fit", str(path), "--add", "weight_error", "--json", "--quiet"]) == 0
+    assert main(["fit", str(path), "--add", "weight_error", "--json", "--quiet", "--power-replicates", "0"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["refit_null_replicates"] > 0 and out["refit_null_calibrated"] is taps
-    assert main(["fit", str(path), "--add", "weight_error", "--quiet"]) == 0
+    assert main(["fit", str(path), "--add", "weight_error", "--quiet", "--power-replicates", "0"]) == 0
     assert ("no taps" in capsys.readouterr().out) is (not taps)
 
 

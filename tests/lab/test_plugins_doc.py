@@ -23,6 +23,9 @@ def _blocks():
 def test_plugins_page_runs_and_says_what_it_shows(tmp_path):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([os.path.abspath(os.path.join(os.path.dirname(DOC), "..")),
                                                        os.environ.get("PYTHONPATH", "")]))
+    # the blocks run one after the other: the later commands load the programs the first one
+    # compiled (a cache of this test's own, nothing shared with other tests)
+    env["GIFT_COMPILATION_CACHE"] = str(tmp_path / "xla")
     bindir = os.path.dirname(sys.executable)
     env["PATH"] = bindir + os.pathsep + env.get("PATH", "")
     outs = []

@@ -150,7 +150,10 @@ def test_jitter_gives_each_shot_its_own_w_and_noise_that_scales_with_the_input()
     se = u1.std(axis=0) / np.sqrt(len(u1))
     assert np.all(np.abs(u1.mean(axis=0) - a[0] @ layer.mean_matrix().T) < 5 * se)
     C = np.corrcoef(u1.T)[np.triu_indices(8, 1)]
-    assert np.mean(np.abs(C)) > 10 / np.sqrt(len(u1))       # independent noise: |corr| ~ 1 / sqrt(shots)
+    # independent noise would give a mean |corr| of 0.8 / sqrt(shots) = 0.013 (sd 0.002 over the 28
+    # pairs); over 150 random instances the jitter's was 0.11-0.48 (1 % quantile 0.113): 5 / sqrt(shots)
+    # = 0.079 separates them (10 / sqrt(shots) = 0.158 failed on 5 % of instances)
+    assert np.mean(np.abs(C)) > 5 / np.sqrt(len(u1))
     assert np.abs(layer.matrix() - W).max() < 1e-10        # the fixed map is the programmed one
 
 

@@ -34,13 +34,33 @@ def pytest_configure(config):
         _MADE.append(tempfile.mkdtemp(prefix="gift-test-cache-"))
         os.environ["GIFT_CACHE_DIR"] = _MADE[-1]
     os.environ.setdefault("MPLBACKEND", "agg")
-    # no persistent compilation cache in tests (hermetic runs; JAX writes its entries without a
-    # lock unless the filelock package is there); tests of the cache turn it on in a subprocess
-    os.environ.setdefault("GIFT_COMPILATION_CACHE", "off")
+    _compilation_cache()
+
+
+def _compilation_cache():
+    """One persistent compilation cache per test run, in a fresh temporary folder, shared by the
+    xdist workers and every command a test starts (a program one process compiled, the others
+    load: the same chips and shapes recur across tests). Only with the ``filelock`` package:
+    gift's :func:`~gift_theory.use_compilation_cache` then gives the cache a size limit, under
+    which JAX locks the folder for every read and write; without it JAX writes entries unlocked
+    and a concurrent reader could see one half written, so the cache stays off.
+    ``GIFT_COMPILATION_CACHE`` set by the user is kept."""
+    try:
+        import filelock  # noqa: F401
+    except ImportError:
+        os.environ.setdefault("GIFT_COMPILATION_CACHE", "off")
+        return
+    if "GIFT_COMPILATION_CACHE" not in os.environ:
+        _MADE.append(tempfile.mkdtemp(prefix="gift-test-xla-"))
+        os.environ["GIFT_COMPILATION_CACHE"] = _MADE[-1]
+    import gift_theory as gt
+
+    gt.use_compilation_cache()
 
 
 def pytest_unconfigure(config):
-    """Remove the temporary weight cache this process made (each xdist worker makes its own)."""
+    """Remove the temporary folders this process made (the weight cache: each xdist worker makes
+    its own; the compilation cache: the controller's, which the workers inherit)."""
     for folder in _MADE:
         shutil.rmtree(folder, ignore_errors=True)
         if os.environ.get("GIFT_CACHE_DIR") == folder:

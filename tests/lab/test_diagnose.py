@@ -229,9 +229,9 @@ def test_order_of_candidates_and_threads_change_no_number():
         out.pop("seconds")
         return json.dumps(out, sort_keys=True, default=str, indent=0)
 
-    one = run(cands, 1)
-    assert run(cands[::-1], 3) == one
-    assert run([cands[2], cands[0], cands[3], cands[1]], 2) == one
+    # one thread in catalogue order against three threads in reverse order (each of the four
+    # candidates moves, and every thread count above one runs the same pool code)
+    assert run(cands[::-1], 3) == run(cands, 1)
 
 
 @pytest.mark.slow

@@ -1,5 +1,5 @@
-"""docs/plugins.md runs: its shell blocks, in order, in an empty folder, with what the page says
-they print (the verdict, the mechanism, the fit to the floor, the one-line plugin errors); its
+"""docs/plugins.md runs: its shell blocks, in an empty folder (the chip and the plugin file
+first, then each command block as its own test), with what the page says they print (the verdict, the mechanism, the fit to the floor, the one-line plugin errors); its
 python blocks run in one namespace (the plugins of section 6 register through the public API)."""
 
 import os
@@ -19,34 +19,64 @@ def _blocks():
     return re.findall(r"```bash\n(.*?)```", text, flags=re.S)
 
 
-@pytest.mark.slow
-def test_plugins_page_runs_and_says_what_it_shows(tmp_path):
+def _env():
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([os.path.abspath(os.path.join(os.path.dirname(DOC), "..")),
                                                        os.environ.get("PYTHONPATH", "")]))
-    # the blocks run one after the other: the later commands load the programs the first one
-    # compiled (a cache of this test's own, nothing shared with other tests)
-    env["GIFT_COMPILATION_CACHE"] = str(tmp_path / "xla")
-    bindir = os.path.dirname(sys.executable)
-    env["PATH"] = bindir + os.pathsep + env.get("PATH", "")
-    outs = []
-    for block in _blocks():
-        proc = subprocess.run(["bash", "-c", block], cwd=tmp_path, env=env, capture_output=True, text=True,
-                              timeout=900)
-        assert proc.returncode == 0, (block, proc.stderr[-2000:])
-        outs.append(proc.stdout + proc.stderr)
-    assert len(outs) == 6
-    diagnose, fit, explained, bad = outs[1], outs[3], outs[4], outs[5]
+    env["PATH"] = os.path.dirname(sys.executable) + os.pathsep + env.get("PATH", "")
+    return env
+
+
+def _run(block, cwd):
+    proc = subprocess.run(["bash", "-c", block], cwd=cwd, env=_env(), capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, (block, proc.stderr[-2000:])
+    return proc.stdout + proc.stderr
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory):
+    """The page's blocks and a folder where its first block (the chip) and its plugin file (the
+    third) have run: each command block after them reads only those two, so each is its own
+    test (the test run's workers share them out)."""
+    blocks = _blocks()
+    assert len(blocks) == 6
+    cwd = tmp_path_factory.mktemp("plugins_page")
+    _run(blocks[0], cwd)
+    _run(blocks[2], cwd)
+    return blocks, cwd
+
+
+@pytest.mark.slow
+def test_plugins_page_diagnosis_is_not_explained_and_names_the_activation(page):
+    blocks, cwd = page
+    diagnose = _run(blocks[1], cwd)
     # not explained, the hidden layers fail, the mechanism is the activation's
     assert diagnose.startswith("NOT EXPLAINED"), diagnose[:400]
     assert "failing layers (one-step check, 0.01 with Bonferroni over the layers): 1, 2\n" in diagnose
     mech = diagnose.split("mechanisms the localised evidence points to")[1].splitlines()[1].split()
     assert mech[0] == "activation_mismatch", mech
+
+
+@pytest.mark.slow
+def test_plugins_page_fit_reaches_the_floor_and_recovers_a2(page):
+    blocks, cwd = page
+    fit = _run(blocks[3], cwd)
     # the plugin's fit reaches the floor, and the hidden a2 = -0.0832 is recovered
     p_after = float(re.search(r"-> after [0-9.e+-]+ \+- [0-9.e+-]+ \(p = ([0-9.e+-]+)\)", fit).group(1))
     m = re.search(r"a2=(-?[0-9.e+-]+) \[(-?[0-9.e+-]+), (-?[0-9.e+-]+)\]", fit)
     a2, lo, hi = (float(g) for g in m.groups())
     assert p_after >= 0.01 and abs(a2 + 0.0832) < 0.02 and lo <= a2 <= hi, fit
+
+
+@pytest.mark.slow
+def test_plugins_page_diagnosis_with_the_plugin_is_explained(page):
+    blocks, cwd = page
+    explained = _run(blocks[4], cwd)
     assert explained.startswith("explained: awgn + act_shape"), explained[:300]
+
+
+def test_plugins_page_bad_plugins_are_one_line_and_exit_2(page):
+    blocks, cwd = page
+    bad = _run(blocks[5], cwd)
     # every bad plugin: one line naming the file, then exit 2
     lines = [l for l in bad.splitlines() if l]
     assert [l for l in lines if l.startswith("exit")] == ["exit 2"] * 4, bad

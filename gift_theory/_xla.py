@@ -26,12 +26,10 @@ when gift is imported, points JAX at ``$GIFT_COMPILATION_CACHE`` or, by default,
 folder of gift's cache (``$GIFT_CACHE_DIR`` or ``~/.cache/gift``), and keeps every program
 (:data:`CACHE_MIN_COMPILE_SECONDS`). ``GIFT_COMPILATION_CACHE=off``
 turns it off; a folder the user already gave JAX (``jax_compilation_cache_dir``) is kept.
-Processes may share the folder (the workers of a sweep, the xdist workers of the tests): the
-cache is given a size limit (:data:`CACHE_MAX_BYTES`, least recently used entries evicted
-beyond it), under which JAX takes a file lock (the ``filelock`` package, a dependency) for
-every read and write, so no process reads an entry another is writing. Without ``filelock``
-JAX takes no lock, and a process reading an entry at the very moment another writes the
-same one may see it truncated -- JAX then warns and compiles the program itself (a lost
+Processes may share the folder (the workers of a sweep): JAX writes an entry in one piece and
+reads it back whole; without the ``filelock`` package it takes no lock, so a process reading
+an entry at the very moment another writes the same one may see it truncated -- JAX then
+warns and compiles the program itself (the compressed entry fails to decompress: a lost
 shortcut, not a wrong program).
 """
 
@@ -53,9 +51,6 @@ CPU_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_REDU
 #: (``python -m studies.calibrate time --taps``, a fresh process): 17.5-20 s with a threshold of
 #: 0.2 s (166 of the 244 programs compiled again), 14.5-15 s with none.
 CACHE_MIN_COMPILE_SECONDS = 0.0
-#: the cache's size limit (least recently used entries evicted beyond it); with a limit JAX locks
-#: the folder for every read and write (a diagnosis writes some 2 MB)
-CACHE_MAX_BYTES = 4 * 2 ** 30
 _OFF = ("0", "off", "none", "false", "no")  # values of GIFT_COMPILATION_CACHE that turn it off
 
 
@@ -83,11 +78,6 @@ def use_compilation_cache() -> str | None:
         return None
     jax.config.update("jax_compilation_cache_dir", folder)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_SECONDS)
-    try:
-        import filelock  # noqa: F401  (JAX's lock; a limit without it would make JAX raise)
-    except ImportError:
-        return folder
-    jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
     return folder
 
 

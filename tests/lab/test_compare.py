@@ -64,6 +64,7 @@ def setup():
     return params, x
 
 
+@pytest.mark.slow
 def test_correct_model_sits_at_floor_wrong_model_fails(setup):
     params, x = setup
     phys = gt.Physics.create(s=0.1)

@@ -112,6 +112,7 @@ def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     assert twin.p_value < 0.01 < d.ranking[0].comparison.p_value
 
 
+@pytest.mark.slow
 def test_weight_offsets_are_fitted_at_the_data_s_noise_level_not_the_default():
     """A candidate fitted from scratch (as diagnose fits every single effect) fits its offsets
     after s: at s = 0.03 the mean response tanh(z + n) of the default s = 0.1 is compressed,

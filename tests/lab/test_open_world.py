@@ -302,6 +302,7 @@ def test_plugin_flag_on_simulate_compare_and_diagnose(tmp_path, capsys):
     assert len(err) == 1 and err[0].startswith(str(bad)) and "no laser" in err[0]
 
 
+@pytest.mark.slow
 def test_layer_gain_is_a_name_on_every_command(tmp_path, capsys):
     """CONTRACTS §4: layer_gain in simulate --effect, fit --add, diagnose --candidates and
     finetune --true-effect (parsed by the same catalogue); the fit recovers a uniform loss."""

@@ -7,6 +7,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 import sympy as sp
 
 import linear_case as lc
@@ -59,6 +60,7 @@ def test_numeric_copy_matches_sympy(x64):
     assert num["printed_condition"] == sym["printed_condition"] and num["corrected_condition"] == sym["corrected_condition"]
 
 
+@pytest.mark.slow
 def test_small_onn_numeric_family(x64):
     """A 2-3-1 tanh ONN with fixed draws: intervals contain their estimates, the sup bracket holds
     every point value on a grid, the trivial critical point refutes only inside the hypotheses."""

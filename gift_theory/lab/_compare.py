@@ -281,11 +281,13 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
     Returns
     -------
     list of dict: {"mechanism", "probe", "power", "se", "power_with_taps" (None with taps),
-    "replicates", "n", "r", "taps", "layers", "probe_params"}; empty for a model without awgn
-    or one that already has both probes' physics.
+    "replicates", "n", "r", "taps", "layers", "probe_params"}; empty for a model without awgn,
+    one that already has both probes' physics, or one whose physics depends on the acquisition
+    time (the simulated files here carry the file's times only as labels: the probe chips would
+    not drift as the model does).
     """
     phys = model.physics
-    if "awgn" not in phys.names:
+    if "awgn" not in phys.names or phys.needs_times():
         return []
     s = float(phys.s)
     Physics = type(phys)

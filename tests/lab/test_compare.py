@@ -352,6 +352,8 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
     assert shot[0]["probe_params"]["q"] == pytest.approx(0.01)  # the model's own shot noise kept
     both = Model(gt.Physics.parse(["awgn=0.1", "shot=0.01", "laplace"]))
     assert power_of(jax.random.PRNGKey(1), both, meas) == []
+    # a time-dependent model: no probe simulated without its times
+    assert power_of(jax.random.PRNGKey(1), Model(gt.Physics.parse(["awgn=0.1", "drift=0.1"])), meas) == []
 
 
 @pytest.mark.slow

@@ -305,12 +305,17 @@ def _within(E, g, A):
     if A.shape[1] == 1:
         return E
     n, r, d = E.shape
-    Gd = g.transpose(2, 0, 1)[..., None] * A[None]  # (d, n, r, p)
-    Gd = (Gd - Gd.mean(2, keepdims=True)).reshape(d, n * r, -1)
-    Ed = (E - E.mean(1, keepdims=True)).transpose(2, 0, 1).reshape(d, n * r, 1)
-    Gt = Gd.transpose(0, 2, 1)
-    beta = np.linalg.solve(np.matmul(Gt, Gd) + 1e-12 * np.eye(A.shape[2]), np.matmul(Gt, Ed))  # (d, p, 1)
-    return E - np.matmul(Gd, beta)[..., 0].reshape(d, n, r).transpose(1, 2, 0)
+    p = A.shape[2]
+    Ed = E - E.mean(1, keepdims=True)
+    out = np.array(E, dtype=np.float64, copy=True)
+    # neuron by neuron: the (n r, p) design of one neuron at a time (all at once it is d n r p
+    # floats: 1.3 GB on a 100-neuron layer fed by 500 at 200 inputs x 16 shots)
+    for i in range(d):
+        Gi = g[:, :, i, None] * A  # (n, r, p)
+        Gi = (Gi - Gi.mean(1, keepdims=True)).reshape(n * r, p)
+        beta = np.linalg.solve(Gi.T @ Gi + 1e-12 * np.eye(p), Gi.T @ Ed[:, :, i].reshape(n * r))
+        out[:, :, i] -= (Gi @ beta).reshape(n, r)
+    return out
 
 
 def _covariance(X, Chat, r):

@@ -7,6 +7,7 @@ other half (CONTRACTS §4 JSON with ``--json``; a text report and a figure folde
 from __future__ import annotations
 
 
+from ._common import Progress
 from ._fit import NO_TAPS_CAVEAT
 from ._labargs import add_common, figure_dir, key, load
 
@@ -31,8 +32,6 @@ def run(args):
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
-    from ._common import Progress
-
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
                    progress=Progress("gift diagnose: candidates", args.quiet))
     out = res.as_json()

@@ -1,6 +1,7 @@
 """Statistical calibration of the measurement loop (a script, not a test: it takes minutes).
 
     python -m studies.calibrate null  [--sets 120] [--taps|--no-taps] [--fitted [--effect NAME]]
+    python -m studies.calibrate ident-null [--sets 120] [--taps|--no-taps]
     python -m studies.calibrate ident [--seeds 3] [--taps|--no-taps] [--effects a,b]
     python -m studies.calibrate time  [--taps] [--warm N] [--fresh N]
 
@@ -13,6 +14,10 @@ s is fitted on half the inputs and the p-value taken on the other half, exactly 
 refit null); for an effect fitted as offsets each row also says which checks of the fitted
 values refused them (``prior_refused``: the verdict's rule b, so a refusal here is a false
 one) and the coupling test's p per layer, and the summary the refusal rate.
+
+``ident-null``: the layer-wise identification alone on the null files of ``null`` (the same
+networks, inputs and draws): how often it names a class at Holm-adjusted 0.01 and 0.05, and
+per test and layer its unadjusted rejection rates and a KS p-value against the uniform law.
 
 ``ident``: for every effect of CONTRACTS §2 (and a two-effect case and the null), data
 with that hidden effect on a random network per seed; records whether ``diagnose`` flags a
@@ -132,6 +137,43 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
             "seconds": time.time() - t0}
 
 
+def ident_null_study(sets, widths, n, r, s, taps, out):
+    """The identification alone on null files (awgn only; the same networks, inputs and draws as
+    :func:`null_study`): per file the smallest Holm-adjusted p and the classes named at 0.05;
+    the summary has the family-wise rates and, per test and layer, its unadjusted rejection
+    rates and a KS p of its p-values against the uniform law."""
+    import gift_theory as gt
+    from gift_theory.lab import identify, simulate_measurement
+    from scipy import stats
+
+    ident_p, per_test = [], {}
+    t0 = time.time()
+    for i in range(sets):
+        arch, params = _network(1000 + i, widths)
+        x = np.asarray(jax.random.uniform(jax.random.PRNGKey(2000 + i), (n, widths[0])))
+        meas = simulate_measurement(jax.random.PRNGKey(3000 + i), params, x, gt.Physics.create(s=s), shots=r,
+                                    taps=taps)
+        rows = identify(meas).rows()
+        ident_p.append(min((rw["p_adj"] for rw in rows), default=1.0))
+        for rw in rows:
+            per_test.setdefault(f"{rw['class']}/{rw['test']}@{rw['layer']}", []).append(rw["p"])
+        out.write(json.dumps({"study": "ident-null", "set": i, "taps": taps, "identify_min_p_adj": ident_p[-1],
+                              "identify_flagged_0.05": sorted({rw["class"] for rw in rows if rw["p_adj"] < 0.05}),
+                              "p": {f"{rw['class']}/{rw['test']}@{rw['layer']}": rw["p"] for rw in rows}}) + "\n")
+        out.flush()
+        if (i + 1) % 20 == 0:
+            sys.stderr.write(f"ident-null {i + 1}/{sets}: a class named at 0.01 on "
+                             f"{np.mean(np.array(ident_p) < 0.01):.3f} of files ({time.time() - t0:.0f} s)\n")
+    ip = np.array(ident_p)
+    tests = {k: {"files": len(v), "rate_0.01": float(np.mean(np.array(v) < 0.01)),
+                 "rate_0.05": float(np.mean(np.array(v) < 0.05)),
+                 "ks_uniform_p": float(stats.kstest(v, "uniform").pvalue) if len(v) > 1 else None}
+             for k, v in sorted(per_test.items())}
+    return {"study": "ident-null", "summary": True, "sets": sets, "taps": taps, "arch": list(widths), "inputs": n,
+            "shots": r, "s": s, "identify_flag_rate_0.01": float(np.mean(ip < 0.01)),
+            "identify_flag_rate_0.05": float(np.mean(ip < 0.05)), "tests": tests, "seconds": time.time() - t0}
+
+
 def ident_study(seeds, widths, n, r, s, taps, effects, out):
     from gift_theory.lab import diagnose, simulate_measurement
 
@@ -239,7 +281,7 @@ def time_study(taps, out, warm: int = 1):
 
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m studies.calibrate", description=__doc__.split("\n\n")[0])
-    p.add_argument("study", choices=("null", "ident", "time"))
+    p.add_argument("study", choices=("null", "ident-null", "ident", "time"))
     p.add_argument("--sets", type=int, default=120)
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--taps", action=argparse.BooleanOptionalAction, default=True)
@@ -263,6 +305,8 @@ def main(argv=None):
         if a.effect is not None and not a.fitted:
             p.error("--effect needs --fitted (the model fits the effect's parameters)")
         res = null_study(a.sets, widths, a.inputs, a.shots, a.s, a.taps, a.fitted, out, a.effect)
+    elif a.study == "ident-null":
+        res = ident_null_study(a.sets, widths, a.inputs, a.shots, a.s, a.taps, out)
     elif a.study == "ident":
         res = ident_study(a.seeds, widths, a.inputs, a.shots, a.s, a.taps, a.effects.split(","), out)
     elif a.fresh:

@@ -30,9 +30,13 @@ Per layer (float64 numpy, closed form or a few Gauss-Newton steps, all neurons a
   noise), and trends over acquisition time t (additive per neuron, a gain, a noise level).
 
 Without taps the same is done at the output, its regressor the model's mean of a_{L-1} and
-the noise of the hidden layers propagated to the output (linearised): a deviation there is
-what every layer's deviation adds up to, and docs/identification.md lists what cannot be
-separated.
+the noise of the hidden layers propagated to the output (Monte Carlo through the model, fixed
+draws, at the level's fixed point): a deviation there is what every layer's deviation adds up
+to, and docs/identification.md lists what cannot be separated.
+
+Whether the map is the programmed one is a score test at the programmed map (no fit needed); a
+layer with fewer inputs than its parameters per neuron (plus a margin) is not resolved: only
+that test and the noise's are run there.
 
 Every test returns a p-value (:func:`tests`: Holm-adjusted over classes x layers), an
 effect size and its layer; :mod:`._mechanisms` turns them into the ``mechanisms`` list.

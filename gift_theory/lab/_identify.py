@@ -436,8 +436,41 @@ def _solve_psd(S, v):
         return np.linalg.pinv(S) @ v
 
 
+class _Blocks:
+    """A block-diagonal covariance (one (k, k) block per neuron) of the stacked theta: what a wide
+    layer's map has (dense, 100 neurons of 101 parameters were 10^4 x 10^4 floats and a solve of
+    10^12 operations)."""
+
+    def __init__(self, blocks):
+        self.blocks = blocks
+        self.k = blocks.shape[1]
+
+    def sub(self, idx):
+        """The dense covariance of the entries ``idx`` (a few hundred at most)."""
+        i, a = np.divmod(np.asarray(idx), self.k)
+        return np.where(i[:, None] == i[None, :], self.blocks[i[:, None], a[:, None], a[None, :]], 0.0)
+
+    def diag(self):
+        return np.einsum("iaa->ia", self.blocks).ravel()
+
+
+def _sub(S, idx):
+    return S.sub(idx) if isinstance(S, _Blocks) else S[np.ix_(idx, idx)]
+
+
 def _gls(theta, S, R):
     """GLS of theta ~ N(R phi, S): phi, its covariance and the misfit chi-square."""
+    if isinstance(S, _Blocks):
+        d, k = S.blocks.shape[:2]
+        Sinv = np.linalg.pinv(S.blocks, hermitian=True)
+        Rb = R.reshape(d, k, R.shape[1])
+        SiR = np.matmul(Sinv, Rb)
+        F = np.einsum("iam,ian->mn", Rb, SiR)
+        Fi = np.linalg.pinv(F)
+        tb = theta.reshape(d, k)
+        phi = Fi @ np.einsum("iam,ia->m", SiR, tb)
+        q_full = float(np.einsum("ia,iab,ib->", tb, Sinv, tb))
+        return phi, Fi, max(q_full - float(phi @ F @ phi), 0.0)
     Si_R = _solve_psd(S, R)
     F = R.T @ Si_R
     Fi = np.linalg.pinv(F)
@@ -749,12 +782,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     da = len(alive)
     idx = np.concatenate([np.arange(i * k, (i + 1) * k) for i in alive]) if alive else np.zeros(0, int)
     th = theta[alive].ravel()
-    if full:
-        Sa = S[np.ix_(idx, idx)]
-    else:
-        Sa = np.zeros((len(idx), len(idx)))
-        for a_, i in enumerate(alive):
-            Sa[a_ * k:(a_ + 1) * k, a_ * k:(a_ + 1) * k] = S[i]
+    Sa = S[np.ix_(idx, idx)] if full else _Blocks(S[alive])
     Wa, ba = lay.W[alive], lay.b[alive]
 
     def unit(pos):  # per alive neuron, the column moving entry ``pos`` of its theta
@@ -806,7 +834,9 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
         Eg = dW[alive] - (g_ols - 1.0) * Wa
         tau2 = max(0.0, float(np.mean(Eg ** 2) - np.mean(se[alive, :p] ** 2)))
         wv = Wa.ravel()
-        g_se_tot = float(np.sqrt(max(wv @ Sa[np.ix_(W_idx, W_idx)] @ wv, 0.0) / max(w2, 1e-300) ** 2
+        q_w = (float(np.einsum("ip,ipq,iq->", Wa, Sa.blocks[:, :p, :p], Wa)) if isinstance(Sa, _Blocks)
+               else float(wv @ Sa[np.ix_(W_idx, W_idx)] @ wv))
+        g_se_tot = float(np.sqrt(max(q_w, 0.0) / max(w2, 1e-300) ** 2
                                  + tau2 / max(w2, 1e-300)))
         rel = float(np.sqrt(np.mean(Eg ** 2)) / max(np.sqrt(np.mean(Wa ** 2)), 1e-300))
         if choice in ("gain+bias", "general"):
@@ -856,7 +886,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
             # bias shifts: in the least restrictive map not rejected (general: W free)
             b_idx = np.arange(da) * k + p
             if choice == "general":
-                dbs, Sb = th[b_idx], Sa[np.ix_(b_idx, b_idx)]
+                dbs, Sb = th[b_idx], _sub(Sa, b_idx)
             else:
                 phi_b, Fi_b, _ = fits[choice]
                 o = 1 if choice == "gain+bias" else 0
@@ -874,9 +904,9 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
                          f"the map at layer {l} is the programmed one (p = {p_omni:.2g})"))
         if tt is not None:
             tr = np.concatenate([np.arange(da) * k + p + 1, np.arange(da) * k + p + 2])
-            qt = float(th[tr] @ _solve_psd(Sa[np.ix_(tr, tr)], th[tr]))
+            qt = float(th[tr] @ _solve_psd(_sub(Sa, tr), th[tr]))
             pt, zt = _chi2(qt, tr.size, nu)
-            zc_ = th[tr] / np.sqrt(np.maximum(np.diag(Sa)[tr], 1e-300))
+            zc_ = th[tr] / np.sqrt(np.maximum((Sa.diag() if isinstance(Sa, _Blocks) else np.diag(Sa))[tr], 1e-300))
             wi = int(np.argmax(np.abs(zc_)))
             rows.append(_row("time_drift", "time_map", pt, zt, float(np.max(np.abs(th[tr]))),
                              f"the map at layer {l} moves over acquisition time: "

@@ -193,3 +193,82 @@ def test_under_the_null_the_p_values_are_not_too_small(taps):
     fw, raw = _null_family_wise(range(40), taps=taps)
     assert np.sum(fw < 0.01) <= stats.binom.isf(1e-3, len(fw), 0.01) + 1
     assert np.mean(raw < 0.05) <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / len(raw)) * 3  # tests within a file correlate
+
+
+def test_a_layer_with_fewer_inputs_than_parameters_is_tested_whole_not_resolved():
+    # 40 inputs for 61 parameters per neuron at layer 1: W_eff cannot be read off; the
+    # programmed map is still tested as a whole (null: passes; a weight error: rejected) and
+    # the noise identified, without the (d, k, k) normal equations
+    from gift_theory.lab import _identify as I
+
+    def run(err):
+        Ws, bs = _net(7, (60, 12, 4))
+        rng = np.random.default_rng(8)
+        x = rng.uniform(0, 1, (40, 60))
+        s, r = 0.05, 24
+        W1 = Ws[0] + err * rng.normal(size=Ws[0].shape)
+        a0 = x[:, None, :] + s * rng.normal(size=(40, r, 60))
+        a1 = np.tanh(np.einsum("nkp,ip->nki", a0, W1) + bs[0] + s * rng.normal(size=(40, r, 12)))
+        a1 = a1 + s * rng.normal(size=a1.shape)
+        y = np.einsum("nkp,ip->nki", a1, Ws[1]) + bs[1] + s * rng.normal(size=(40, r, 4))
+        return identify(Measurement(x=x, y=y, params=tuple(Layer(W, b) for W, b in zip(Ws, bs)), taps=(a1,)))
+
+    null, bad = run(0.0), run(0.05)
+    for ident in (null, bad):
+        li = ident.by_layer()[1]
+        assert li.choice == "unresolved" and np.all(np.isinf(li.theta_se))
+        assert 40 < 61 + I.RESOLVE_MARGIN
+    om = [r for r in null.rows() if r["layer"] == 1 and r["test"] == "omnibus"][0]
+    assert om["p"] > 0.01 and "not resolved" in om["evidence"]
+    om_bad = [r for r in bad.rows() if r["layer"] == 1 and r["test"] == "omnibus"][0]
+    assert om_bad["p"] < 1e-6
+    assert abs(null.by_layer()[1].s / 0.05 - 1) < 0.05  # the level still read at the programmed map
+
+
+def test_block_diagonal_gls_equals_the_dense_one():
+    from gift_theory.lab._identify import _Blocks, _gls, _sub
+
+    rng = np.random.default_rng(0)
+    d, k = 7, 5
+    A = rng.normal(size=(d, k, k))
+    B = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(k)
+    D = np.zeros((d * k, d * k))
+    for i in range(d):
+        D[i * k:(i + 1) * k, i * k:(i + 1) * k] = B[i]
+    th, R = rng.normal(size=d * k), rng.normal(size=(d * k, 9))
+    for a, b in zip(_gls(th, _Blocks(B), R), _gls(th, D, R)):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+    idx = np.array([3, 8, 9, 20, 34])
+    np.testing.assert_array_equal(_sub(_Blocks(B), idx), D[np.ix_(idx, idx)])
+
+
+def test_expected_kurtosis_of_a_normal_sample_is_minus_6_over_r_plus_1():
+    # identity activation: the cell is normal, and a normal sample's m4 / m2^2 has mean
+    # 3 (r - 1) / (r + 1) exactly; the Monte Carlo mean must agree within its standard error
+    from gift_theory.lab._identify import _expected_kurtosis
+
+    r = 12
+    k = _expected_kurtosis("identity", np.zeros((50, 40)), np.full((50, 40), 0.3), 0.01, r)
+    B = k.size * int(max(4, min(32, 3e7 / (k.size * r))))
+    se = np.sqrt(24.0 / r) / np.sqrt(B)  # sd of one sample's excess kurtosis ~ sqrt(24 / r) (an upper bound here)
+    assert abs(k.mean() + 6.0 / (r + 1)) < 4 * se
+    # tanh bends the law: a wide pre-activation noise at z = 0 flattens the tails (negative excess)
+    kt = _expected_kurtosis("tanh", np.zeros((20, 20)), np.full((20, 20), 1.0), 1e-4, 48)
+    assert kt.mean() < -6.0 / 49 - 0.2
+
+
+def test_without_taps_the_propagation_matches_a_long_simulation():
+    # the output layer's regressor and input covariance by Monte Carlo against 20000 shots of
+    # the plain-numpy simulator at the same level (its own independent draws)
+    from gift_theory.lab._identify import _propagate
+
+    meas = sim(3, n=4, r=20000, s=0.08, taps=True)
+    m, C, M = _propagate(meas, 0.08)
+    A = np.asarray(meas.taps[-1], np.float64)
+    mu = A.mean(1)
+    se = np.sqrt(A.var(1) * (1 / A.shape[1] + 1 / M))
+    assert np.max(np.abs(mu - m) / se) < 4.5
+    dev = A - mu[:, None]
+    emp = np.einsum("nki,nkj->nij", dev, dev) / (A.shape[1] - 1) / 0.08 ** 2
+    sd = np.sqrt(np.einsum("nii,njj->nij", emp, emp) * (1 / A.shape[1] + 1 / M))  # entry sd, normal approx
+    assert np.max(np.abs(emp - C) / sd) < 5

@@ -83,7 +83,7 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
     import gift_theory as gt
     from gift_theory.lab import Model, compare, simulate_measurement
     from gift_theory.lab._diagnose import Session
-    from gift_theory.lab._fit_offsets import prior_check, refusing
+    from gift_theory.lab._offset_prior import prior_check, refusing
 
     from gift_theory.lab import identify
 

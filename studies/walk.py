@@ -27,7 +27,8 @@ import sys
 #: the pipeline's module and the order of its stages (issue 15's layout; unknown modules are not ranked)
 PIPELINE = "gift_theory.lab._diagnose"
 ORDER = tuple(f"gift_theory.lab.{m}" for m in ("_io", "_shots", "_qtest", "_channels", "_compare", "_fit_moments",
-                                               "_fit_offsets", "_fit", "_localise", "_mechanisms", "_verdict",
+                                               "_offset_kinds", "_offset_fit", "_offset_null", "_offset_prior",
+                                               "_fit", "_identify", "_localise", "_mechanisms", "_verdict",
                                                "_diagnose"))
 
 

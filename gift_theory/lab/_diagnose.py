@@ -15,7 +15,7 @@ The baseline (awgn, s fitted) and every candidate ``awgn + effect`` (every regis
 by default: the built-in ones and any plugin) are fitted on the fitting half and scored on
 the held-out half. ``missing_effect_detected`` is the baseline's goodness-of-fit test,
 ``p_value < 0.01``. A model with fitted offsets is tested against a refit null
-(:mod:`._fit_offsets`).
+(:mod:`._offset_fit`, :mod:`._offset_null`).
 
 **Status and order** (CONTRACTS §6, 2026-11-25). Every candidate has a ``status``:
 ``"passes"`` (p >= 0.01 and every check of the verdict's rule holds: its values identified and
@@ -67,7 +67,9 @@ from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, failing_layers, one_step_check
 from ._fit import fit_model
 from ._fit_moments import MomentProblem
-from ._fit_offsets import effective_dof, fitted_as_offsets, kinds_of, offset_replicates, prior_check
+from ._offset_kinds import fitted_as_offsets, kinds_of
+from ._offset_null import effective_dof, offset_replicates
+from ._offset_prior import prior_check
 from ._localise import (
     layer_evidence,
     one_step_residuals,
@@ -287,7 +289,7 @@ class Session:
                          baseline=self.baseline)
 
     def prior(self, model: Model) -> list:
-        """:func:`~gift_theory.lab._fit_offsets.prior_check` of a fitted model on the fitting half
+        """:func:`~gift_theory.lab._offset_prior.prior_check` of a fitted model on the fitting half
         (the mechanisms' fit gains and the checks both read it; [] without offsets)."""
         if not any(model.offsets):
             return []

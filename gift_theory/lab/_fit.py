@@ -2,7 +2,7 @@
 
 Each effect says how it is fitted (:class:`gift_theory.effects.Effect`): values it reads off
 the data and holds fixed (``from_data``: quantization's lattice), per-device values fitted as
-fixed offsets (``offsets_of``, per-neuron ``shape``: :mod:`._fit_offsets`), and scalar
+fixed offsets (``offsets_of``, per-neuron ``shape``: :mod:`._offset_fit`), and scalar
 parameters by simulated moment matching over the values it proposes (``search``:
 :mod:`._fit_moments`). No table here names an effect.
 """
@@ -13,7 +13,8 @@ from .._errors import GiftInputError
 from .._measurement import Measurement
 from ..effects import REGISTRY, Physics, make_effect
 from ._fit_moments import MomentProblem, fit_moments
-from ._fit_offsets import fit_offsets, fitted_as_offsets
+from ._offset_fit import fit_offsets
+from ._offset_kinds import fitted_as_offsets
 from ._intervals import attach_uncertainty, offset_uncertainty
 from ._shots import Model
 

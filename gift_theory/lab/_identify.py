@@ -632,7 +632,10 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
         # rank-one part along the signal, squared, beyond its null size
         alpha = a_g / np.maximum(1.0 - np.sum(wn ** 4, 1), 1e-300)
         dC = (Chat_s - Cm - alpha[:, None, None] * wn[:, :, None] * wn[:, None, :]) * off
-        null = (obs_s[:, :, None] * obs_s[:, None, :] + Cm ** 2) / max(r - 1, 1) * off
+        # (without taps the model's covariance is a Monte Carlo estimate too: its own sampling
+        # variance, (M - 1) draws' against the shots' r - 1, is part of dC's)
+        mc = 1.0 + (max(r - 1, 1) / (lay.draws - 1) if lay.draws > 1 else 0.0)
+        null = mc * (obs_s[:, :, None] * obs_s[:, None, :] + Cm ** 2) / max(r - 1, 1) * off
         U = np.sum(dC ** 2 - null, axis=(1, 2)) / np.maximum(np.sum(null, axis=(1, 2)), 1e-300)
         z_u = over_inputs(U)
         zc_ = max(z1, z_s, z_u)
@@ -961,7 +964,8 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     # error is one draw shared by every input, so W_eff C W_eff^T (no taps: C the hidden
     # layers' propagated noise) carried a bias the test over inputs could not average out
     # (correlated_noise on 12 % of null files without taps)
-    W_n = lay.W if choice == "programmed" else gain * lay.W if choice == "gain" else W_eff
+    W_n = (lay.W if choice in ("programmed", "bias") else gain * lay.W if choice in ("gain", "gain+bias")
+           else W_eff)
     noise_rows, s_lvl, s_se, kurt = _noise_rows(lay, act, l, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2,
                                                 _unit_var(lay, W_n), _unit_cov(lay, W_n, sub))
     rows.extend(noise_rows)

@@ -4,7 +4,7 @@
 Three kinds of fitted values, three methods, each honest for the way its value is fitted:
 
 * **Per-neuron values** (a plugin's ``shape = {"p": "neurons"}``, the bias offsets of
-  ``bias_offset``) are fitted as offsets with a Gaussian prior (:mod:`._fit_offsets`). Their
+  ``bias_offset``) are fitted as offsets with a Gaussian prior (:mod:`._offset_fit`). Their
   standard error is the posterior standard deviation of the linearised (Gauss-Newton) problem
   at the fit: ``cov = (J^T J / s2 + diag(1 / e^2))^-1`` with J the Jacobian of the fitted mean
   response in the offsets, s2 the residual mean square at the fit (so it includes the model's
@@ -45,18 +45,9 @@ from .._measurement import Measurement
 from .._model import named_subkey
 from ..effects._base import is_per_neuron
 from ._fit_moments import MomentProblem, _owner, _positive, _scalar, theta_of
-from ._fit_offsets import (
-    _joint_setup,
-    _layer_jvps,
-    _layer_setup,
-    _mean_output,
-    _output_jacobian,
-    base_model,
-    fitted_as_offsets,
-    kinds_of,
-    offset_deltas,
-    resimulate,
-)
+from ._offset_fit import _joint_setup, _layer_jvps, _layer_setup, offset_deltas
+from ._offset_kinds import base_model, fitted_as_offsets, kinds_of
+from ._offset_null import _mean_output, _output_jacobian, resimulate
 from ._shots import Model, params32
 
 #: the intervals' level

@@ -313,12 +313,13 @@ def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float =
     baseline's sd of Q) its discrepancy fell below the baseline's. A candidate that removes
     less is no evidence for its class (an extra parameter absorbs part of any misfit); an
     offset family counts only when it passes, the data identify its values and they look like
-    its own effect (``prior``: model -> :func:`~gift_theory.lab._fit_offsets.prior_check` rows on
+    its own effect (``prior``: model -> :func:`~gift_theory.lab._offset_prior.prior_check` rows on
     the fitting half; None skips that check): with
     hundreds of free values it lowers the discrepancy whatever the physics. Weight offsets that
     pass but are refused only as coupled to the programmed weights (``w_structure``,
     ``w_coupling``) are a structured weight error: they count for ``weight_error``."""
-    from ._fit_offsets import fitted_as_offsets, refusing
+    from ._offset_kinds import fitted_as_offsets
+    from ._offset_prior import refusing
 
     out = FitGains()
     unit = base_cmp.se if base_cmp.se > 0 else 1.0

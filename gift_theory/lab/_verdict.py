@@ -6,13 +6,13 @@
 2. the top-ranked model passes its held-out test, and
    a. its parameters are identified by the data: every per-device offset family it fits is
       determined by the data rather than by its prior -- effective degrees of freedom at least
-      half its number of values (:func:`~gift_theory.lab._fit_offsets.effective_dof`; without
+      half its number of values (:func:`~gift_theory.lab._offset_null.effective_dof`; without
       taps a few hundred weight offsets fitted to a few hundred output means are not: they can
       follow almost any smooth distortion of the network, so their passing says nothing);
    b. its fitted values look like its own effect: fitted weight offsets are neither
       proportional to the programmed weights nor a fixed linear map of them, nor are their
       rows coupled as the rows of the weights are; fitted bias offsets do not all go one way
-      (:func:`~gift_theory.lab._fit_offsets.prior_check`: |z| < 4 in every layer, the coupling
+      (:func:`~gift_theory.lab._offset_prior.prior_check`: |z| < 4 in every layer, the coupling
       test's exact p above 0.01 over the layers);
    b'. an effect that acts through the acquisition times (``needs_times``: drift) is what the
       data show only if its time dependence is: the same fitted model with every time held at
@@ -45,7 +45,7 @@ import dataclasses
 import numpy as np
 
 from ._compare import failing_layers
-from ._fit_offsets import refusing
+from ._offset_prior import refusing
 
 ALPHA = 0.01
 
@@ -64,7 +64,7 @@ def p_words(p: float) -> str:
 def refusals(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[str]:
     """Why a candidate that passes its held-out test is still no explanation (rules a, b, b', c,
     d of the module); [] when none refuses it. ``steps``: its one-step checks (with taps);
-    ``prior``: :func:`~gift_theory.lab._fit_offsets.prior_check` rows of its fitted values;
+    ``prior``: :func:`~gift_theory.lab._offset_prior.prior_check` rows of its fitted values;
     ``twin``: its held-out comparison with the times held at their mean, when it acts through
     them."""
     name = " + ".join(cand.effects)

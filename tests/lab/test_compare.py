@@ -222,7 +222,7 @@ def test_empirical_bayes_scale_of_unidentified_offsets():
     is nearly unbiased over devices and scatters no more than the moment equation
     |rho|^2 = e^2 tr + n sigma^2. 300 simulated devices; tolerances from the observed spread
     (4 standard errors)."""
-    from gift_theory.lab._fit_offsets import marginal_e2 as _marginal_e2
+    from gift_theory.lab._offset_null import marginal_e2 as _marginal_e2
 
     rng = np.random.default_rng(0)
     n, P, e, sigma2 = 120, 300, 0.15, 1.5

@@ -153,7 +153,7 @@ def test_a_weight_error_as_large_as_W_is_identified_and_the_noise_level_stays_th
 
 
 def test_a_gross_outlier_among_offsets_is_refused_and_named():
-    from gift_theory.lab._fit_offsets import outlier_test, refusing
+    from gift_theory.lab._offset_prior import outlier_test, refusing
 
     rng = np.random.default_rng(3)
     d = rng.normal(0, 0.05, 16)

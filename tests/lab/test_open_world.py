@@ -82,7 +82,7 @@ def test_prior_check_tells_offsets_from_their_effect_s_prior():
     offsets all one way fail ``b_mean``; weight offsets drawn apart from W pass, offsets
     proportional to W fail ``w_correlation``; a coupling W M on an expanding layer fails
     ``w_structure``."""
-    from gift_theory.lab._fit_offsets import prior_check
+    from gift_theory.lab._offset_prior import prior_check
 
     arch = gt.Architecture((4, 12, 3))
     params = gt.init_params(jax.random.PRNGKey(0), arch)
@@ -116,7 +116,7 @@ def test_coupling_test_is_exact_under_the_prior_and_finds_a_coupling():
     uniform, so P(p < 0.1) = 0.1 (200 draws: 99.9 % binomial bounds 0.04-0.18). A coupling
     E = W M (dense crosstalk on a contracting layer, where the F test ``w_structure`` cannot
     apply) is found; the normal law beyond 64 rows does too, and is centred under the prior."""
-    from gift_theory.lab._fit_offsets import coupling_test
+    from gift_theory.lab._offset_prior import coupling_test
 
     rng = np.random.default_rng(5)
     d_out, d_in = 8, 14

@@ -78,7 +78,7 @@ from ._localise import (
     where_it_fails,
 )
 from ._identify import identify
-from ._mechanisms import Context, fit_gains, mechanisms
+from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms
 from ._shots import Model
 from ._verdict import as_json_fields, refusals, time_free, verdict
 
@@ -630,6 +630,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
                   ident=ident)
     mechs = mechanisms(ctx)
     explained, reasons, line = verdict(session, ranking, meas, mechs, failing)
+    if explained and base_cmp.p_value < ALPHA:  # a fitted effect explains: its class leads
+        mechs = lead_with_explanation(mechs, ranking[0], base_cmp, ctx)
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),

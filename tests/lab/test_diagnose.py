@@ -347,6 +347,28 @@ def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
     for m in out["mechanisms"]:
         assert m["mechanism"] in gt.effects.MECHANISMS
         assert "p_value" not in m or 0.0 <= m["p_value"] <= 1.0
+    if out["explained"] and out["baseline"]["p_value"] < 0.01:  # the explaining model's class leads
+        assert out["mechanisms"][0]["mechanism"] in ranking[0]["mechanism"].split("+")
+
+
+def test_an_explaining_fit_leads_the_mechanisms_and_keeps_the_rest_in_order():
+    from types import SimpleNamespace as NS
+
+    from gift_theory.lab._mechanisms import Context, lead_with_explanation
+
+    ctx = Context({}, 3, False, None, {}, {})
+    base = NS(discrepancy=500.0, se=5.0, p_value=1e-40)
+    top = NS(effects=("layer_gain",), comparison=NS(discrepancy=10.0, p_value=0.5))
+    mechs = [{"mechanism": "bias_offset", "layers": [3], "score": 170.0, "evidence": "shifts", "p_value": 1e-9},
+             {"mechanism": "weight_error", "layers": [3], "score": 160.0, "evidence": "map", "p_value": 1e-8}]
+    out = lead_with_explanation(mechs, top, base, ctx)
+    assert [m["mechanism"] for m in out] == ["gain_error", "bias_offset", "weight_error"]
+    assert out[0]["score"] == pytest.approx(98.0) and out[0]["layers"] == [1, 2, 3]
+    assert out[0]["p_value"] == 1e-40 and "layer_gain explains" in out[0]["evidence"]
+    listed = mechs + [{"mechanism": "gain_error", "layers": [3], "score": 20.0, "evidence": "g", "p_value": 1e-3}]
+    out = lead_with_explanation(listed, top, base, ctx)
+    assert [m["mechanism"] for m in out] == ["gain_error", "bias_offset", "weight_error"]
+    assert out[0]["layers"] == [3] and out[0]["score"] == pytest.approx(98.0) and out[0]["p_value"] == 1e-3
 
 
 # ---- layer_gain: one fixed gain per layer (CONTRACTS §2, class gain_error) ----------------------

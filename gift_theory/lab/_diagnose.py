@@ -631,7 +631,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     mechs = mechanisms(ctx)
     explained, reasons, line = verdict(session, ranking, meas, mechs, failing)
     if explained and base_cmp.p_value < ALPHA:  # a fitted effect explains: its class leads
-        mechs = lead_with_explanation(mechs, ranking[0], base_cmp, ctx)
+        mechs = lead_with_explanation(mechs, ranking[0], base_cmp)
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),

@@ -374,37 +374,26 @@ def mechanisms(ctx: Context) -> list[dict]:
     return out
 
 
-def lead_with_explanation(mechs: list, top, base_cmp, ctx: Context) -> list:
+def lead_with_explanation(mechs: list, top, base_cmp) -> list:
     """When a fitted model explains the data (``top``: ranking[0], its held-out test passed and
-    its values checked), its classes lead ``mechs``: the identification's order stands among the
-    rest. A passing fit is measured evidence for its class, and the identification alone cannot
-    always see it -- without taps a gain on every layer folds into the output's map as shifts
-    and a general change (mesh insertion loss: named bias_offset first while layer_gain passed
-    at p = 0.5). Each leading class scores at least the fit's gain in baseline standard
-    deviations (so "best first" holds by score too). A class the identification did not list is
-    added, its score that gain, its p-value the baseline's (what the fit removes), its layers
-    the identification's rows of the class at 0.05, else the failing layers, else all."""
+    its values checked), its classes that ``mechs`` lists lead, each scored at least the fit's
+    gain in baseline standard deviations (so "best first" holds by score too); the rest keep
+    their order. A passing fit and an identification test rejecting for the same class are two
+    measurements agreeing -- without taps a gain on every layer folds into the output's map as
+    shifts and a general change, and mesh insertion loss was named bias_offset first while
+    layer_gain passed at p = 0.5 and gain_error's own test rejected. A class the identification
+    does not list is not added: a fit that passes is not proof (a bias drifting in time passed
+    as layer_gain without taps, p = 0.09, while time_drift's test rejected)."""
     if top is None:
         return list(mechs)
-    classes = [REGISTRY[e].mechanism for e in top.effects]
-    rest = [m for m in mechs if m["mechanism"] not in classes]
+    classes = list(dict.fromkeys(REGISTRY[e].mechanism for e in top.effects))
     unit = base_cmp.se if base_cmp.se > 0 else 1.0
     gain = float((base_cmp.discrepancy - top.comparison.discrepancy) / unit)
+    fit_text = (f"awgn + {' + '.join(top.effects)} explains the data (held-out p = {top.comparison.p_value:.3g}), "
+                f"lowering the discrepancy by {gain:.1f} sd")
     lead = []
-    for cls in dict.fromkeys(classes):
-        have = [m for m in mechs if m["mechanism"] == cls]
-        fit_text = (f"awgn + {' + '.join(top.effects)} explains the data (held-out p = {top.comparison.p_value:.3g}), "
-                    f"lowering the discrepancy by {gain:.1f} sd")
-        if have:
-            m = dict(have[0])
-            m["evidence"] = fit_text + "; " + m["evidence"]
-            m["score"] = max(float(m["score"]), gain)  # the fit's gain, as _with_fit scores it
-            lead.append(m)
-            continue
-        rows = [r for r in ctx.rows if r["class"] == cls and r["p"] < 0.05]
-        layers = (sorted({int(r["layer"]) for r in rows}) if rows else sorted(ctx.failing) if ctx.failing
-                  else list(range(1, ctx.depth + 1)))
-        lead.append({"mechanism": cls, "layers": layers, "score": gain,
-                     "evidence": fit_text + ("" if ctx.taps else " (without taps the layers are not told apart)"),
-                     "p_value": float(base_cmp.p_value)})
-    return lead + rest
+    for cls in classes:
+        for m in mechs:
+            if m["mechanism"] == cls:
+                lead.append(dict(m, evidence=fit_text + "; " + m["evidence"], score=max(float(m["score"]), gain)))
+    return lead + [m for m in mechs if m["mechanism"] not in classes]

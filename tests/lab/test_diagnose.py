@@ -351,24 +351,23 @@ def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
         assert out["mechanisms"][0]["mechanism"] in ranking[0]["mechanism"].split("+")
 
 
-def test_an_explaining_fit_leads_the_mechanisms_and_keeps_the_rest_in_order():
+def test_an_explaining_fit_leads_the_mechanisms_it_agrees_with_and_keeps_the_rest_in_order():
     from types import SimpleNamespace as NS
 
-    from gift_theory.lab._mechanisms import Context, lead_with_explanation
+    from gift_theory.lab._mechanisms import lead_with_explanation
 
-    ctx = Context({}, 3, False, None, {}, {})
     base = NS(discrepancy=500.0, se=5.0, p_value=1e-40)
     top = NS(effects=("layer_gain",), comparison=NS(discrepancy=10.0, p_value=0.5))
     mechs = [{"mechanism": "bias_offset", "layers": [3], "score": 170.0, "evidence": "shifts", "p_value": 1e-9},
              {"mechanism": "weight_error", "layers": [3], "score": 160.0, "evidence": "map", "p_value": 1e-8}]
-    out = lead_with_explanation(mechs, top, base, ctx)
-    assert [m["mechanism"] for m in out] == ["gain_error", "bias_offset", "weight_error"]
-    assert out[0]["score"] == pytest.approx(98.0) and out[0]["layers"] == [1, 2, 3]
-    assert out[0]["p_value"] == 1e-40 and "layer_gain explains" in out[0]["evidence"]
+    # the identification does not list gain_error: nothing is added, the order stands
+    assert lead_with_explanation(mechs, top, base) == mechs
     listed = mechs + [{"mechanism": "gain_error", "layers": [3], "score": 20.0, "evidence": "g", "p_value": 1e-3}]
-    out = lead_with_explanation(listed, top, base, ctx)
+    out = lead_with_explanation(listed, top, base)
     assert [m["mechanism"] for m in out] == ["gain_error", "bias_offset", "weight_error"]
     assert out[0]["layers"] == [3] and out[0]["score"] == pytest.approx(98.0) and out[0]["p_value"] == 1e-3
+    assert out[0]["evidence"].startswith("awgn + layer_gain explains the data") and out[0]["evidence"].endswith("; g")
+    assert out[1:] == mechs
 
 
 # ---- layer_gain: one fixed gain per layer (CONTRACTS §2, class gain_error) ----------------------

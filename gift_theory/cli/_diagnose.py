@@ -65,7 +65,9 @@ def render(out) -> str:
         for m in out["mechanisms"]:
             where = f"layers {', '.join(map(str, m['layers']))}" if m["layers"] else "layers ?"
             p = m.get("p_value")
-            ptext = f"p = {p:<9.3g}" if isinstance(p, (int, float)) else " " * 13
+            # a p-value below float range is printed as such, not as a certainty of 0
+            ptext = ((f"p = {p:<9.3g}" if p > 0 else f"{'p < 1e-300':<13s}") if isinstance(p, (int, float))
+                     else " " * 13)
             lines.append(f"  {m['mechanism']:<22s} {where:<14s} {m['score']:7.1f}  {ptext} {m['evidence']}")
     if not out.get("explained", True) and out.get("reasons"):
         lines.append("why not explained: " + "; ".join(out["reasons"]))

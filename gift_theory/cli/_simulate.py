@@ -39,7 +39,7 @@ def run(args):
     import gift_theory as gt
     from .._io import atomic_write
     from .._model import named_subkey
-    from ..lab import load_weights, save_csv, simulate_measurement
+    from ..lab import load_weight_arrays, save_csv, simulate_measurement
     from ..lab._io import NETCDF_EXTENSIONS, save_file
 
     load_plugins(args)
@@ -58,7 +58,7 @@ def run(args):
     key = jax.random.PRNGKey(args.seed)
     activation = args.activation
     if args.weights:
-        w = load_weights(args.weights)
+        w = load_weight_arrays(args.weights)
         params = gt.params_from_arrays(w, where=args.weights)
         if activation is None and "activation" in w:
             activation = str(np.asarray(w["activation"]).item())

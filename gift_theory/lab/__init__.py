@@ -56,7 +56,7 @@ from ._io import load_csv as load_csv
 from ._io import load_netcdf as load_netcdf
 from ._io import load_wide_csv as load_wide_csv
 from ._io import load_measurement as load_measurement
-from ._io import load_weights as load_weights
+from ._io import load_weight_arrays as load_weight_arrays
 from ._io import save_csv as save_csv
 from ._io import save_file as save_file
 from ._io import save_netcdf as save_netcdf

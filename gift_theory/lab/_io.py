@@ -191,7 +191,7 @@ def load_measurement(path, *, weights=None) -> Measurement:
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
         raise GiftInputError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
     if weights is not None:
-        w = load_weights(weights)
+        w = load_weight_arrays(weights)
         arrays = {**w, **arrays}
     return validate_arrays(arrays, where=path)
 
@@ -199,7 +199,7 @@ def load_measurement(path, *, weights=None) -> Measurement:
 def weights_arrays(weights) -> dict:
     """W1..WL, b1..bL (and ``activation``) from a ``.npz`` path or a mapping of arrays."""
     if isinstance(weights, (str, os.PathLike)):
-        return load_weights(weights)
+        return load_weight_arrays(weights)
     return {k: np.asarray(v) for k, v in dict(weights).items() if (k[:1] in "Wb" and k[1:].isdigit()) or k == "activation"}
 
 
@@ -424,8 +424,10 @@ def save_file(path, meas: Measurement, *, csv: str = "wide") -> str | None:
     return wpath
 
 
-def load_weights(path) -> dict:
-    """The arrays W1..WL, b1..bL (and ``activation``) of a weights ``.npz``, checked to exist."""
+def load_weight_arrays(path) -> dict:
+    """The raw arrays W1..WL, b1..bL (and ``activation``) of a measurement's weights ``.npz``,
+    checked to exist -- what the CSV and table readers pair with their values.
+    (:func:`gift_theory.training.load_weights` reads a trained network: ``(params, meta)``.)"""
     path = os.fspath(path)
     require(os.path.exists(path), f"{path}: no such weights file")
     try:
@@ -447,7 +449,7 @@ def load_csv(path, *, weights=None) -> Measurement:
     """
     path = os.fspath(path)
     require(weights is not None, f"{path}: a CSV measurement needs --weights FILE.npz with W1..WL, b1..bL")
-    warrays = load_weights(weights)
+    warrays = load_weight_arrays(weights)
     try:
         with open(path, newline="") as fh:
             header = fh.readline().strip().split(",")

@@ -13,4 +13,6 @@ from ._common import nonneg_float as nonneg_float
 from ._common import nonneg_int as nonneg_int
 from ._common import positive_float as positive_float
 from ._common import positive_int as positive_int
+from ._fit import standouts as standouts
 from ._main import emit as emit
+from ._main import main as main

@@ -47,6 +47,7 @@ from ._diagnose import penalised_score as penalised_score
 from ._diagnose import ranked as ranked
 from ._diagnose import split_inputs as split_inputs
 from ._fit import fit_model as fit_model
+from ._fit import fit_uncertainty as fit_uncertainty
 from ._identify import Identification as Identification
 from ._identify import identify as identify
 from ._figures import error_ladder as error_ladder

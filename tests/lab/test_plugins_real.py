@@ -15,8 +15,7 @@ from scipy import stats
 
 import gift_theory as gt
 from gift_theory import effects as fx
-from gift_theory.lab import diagnose, fit_effects, save_measurement, simulate_measurement
-from gift_theory.lab._fit import fit_uncertainty
+from gift_theory.lab import diagnose, fit_effects, fit_uncertainty, save_measurement, simulate_measurement
 
 HEAD = "import jax.numpy as jnp\nfrom gift_theory.effects import Effect, register\n\n"
 
@@ -153,7 +152,7 @@ def test_plugin_fits_to_the_floor_and_recovers_its_parameter(tmp_path, name):
         other_se = np.array([s for l in ses for i, s in enumerate(ses[l]) if (int(l), i) != DEAD])
         assert np.all(np.abs(others - 1.0) < 4.5 * other_se)
         # the text names the dead neuron and no other
-        from gift_theory.cli._fit import standouts
+        from gift_theory.cli import standouts
         named = standouts({"alive": vals}, {"alive": ses})
         assert len(named) == 1 and named[0].startswith("neuron 2:5 alive 0.0"), named
         assert "transmission" in unc["intervals"]  # the spread of the per-neuron values
@@ -211,7 +210,7 @@ def test_per_neuron_standard_errors_are_calibrated(tmp_path):
 
 def _gift(args, cwd, capsys, monkeypatch):
     """``gift ARGS`` in this process (the same entry point as the console script): (exit, stderr)."""
-    from gift_theory.cli._main import main
+    from gift_theory.cli import main
 
     monkeypatch.chdir(cwd)
     capsys.readouterr()

@@ -67,13 +67,14 @@ STANDOUT_K = 4.0
 def standouts(per_neuron: dict, per_neuron_se: dict, k: float = STANDOUT_K) -> list[str]:
     """Lines naming the neurons whose value stands out: ``|value - median| > k sqrt(se^2 +
     spread^2)``, the median and the spread (1.4826 MAD) over every neuron of that parameter,
-    se the neuron's own standard error. ``"neuron 2:5 alive 0.0179 +- 0.0052 (others 0.98-1.02)"``
-    (layer:neuron, 1-based)."""
+    se the neuron's own standard error. ``"neuron 2:4 alive 0.0179 +- 0.0052 (others 0.98-1.02)"``
+    (layer:neuron, the neuron counted from 0 as everywhere in gift's output: its position in the
+    JSON's ``per_neuron`` list, the identification's ``l:i``, the where-figure's rows)."""
     import numpy as np
 
     lines = []
     for name, layers in per_neuron.items():
-        cells = [(int(l), j + 1, float(v), (per_neuron_se.get(name, {}).get(l) or [None] * len(vals))[j])
+        cells = [(int(l), j, float(v), (per_neuron_se.get(name, {}).get(l) or [None] * len(vals))[j])
                  for l, vals in layers.items() for j, v in enumerate(vals)]
         if len(cells) < 3:
             continue

@@ -89,7 +89,7 @@ PLUGINS = {
 }
 
 WIDTHS = (5, 8, 6, 3)
-DEAD = (2, 4)  # layer 2, neuron 5 (1-based): transmits 2 %
+DEAD = (2, 4)  # layer 2, neuron 4 (counted from 0): transmits 2 %
 
 
 @pytest.fixture(autouse=True)
@@ -154,7 +154,7 @@ def test_plugin_fits_to_the_floor_and_recovers_its_parameter(tmp_path, name):
         # the text names the dead neuron and no other
         from gift_theory.cli import standouts
         named = standouts({"alive": vals}, {"alive": ses})
-        assert len(named) == 1 and named[0].startswith("neuron 2:5 alive 0.0"), named
+        assert len(named) == 1 and named[0].startswith("neuron 2:4 alive 0.0"), named
         assert "transmission" in unc["intervals"]  # the spread of the per-neuron values
         return
     for p, true in _truth(name).items():

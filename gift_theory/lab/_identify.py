@@ -71,10 +71,12 @@ RESOLVE_MARGIN = 10
 #: per-input covariances would be n 500^2 floats
 WIDE = 128
 #: Monte Carlo draws per input of the hidden layers' noise without taps: at most this many ...
-MC_DRAWS = 2048
+#: (the draws' error is counted: a per-input mean's variance grows by r / draws, the
+#: covariance test's null by (r - 1) / (draws - 1); 2048 draws took 5 s a propagation)
+MC_DRAWS = 512
 #: ... within this many multiply-adds of the propagation (at least MC_MIN_DRAWS)
-MC_FLOPS = 4e9
-MC_MIN_DRAWS = 256
+MC_FLOPS = 1e9
+MC_MIN_DRAWS = 128
 #: layers whose stacked parameters exceed this are treated neuron by neuron (block-diagonal)
 FULL_COV_MAX = 1600
 
@@ -531,7 +533,10 @@ def _expected_kurtosis(act: str, z, vz, s2: float, r: int):
     null files at 0.01)."""
     f = _ACT[act][0]
     n, d = z.shape
-    B = int(max(4, min(32, 3e7 / max(n * d * r, 1))))
+    # draws per cell: few are enough -- the Monte Carlo error is independent across inputs, so
+    # the test over inputs counts it in its own variance (calibrated at any B, a little less
+    # power at small B); 2e6 samples per layer keep it at ~0.1 s (3e7 took 4 s a layer)
+    B = int(max(4, min(32, 2e6 / max(n * d * r, 1))))
     rng = np.random.default_rng(20261127)
     sd, s_ = np.sqrt(np.maximum(vz, 0.0)), np.sqrt(s2)
     out = np.empty((n, d))

@@ -46,7 +46,7 @@ from .._model import named_subkey
 from ..effects._base import is_per_neuron
 from ._fit_moments import MomentProblem, _owner, _positive, _scalar, theta_of
 from ._offset_fit import _joint_setup, _layer_jvps, _layer_setup, offset_deltas
-from ._offset_kinds import base_model, fitted_as_offsets, kinds_of
+from ._offset_kinds import base_model, fitted_as_offsets, kind_columns, kinds_of
 from ._offset_null import _mean_output, _output_jacobian, resimulate
 from ._shots import Model, params32
 
@@ -59,24 +59,6 @@ STEP = 0.02
 
 
 # ---- per-neuron values and offset scales ------------------------------------------------------
-
-def _kind_columns(kinds, arch, layer):
-    """Per kind at ``layer``: the directions moving one column of every neuron's block (W: entry
-    j of every row, d_in of them; b or a per-neuron parameter: one), and the kind of each column."""
-    dirs, owner = [], []
-    for ki, k in enumerate(kinds):
-        ncols = arch.widths[layer - 1] if k.target == "W" else 1
-        for j in range(ncols):
-            v = [np.zeros(kk.shape(arch, layer), np.float32) for kk in kinds]
-            if k.target == "W":
-                v[ki][:, j] = 1.0
-            else:
-                v[ki][:] = 1.0
-            dirs.append(v)
-            owner.append(ki)
-    basis = tuple(np.stack([d[i] for d in dirs]) for i in range(len(kinds)))
-    return basis, np.array(owner)
-
 
 def _blocks_taps(key, meas: Measurement, model: Model, kinds, base, deltas, scales):
     """Per layer and neuron with taps: the posterior standard errors of the per-neuron kinds and
@@ -93,7 +75,7 @@ def _blocks_taps(key, meas: Measurement, model: Model, kinds, base, deltas, scal
         noise, a, t, target, _, axis = _layer_setup(jax.random.fold_in(named_subkey(key, "offsets"), l), meas,
                                                     base.physics, l)
         ds = tuple(np.asarray(deltas[k][k.layers.index(l)], np.float32) for k in here)
-        basis, owner = _kind_columns(here, arch, l)
+        basis, owner = kind_columns(here, arch, l)
         p0, cols = _layer_jvps(ds, W, b, a, noise, base.physics, t, basis, arch, l, axis, here)
         d_l = arch.widths[l]
         cols = np.asarray(cols, np.float64).reshape(len(owner), -1, d_l)  # (P_i, samples, neurons)

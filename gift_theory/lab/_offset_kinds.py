@@ -163,3 +163,21 @@ def base_model(model: Model, meas: Measurement) -> Model:
     their defaults, everything else of ``model``'s physics."""
     kinds = kinds_of(list(model.offsets), meas.arch)
     return Model(reset(model.physics, kinds))
+
+
+def kind_columns(kinds, arch, layer):
+    """Per kind at ``layer``: the directions moving one column of every neuron's block (W: entry
+    j of every row, d_in of them; b or a per-neuron parameter: one), and the kind of each column."""
+    dirs, owner = [], []
+    for ki, k in enumerate(kinds):
+        ncols = arch.widths[layer - 1] if k.target == "W" else 1
+        for j in range(ncols):
+            v = [np.zeros(kk.shape(arch, layer), np.float32) for kk in kinds]
+            if k.target == "W":
+                v[ki][:, j] = 1.0
+            else:
+                v[ki][:] = 1.0
+            dirs.append(v)
+            owner.append(ki)
+    basis = tuple(np.stack([d[i] for d in dirs]) for i in range(len(kinds)))
+    return basis, np.array(owner)

@@ -37,6 +37,7 @@ from ._offset_kinds import (
     apply_all,
     base_model,
     fitted_as_offsets,
+    kind_columns,
     kinds_of,
     unflat_vector,
 )
@@ -76,24 +77,14 @@ def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, i
         W, b = p32[l - 1]
         noise, a, t, _, resid_var, axis = _layer_setup(jax.random.fold_in(named_subkey(key, "offsets"), l), meas,
                                                        model.physics, l)
-        d_l, d_in = arch.widths[l], arch.widths[l - 1]
+        d_l = arch.widths[l]
         # columns per neuron: each W kind contributes d_in (entry j of every row), b / per-neuron 1
-        dirs = []
-        for ki, k in enumerate(here):
-            cols = d_in if k.target == "W" else 1
-            for j in range(cols):
-                v = [np.zeros(kk.shape(arch, l), np.float32) for kk in here]
-                if k.target == "W":
-                    v[ki][:, j] = 1.0
-                else:
-                    v[ki][:] = 1.0
-                dirs.append((v, e[k]))
-        basis = tuple(np.stack([d[0][i] for d in dirs]) for i in range(len(here)))
+        basis, owner = kind_columns(here, arch, l)
         zero = tuple(np.zeros(k.shape(arch, l), np.float32) for k in here)
         cols = np.asarray(_layer_jvps(zero, W, b, a, noise, model.physics, t, basis, arch, l, axis, here)[1],
                           np.float64)
-        cols = cols.reshape(len(dirs), -1, d_l)  # (P_i, samples, neurons)
-        prior = np.array([d[1] ** 2 for d in dirs])
+        cols = cols.reshape(len(owner), -1, d_l)  # (P_i, samples, neurons)
+        prior = np.array([e[here[o]] ** 2 for o in owner])
         # per neuron i, J_i (samples, P_i) scaled by the prior and the noise; the eigenvalues of
         # J_i^T J_i (a P_i x P_i Gram matrix per neuron: the squared singular values of J_i)
         Js = np.ascontiguousarray(np.transpose(cols * (np.sqrt(prior) / np.sqrt(resid_var))[:, None, None], (2, 1, 0)))

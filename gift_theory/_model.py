@@ -36,9 +36,14 @@ from ._errors import GiftInputError
 from .effects import Physics
 
 
+def name_tag(name: str) -> int:
+    """The integer a name folds into a key (:func:`named_subkey`)."""
+    return zlib.crc32(name.encode()) & 0x7FFFFFFF
+
+
 def named_subkey(key: jax.Array, name: str) -> jax.Array:
     """A subkey that depends only on ``name`` (stable when other names are added)."""
-    return jax.random.fold_in(key, zlib.crc32(name.encode()) & 0x7FFFFFFF)
+    return jax.random.fold_in(key, name_tag(name))
 
 
 def noise_law(physics: Physics):
@@ -75,7 +80,13 @@ def site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype=jnp.floa
     """One site's standard draws: from the site's own named subkey, the law's unit-variance
     draws (``law``: a noise-law effect) or standard normal (None). The one per-site sampler:
     :func:`sample_noise` and the lab's per-site draw cache both draw through it."""
-    k = named_subkey(key, name)  # a site's draws are named by the site
+    return tagged_draws(key, name_tag(name), shape, law, dtype)  # a site's draws are named by the site
+
+
+def tagged_draws(key: jax.Array, tag, shape: tuple, law=None, dtype=jnp.float32) -> jax.Array:
+    """:func:`site_draws` with the site's name given as its tag (:func:`name_tag`), which may be
+    traced: one compiled program then serves every site of the same shape and law."""
+    k = jax.random.fold_in(key, tag)
     if law is None:
         return _random.normal(k, shape, dtype)
     return _law_draws(law, k, shape, dtype)

@@ -127,11 +127,27 @@ def cell_statistic(M, Y, paired: bool = False, scales=None):
     return np.stack([E / max(S, 1e-30), np.mean(E1 / np.maximum(S1, 1e-30), axis=1)], axis=1)
 
 
+def within_spreads(Y):
+    """A measured layer's within-data spreads (float64 numpy): ``wy`` (n,) the mean over pairs of
+    shots b != b' of |Y_b - Y_b'| (the vector over neurons) and ``wy1`` (n, d) the same of each
+    neuron -- the ``wy`` and ``wy1`` of :func:`energy_cells`, without a model."""
+    Y = np.asarray(Y, np.float64)
+    n, r, d = Y.shape
+    Yc = Y - Y.mean(axis=1, keepdims=True)
+    wy = np.empty(n)
+    chunk = max(1, int(2e7 // max(r * r, 1)))
+    for c0 in range(0, n, chunk):
+        Z = Yc[c0:c0 + chunk]
+        sq = np.sum(Z * Z, -1)
+        D = np.sqrt(np.maximum(sq[:, :, None] + sq[:, None, :] - 2.0 * (Z @ np.swapaxes(Z, 1, 2)), 0.0))
+        wy[c0:c0 + chunk] = (D.sum((1, 2)) - np.trace(D, axis1=1, axis2=2)) / (r * (r - 1))
+    return wy, 2.0 * _pairsum(Yc) / (r * (r - 1))
+
+
 def layer_scales(Y):
     """The pooled within-data spreads of a measured layer Y (n, r, d): ``(S, S1 (d,))``."""
-    Y = jnp.asarray(Y, jnp.float32)
-    _, wy, _, wy1 = energy_cells(Y[:, :2], Y)
-    return float(np.mean(np.asarray(wy, np.float64))), np.asarray(wy1, np.float64).mean(0)
+    wy, wy1 = within_spreads(Y)
+    return float(np.mean(wy)), wy1.mean(0)
 
 
 def _shot_permutations(key, n: int, r: int):
@@ -139,8 +155,10 @@ def _shot_permutations(key, n: int, r: int):
     return jax.vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n))
 
 
+@jax.jit
 def _halves(key, Y):
-    """Random halves (per cell) of the measured shots: two (n, r//2, d) arrays."""
+    """Random halves (per cell) of the measured shots: two (n, r//2, d) arrays (one program:
+    the permutation, gather and slices dispatched one by one were eight of a diagnosis)."""
     n, r, _ = Y.shape
     perm = _shot_permutations(key, n, r)
     Yp = jnp.take_along_axis(Y, perm[:, :, None], axis=1)
@@ -302,8 +320,9 @@ def reference(key, meas: Measurement, splits: int = 2) -> Reference:
     channels = CHANNELS if moments else CHANNELS[:2]
     F = np.zeros((meas.n, len(layers), len(channels)))
     for li, Y in enumerate(layers):
+        Y32 = jnp.asarray(Y, jnp.float32)
         for s_ in range(splits):
-            A, B = _halves(jax.random.fold_in(jax.random.fold_in(k_floor, li), s_), jnp.asarray(Y, jnp.float32))
+            A, B = _halves(jax.random.fold_in(jax.random.fold_in(k_floor, li), s_), Y32)
             F[:, li, :2] += cell_statistic(A, B, scales=scales[li]) / splits
         if moments:
             F[:, li, 2:] = floor_moment_channels(Y, split)

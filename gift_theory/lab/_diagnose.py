@@ -617,9 +617,10 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         base, base_cmp = session.baseline, session.baseline_comparison
         _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
              f"(floor {session.ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
+        # the identification first (the candidates wait for it): localising starts when it is done
+        ident = ident_f.result() if ident_f is not None else identify(meas)
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
                  if threads > 1 else None)
-        ident = ident_f.result() if ident_f is not None else identify(meas)
         ranking, not_fitted = _rank(session, names, second, verbose, ident, progress)
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))

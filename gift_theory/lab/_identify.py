@@ -95,11 +95,19 @@ def smoothed(activation: str, z, v, var: bool = True):
     xi ~ N(0, 1), by 6-point Gauss-Hermite (exact for polynomials of degree 11: for a smooth
     activation at a chip's noise levels, v << 1, the error is far below a shot's noise)."""
     f, df = _ACT[activation]
-    sd = np.sqrt(np.maximum(v, 0.0))[..., None]
-    pts = z[..., None] + sd * _GH_X
-    F = f(pts)
-    m = F @ _GH_W
-    return m, df(pts, F) @ _GH_W, (np.maximum((F * F) @ _GH_W - m * m, 0.0) if var else None)
+    sd = np.sqrt(np.maximum(v, 0.0))
+    # one node at a time, accumulated: 2.6 times faster than a trailing axis of 6 nodes
+    # contracted by matmul (measured on 240 x 64 x 32 cells)
+    m, g = np.zeros(np.shape(z)), np.zeros(np.shape(z))
+    q = np.zeros(np.shape(z)) if var else None
+    for x, w in zip(_GH_X, _GH_W):
+        pts = z + sd * x
+        F = f(pts)
+        m += w * F
+        g += w * df(pts, F)
+        if var:
+            q += w * (F * F)
+    return m, g, (np.maximum(q - m * m, 0.0) if var else None)
 
 
 def _z_of_p(p):
@@ -371,6 +379,21 @@ def _within(E, g, A):
     return out
 
 
+def _meat(C, X):
+    """sum_n C[n, i, j] X[n, i, p] X[n, j, q] as (d, k, d, k): batched matrix products over
+    blocks of neurons i (an einsum over four indices ran at a tenth of BLAS' pace)."""
+    n, d, k = X.shape
+    out = np.empty((d, k, d, k))
+    chunk = max(1, int(4e6 // max(n * d * k, 1)))
+    for i0 in range(0, d, chunk):
+        sl = slice(i0, min(i0 + chunk, d))
+        Y = C[:, sl, :, None] * X[:, None, :, :]  # (n, c, d, k)
+        c = Y.shape[1]
+        out[sl] = np.matmul(X[:, sl, :].transpose(1, 2, 0),
+                            Y.transpose(1, 0, 2, 3).reshape(c, n, d * k)).reshape(c, k, d, k)
+    return out
+
+
 def _covariance(X, Chat, obs, r):
     """The sandwich covariance of the stacked per-neuron least squares (d (p+1) square), or
     its per-neuron blocks (d, p+1, p+1) when the layer is wide (``Chat``: per input the
@@ -380,9 +403,10 @@ def _covariance(X, Chat, obs, r):
     B = np.einsum("nip,niq->ipq", X, X) + 1e-12 * np.eye(k)
     Binv = np.linalg.inv(B)
     if d * k <= FULL_COV_MAX:
-        meat = np.einsum("nij,nip,njq->ipjq", Chat / r, X, X, optimize=True)
-        S = np.einsum("iab,ibjc,jdc->iajd", Binv, meat, Binv, optimize=True)
-        return S.reshape(d * k, d * k), True
+        meat = _meat(Chat / r, X)
+        S = np.matmul(Binv, meat.transpose(2, 0, 1, 3))  # (j, i, a, c): Binv_i meat_ij
+        S = np.matmul(S, Binv.transpose(0, 2, 1)[:, None])  # (j, i, a, d): ... Binv_j^T
+        return S.transpose(1, 2, 0, 3).reshape(d * k, d * k), True
     meat = np.einsum("ni,nip,niq->ipq", obs / r, X, X)
     return np.einsum("iab,ibc,idc->iad", Binv, meat, Binv), False
 
@@ -413,7 +437,7 @@ def _score_omnibus(lay: _Layer, act: str, s2: float, tt, Chat, obs, r: float, al
     U = np.einsum("nip,ni->ip", X, e)
     if Chat is not None and da * kk <= FULL_COV_MAX:
         Ca = Chat[:, alive][:, :, alive]
-        V = np.einsum("nij,nip,njq->ipjq", Ca / r, X, X, optimize=True).reshape(da * kk, da * kk)
+        V = _meat(Ca / r, X).reshape(da * kk, da * kk)
         w, Q = np.linalg.eigh(V)
         keep = w > 1e-10 * max(w.max(), 1e-300)
         q = float(np.sum((Q[:, keep].T @ U.ravel()) ** 2 / w[keep]))
@@ -470,12 +494,32 @@ def _gls(theta, S, R):
         phi = Fi @ np.einsum("iam,ia->m", SiR, tb)
         q_full = float(np.einsum("ia,iab,ib->", tb, Sinv, tb))
         return phi, Fi, max(q_full - float(phi @ F @ phi), 0.0)
-    Si_R = _solve_psd(S, R)
+    return _gls_solved(theta, R, _solve_psd(S, np.column_stack([R, theta])))
+
+
+def _gls_solved(theta, R, Si):
+    """:func:`_gls` given S^-1 [R, theta] (one solve serves several R's sharing columns)."""
+    Si_R = Si[:, :-1]
     F = R.T @ Si_R
     Fi = np.linalg.pinv(F)
     phi = Fi @ (Si_R.T @ theta)
-    q_full = float(theta @ _solve_psd(S, theta))
+    q_full = float(theta @ Si[:, -1])
     return phi, Fi, max(q_full - float(phi @ F @ phi), 0.0)
+
+
+def _gls_all(theta, S, models: dict) -> dict:
+    """:func:`_gls` for each restriction of ``models`` (name: R), the dense S solved once for
+    all of them."""
+    if isinstance(S, _Blocks):
+        return {name: _gls(theta, S, R) for name, R in models.items()}
+    Rs = list(models.values())
+    Si = _solve_psd(S, np.column_stack(Rs + [theta]))
+    out, c0 = {}, 0
+    for name, R in models.items():
+        m = R.shape[1]
+        out[name] = _gls_solved(theta, R, np.column_stack([Si[:, c0:c0 + m], Si[:, -1]]))
+        c0 += m
+    return out
 
 
 # ---- per-layer identification ------------------------------------------------------------------
@@ -546,8 +590,9 @@ def _expected_kurtosis(act: str, z, vz, s2: float, r: int):
         shape = zc.shape[:2] + (B, r)
         x = f(zc + sc * rng.standard_normal(shape)) + s_ * rng.standard_normal(shape)
         x = x - x.mean(-1, keepdims=True)
-        m2 = np.mean(x * x, -1)
-        out[c0:c0 + chunk] = (np.mean(x ** 4, -1) / np.maximum(m2 * m2, 1e-300) - 3.0).mean(-1)
+        x *= x  # squares (x ** 4 is a general power in numpy: 20 times slower than a square of squares)
+        m2 = np.mean(x, -1)
+        out[c0:c0 + chunk] = (np.mean(x * x, -1) / np.maximum(m2 * m2, 1e-300) - 3.0).mean(-1)
     return out
 
 
@@ -581,7 +626,7 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
     s_se = float(np.sqrt(n * np.var(Tl, ddof=1)) / max(np.sum(vcell), 1e-300) / (2 * s_lvl))
     dev = (E - E.mean(1, keepdims=True)) / np.sqrt(np.maximum(var, 1e-300))
     m2 = np.mean(dev ** 2, 1)
-    kurt_cell = np.mean(dev ** 4, 1) / np.maximum(m2 * m2, 1e-300) - 3.0
+    kurt_cell = np.mean(np.square(dev * dev), 1) / np.maximum(m2 * m2, 1e-300) - 3.0
     # a normal sample's kurtosis is biased by -6/(r+1); an activation bends a Gaussian
     # pre-activation noise into a law of its own (layer 1: the input's noise through W as well),
     # whose excess kurtosis the model predicts (measured before this was subtracted: layer 1 of
@@ -826,7 +871,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     rel = 0.0
     W_idx = (np.arange(da)[:, None] * k + np.arange(p)[None, :]).ravel()
     if da:
-        fits = {name: _gls(th, Sa, R) for name, R in models.items()}
+        fits = _gls_all(th, Sa, models)
         pfit = {name: _chi2(f[2], th.size - models[name].shape[1], nu)[0] for name, f in fits.items()}
         # the programmed map by a score test at it (no fitted map: a weakly identified neuron,
         # e.g. a saturated one, can wander far in W_eff, and a Wald test there rejected the
@@ -945,7 +990,8 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     ea = ebar[:, alive]
     Sg = np.einsum("nib,ni->b", Ht, ea)
     if Chat is not None:
-        Vg = np.einsum("nij,nib,njc->bc", Chat[:, alive][:, :, alive] * mf / r, Ht, Ht, optimize=True)
+        CH = np.matmul(Chat[:, alive][:, :, alive] * (mf / r), Ht)  # (n, i, c)
+        Vg = Ht.reshape(-1, Ht.shape[2]).T @ CH.reshape(-1, Ht.shape[2])
     else:  # a wide layer: the neurons' noise taken as uncorrelated here (correlated_noise tests that)
         Vg = np.einsum("ni,nib,nic->bc", obs[:, alive] * mf / r, Ht, Ht, optimize=True)
     w_, U_ = np.linalg.eigh(Vg)

@@ -28,13 +28,15 @@ import numpy as np
 from scipy import stats
 
 from .._measurement import Measurement
-from .._model import forward, named_subkey
+from .._model import named_subkey
 from ..effects import REGISTRY
 from ._qtest import over_inputs
 from ._shots import (
+    central_slope,
     Model,
     model_shots,
     noiseless_pre,
+    noiseless_taps,
     one_step_pre,
     one_step_shots,
     params32,
@@ -104,14 +106,10 @@ class Residuals:
         """Per layer (n, d), d(noiseless model mean)/d param of ``effect`` added at ``at``
         (central difference of step h, every draw zero): the direction the effect would move
         the measured means."""
-        arch = self.meas.arch
         out = []
         for sign in (1.0, -1.0):
-            phys = self.model.physics.with_effect(effect, **{param: at + sign * h})
-            noise = {k: jnp.zeros((self.n, 1) + tuple(ev), jnp.float32) for k, ev in phys.draws(arch).items()}
-            f = forward(params32(self.model.weights(self.meas)), jnp.asarray(self.meas.x, jnp.float32)[:, None, :],
-                        noise, phys, arch, taps=True)
-            out.append([np.asarray(f.taps[l - 1][:, 0], np.float64) for l in self.layer_ids])
+            taps = noiseless_taps(self.model, self.meas, self.model.physics.with_effect(effect, **{param: at + sign * h}))
+            out.append([taps[l - 1] for l in self.layer_ids])
         return [(p - m) / (2 * h) for p, m in zip(*out)]
 
 
@@ -122,9 +120,7 @@ def _directions(model: Model, meas: Measurement, layer: int, pre):
     u = pre - b[None, :]
     if layer == meas.arch.depth:
         return u, np.ones_like(u)
-    sigma = meas.arch.sigma
-    h = 1e-3
-    slope = (np.asarray(sigma(jnp.asarray(pre + h)), np.float64) - np.asarray(sigma(jnp.asarray(pre - h)), np.float64)) / (2 * h)
+    slope = np.asarray(central_slope(jnp.asarray(pre, jnp.float32), meas.arch.sigma), np.float64)
     return slope * u, slope
 
 
@@ -226,8 +222,9 @@ def _design(zpre):
     """Per neuron: the columns [1, z, z^2 - mean, z^3 - fit] of the standardised pre-activation,
     (d, n, 4): a smooth distortion of a neuron's transfer is a function of its z."""
     zc = (zpre - zpre.mean(0)) / (zpre.std(0) + 1e-12)
-    z2 = zc ** 2 - np.mean(zc ** 2, 0)
-    z3 = zc ** 3 - zc * np.mean(zc ** 4, 0) / np.maximum(np.mean(zc ** 2, 0), 1e-12)
+    sq = zc * zc
+    z2 = sq - np.mean(sq, 0)
+    z3 = zc * sq - zc * np.mean(sq * sq, 0) / np.maximum(np.mean(sq, 0), 1e-12)
     return np.stack([np.ones_like(zc), zc, z2, z3], axis=-1).transpose(1, 0, 2)
 
 

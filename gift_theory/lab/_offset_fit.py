@@ -247,13 +247,17 @@ def identified_start(meas: Measurement, params, physics, kinds):
     (:func:`~gift_theory.lab._identify.identify`: ``W_eff - W``, ``b_eff - b``; per-neuron
     parameters at 0), ``{kind: [array per layer]}`` -- a start from which L-BFGS has only the
     prior's shrinkage left to do, so weight errors as large as W itself are fitted and the
-    noise level is not inflated to absorb a misfit mean. None otherwise (the fit starts at 0)."""
+    noise level is not inflated to absorb a misfit mean -- and the noise level the
+    identification reads off the shots with that map (pooled over the layers' neurons).
+    ``(None, None)`` otherwise (the fit starts at 0)."""
     if not meas.has_taps or not any(k.target == "W" for k in kinds):
-        return None
+        return None, None
     from ._identify import identify
 
     s = physics.params().get("s")
     ident = identify(meas, s=None if s is None else float(np.ravel(np.asarray(s))[0])).by_layer()
+    widths = [meas.arch.widths[l] for l in sorted(ident)]
+    level = float(np.sqrt(np.sum([w * ident[l].s ** 2 for w, l in zip(widths, sorted(ident))]) / np.sum(widths)))
     out = {}
     for k in kinds:
         arrs = []
@@ -266,7 +270,7 @@ def identified_start(meas: Measurement, params, physics, kinds):
             else:
                 arrs.append(np.zeros(k.shape(meas.arch, l)))
         out[k] = arrs
-    return out
+    return out, level
 
 
 def fit_offsets(key, meas: Measurement, model: Model, names) -> Model:
@@ -277,7 +281,14 @@ def fit_offsets(key, meas: Measurement, model: Model, names) -> Model:
     physics = reset(model.physics, kinds)
     params = model.weights(meas)
     scales = {k: _initial_scale(k, params, physics) for k in kinds}
-    start = identified_start(meas, params, physics, kinds)
+    start, level = identified_start(meas, params, physics, kinds)
+    if level is not None and np.isfinite(level) and level > 0 and "s" in physics.params():
+        # the mean response the offsets are fitted to is shaped by the noise level (E tanh(z + n)
+        # is compressed by n): at the identified level, not the start's -- a baseline fitted
+        # with the map wrong absorbs the misfit into s (0.27 against the chip's 0.05 on heater
+        # crosstalk that scrambles W; the offsets fitted there failed the held-out test at
+        # p = 1e-202, at the identified level they pass)
+        physics = physics.replace(s=level)
     if start is not None:  # the scale of the offsets the data show, not a fifth of W's
         scales = {k: max(float(np.sqrt(np.mean(np.concatenate([np.ravel(d) ** 2 for d in start[k]])))),
                          1e-4 * _initial_scale(k, params, physics)) for k in kinds}

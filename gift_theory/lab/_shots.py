@@ -23,12 +23,13 @@ from .._model import (
     compiled_draws,
     forward,
     layer_step,
+    name_tag,
     named_subkey,
     noise_law,
     noisy_input,
     sample_noise,
-    site_draws,
     site_laws,
+    tagged_draws,
 )
 from .._params import Layer
 
@@ -98,8 +99,10 @@ _draw_lock = threading.Lock()
 _draw_bytes = [0]
 
 
-#: :func:`gift_theory._model.site_draws`, one compiled program per site name, shape and law
-_site_draws = jax.jit(site_draws, static_argnames=("name", "shape", "law", "dtype"))
+#: :func:`gift_theory._model.site_draws` with the site's name traced (its tag): one compiled
+#: program per shape and law, shared by the sites of that shape (w_l and a_l: a fresh process
+#: traced and lowered 30 of them, one per site, ~1.8 s of a diagnosis)
+_site_draws = jax.jit(tagged_draws, static_argnames=("shape", "law", "dtype"))
 
 
 def draws(key, physics, meas: Measurement, K: int) -> dict:
@@ -126,7 +129,7 @@ def draws(key, physics, meas: Measurement, K: int) -> dict:
             if v is not None:
                 _draw_cache.move_to_end(ck)
         if v is None:
-            v = _site_draws(key, name, full, site_law, jnp.float32)
+            v = _site_draws(key, np.uint32(name_tag(name)), full, site_law, jnp.float32)
             with _draw_lock:
                 if ck not in _draw_cache:
                     _draw_cache[ck] = v
@@ -161,6 +164,13 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     return tuple(outs[l - 1] for l in meas.layer_ids())
 
 
+def strong32(physics):
+    """``physics`` with every parameter a float32 array: a Python float is a weakly typed leaf,
+    and a jitted function called with both kinds compiles twice (``physics.replace(s=0.1)``
+    against a fitted s: a fresh process compiled every layer's one-step program twice)."""
+    return jax.tree_util.tree_map(lambda v: np.asarray(v, np.float32), physics)
+
+
 @functools.partial(jax.jit, static_argnames=("arch", "layer", "q"))
 def _one_step(key, W, b, a, physics, t, arch, layer, q):
     shape = a.shape[:2] + ((q,) if q else ())
@@ -188,29 +198,54 @@ def one_step_shots(key, model: Model, meas: Measurement, layer: int, draws: int 
     else:
         a = jnp.asarray(meas.taps[layer - 2], jnp.float32)
     t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
-    return _one_step(key, W, b, a, model.physics, t, meas.arch, layer, int(draws))
+    return _one_step(key, W, b, a, strong32(model.physics), t, meas.arch, layer, int(draws))
 
 
 def one_step_pre(model: Model, meas: Measurement, layer: int) -> np.ndarray:
     """Layer ``layer``'s noiseless pre-activation (n, d_l) fed with the mean over shots of the
     measured layer before (x for layer 1)."""
     W, b = params32(model.weights(meas))[layer - 1]
-    depth = meas.arch.depth
     a = meas.x if layer == 1 else np.mean(meas.taps[layer - 2], axis=1)
-    W = model.physics.effective_weights(W, layer, depth)
-    z = jnp.asarray(a, jnp.float32) @ W.T + model.physics.bias(b, layer, depth)
-    return np.asarray(z, np.float64)
+    return np.asarray(_one_step_pre(W, b, jnp.asarray(a, jnp.float32), strong32(model.physics), layer,
+                                    meas.arch.depth), np.float64)
+
+
+@functools.partial(jax.jit, static_argnames=("layer", "depth"))
+def _one_step_pre(W, b, a, physics, layer, depth):
+    return a @ physics.effective_weights(W, layer, depth).T + physics.bias(b, layer, depth)
 
 
 def noiseless_pre(model: Model, meas: Measurement):
     """The model's noiseless pre-activations z_l (n, d_l) of every layer, through the core's
     forward pass with every draw zero (every effect's hooks apply; gains at 1 + 0)."""
-    arch = meas.arch
-    noise = {k: jnp.zeros((meas.n, 1) + tuple(ev), jnp.float32) for k, ev in model.physics.draws(arch).items()}
-    out = forward(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32)[:, None, :], noise, model.physics,
-                  arch, t=None, taps=True)
-    return [np.asarray(z[:, 0], np.float64) for z in out.pre]
+    pre = _noiseless(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), strong32(model.physics),
+                     meas.arch)[0]
+    return [np.asarray(z, np.float64) for z in pre]
+
+
+def noiseless_taps(model: Model, meas: Measurement, physics=None):
+    """The noiseless outputs a_l (n, d_l) of every layer, every draw zero (float64 numpy), under
+    ``physics`` (default the model's)."""
+    physics = model.physics if physics is None else physics
+    taps = _noiseless(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), strong32(physics),
+                      meas.arch)[1]
+    return [np.asarray(a, np.float64) for a in taps]
+
+
+@functools.partial(jax.jit, static_argnames=("arch",))
+def _noiseless(params, x, physics, arch):
+    """(pre-activations, outputs) of every layer with every draw zero, in one program (op by op
+    the core's forward was some thirty dispatched programs a diagnosis traced)."""
+    noise = {k: jnp.zeros((x.shape[0], 1) + tuple(ev), jnp.float32) for k, ev in physics.draws(arch).items()}
+    out = forward(params, x[:, None, :], noise, physics, arch, t=None, taps=True)
+    return [z[:, 0] for z in out.pre], [a[:, 0] for a in out.taps]
+
+
+@functools.partial(jax.jit, static_argnames=("sigma",))
+def central_slope(z, sigma, h: float = 1e-3):
+    """(sigma(z + h) - sigma(z - h)) / (2 h) in one program (float32)."""
+    return (sigma(z + h) - sigma(z - h)) / (2 * h)
 
 
 __all__ = ["Model", "params32", "default_model_shots", "tiled_times", "draws", "layer_outputs", "model_shots",
-           "one_step_shots", "noiseless_pre", "named_subkey"]
+           "one_step_shots", "noiseless_pre", "noiseless_taps", "central_slope", "named_subkey"]

@@ -112,11 +112,15 @@ def test_d_dtheta_pathwise_matches_fd_on_common_draws(x64):
         a = _flat(d_dtheta_grad(key, params, x, y, phys, ARCH, theta=theta, method="pathwise", K2=4).mean)
         b = _flat(d_dtheta_grad(key, params, x, y, phys, ARCH, theta=theta, method="fd", K2=4, h=1e-4).mean)
         assert np.allclose(a, b, rtol=1e-5, atol=1e-7 * np.abs(a).max()), theta
-    # shot noise sqrt(q |v|) has a kink at v = 0, where differences are poor: compare statistically
+    # shot noise sqrt(q |v|) has a kink at v = 0, where differences are poor: compare statistically,
+    # by the paired difference on the same draws against its own standard error (20 coordinates,
+    # t_15 tails: a false alarm ~3e-3). Each estimate's own se at 2 sd, as before, failed on
+    # GIFT_TEST_SEED=569949936: 20 coordinates at 2 sd each fail together often
     shot = phys.with_effect("shot", q=0.02)
-    a = d_dtheta_grad(key, params, x, y, shot, ARCH, theta="q", method="pathwise", K2=4)
-    b = d_dtheta_grad(key, params, x, y, shot, ARCH, theta="q", method="fd", K2=4, h=1e-4)
-    assert np.all(np.abs(_flat(a.mean) - _flat(b.mean)) < 2.0 * _flat(a.se))
+    a = d_dtheta_grad(key, params, x, y, shot, ARCH, theta="q", method="pathwise", K2=4, keep_samples=True)
+    b = d_dtheta_grad(key, params, x, y, shot, ARCH, theta="q", method="fd", K2=4, h=1e-4, keep_samples=True)
+    z = _paired_z(a, b)
+    assert np.all(np.abs(z[np.isfinite(z)]) < 5.0), z
     s1 = _flat(d_dtheta_grad(key, params, x, y, phys, ARCH, theta="s", K2=4).mean)
     s2 = _flat(d_ds_grad(key, params, x, y, phys, ARCH, K2=4).mean)
     np.testing.assert_allclose(s1, s2)

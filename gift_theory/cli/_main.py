@@ -202,8 +202,10 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-def entry() -> None:
-    """The ``gift`` console script: :func:`main`, then exit without the interpreter's teardown.
+def entry(argv=None):
+    """The ``gift`` console script: :func:`main`, then -- run as the program (``argv`` None) --
+    exit without the interpreter's teardown. Called with ``argv`` (a study running commands in
+    its own process), it returns main's exit status like :func:`main`.
 
     JAX's exit hook clears every cache of the programs it compiled (0.7 s after a diagnosis of
     a 16-32-16-8 file, a tenth of the command); the command has nothing left to clean by then
@@ -212,6 +214,8 @@ def entry() -> None:
     """
     import multiprocessing
 
+    if argv is not None:
+        return main(argv)
     code = main()
     try:
         sys.stdout.flush()

@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import gift_theory as gt
-from gift_theory.cli._main import main
+from gift_theory.cli import main
 
 
 def run(capsys, *argv):

@@ -182,7 +182,7 @@ def test_paper_noise_laws_map_exactly_onto_the_effects(kind, x64):
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(capsys, tmp_path):
-    from gift_theory.cli._main import main
+    from gift_theory.cli import main
 
     assert main(["figures", "--only", "no_such_figure"]) == 2
     err = capsys.readouterr().err

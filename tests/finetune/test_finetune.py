@@ -150,7 +150,7 @@ def test_spsa_never_blows_up_on_a_flat_start():
 
 
 def _cli(capsys, *argv):
-    from gift_theory.cli._main import main
+    from gift_theory.cli import main
     rc = main(list(argv))
     out = capsys.readouterr()
     return rc, out.out, out.err

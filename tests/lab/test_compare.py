@@ -383,7 +383,7 @@ def test_compare_command_states_power_next_to_the_verdict(deep_setup, tmp_path, 
     import json
 
     from gift_theory.cli._compare import render
-    from gift_theory.cli._main import main
+    from gift_theory.cli import main
     from gift_theory.lab import save_measurement
 
     params, x = deep_setup

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import gift_theory as gt
-from gift_theory.cli._main import main
+from gift_theory.cli import main
 from gift_theory.lab import diagnose, fit_effects, save_measurement, signatures, simulate_measurement
 
 WIDTHS = (6, 12, 6, 4)

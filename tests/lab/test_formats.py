@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import gift_theory as gt
-from gift_theory.cli._main import main
+from gift_theory.cli import main
 from gift_theory.lab import Measurement, load_measurement, save_measurement, simulate_measurement
 from gift_theory.lab._io import detect_format, save_file, save_netcdf, save_wide_csv, save_weights
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import gift_theory as gt
-from gift_theory.cli._main import main
+from gift_theory.cli import main
 from gift_theory.lab import (Measurement, load_measurement, save_csv, save_measurement, simulate_measurement,
                              validate_arrays)
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import gift_theory as gt
-from gift_theory.cli._main import main
+from gift_theory.cli import main
 from gift_theory.effects import MECHANISMS, Effect, register
 from gift_theory.effects._base import unregister
 from gift_theory.lab import Model, fit_effects, save_measurement, signatures, simulate_measurement

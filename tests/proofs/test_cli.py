@@ -2,7 +2,7 @@
 
 import json
 
-from gift_theory.cli._main import main
+from gift_theory.cli import main
 
 KEYS = {"id", "claim", "verdict", "evidence", "correction", "counterexample", "hypotheses"}
 

@@ -8,7 +8,7 @@ import runpy
 import shlex
 import sys
 
-from gift_theory.cli._main import main
+from gift_theory.cli import main
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

@@ -74,7 +74,7 @@ def test_rounded_critical_points_are_critical_within_their_numerical_error(x64):
 
 
 def test_per_sample_J_of_wrong_shape_is_refused(tmp_path, capsys):
-    from gift_theory.cli._main import main
+    from gift_theory.cli import main
 
     f = tmp_path / "shape32.py"
     f.write_text("import jax.numpy as jnp\ndef J(w, s):\n    return jnp.ones((3, 2)) * w[0] * s\nw0 = [1.0]\n")
@@ -84,7 +84,7 @@ def test_per_sample_J_of_wrong_shape_is_refused(tmp_path, capsys):
 
 
 def test_cli_family_json_says_outside(tmp_path, capsys):
-    from gift_theory.cli._main import main
+    from gift_theory.cli import main
 
     f = tmp_path / "saddle.py"
     f.write_text("def J(w, s):\n    return (w[0] - s) ** 2 - w[1] ** 2\nw0 = [1.0, 1.0]\nwt = [1.5, 0.0]\n")

@@ -28,6 +28,7 @@ from ._objective import paired_difference as paired_difference
 from ._objective import per_input_loss as per_input_loss
 from ._params import Box as Box
 from ._params import Layer as Layer
+from ._params import cast as cast_params
 from ._params import arch_of as arch_of
 from ._params import check_params as check_params
 from ._params import flatten as flatten
@@ -41,7 +42,9 @@ from .effects import awgn as awgn
 from .effects import make_effect as make_effect
 from .effects import parse_effect as parse_effect
 
+from ._io import atomic_path as atomic_path
 from ._io import atomic_write as atomic_write
+from ._io import atomic_write_bytes as atomic_write_bytes
 from ._io import atomic_write_text as atomic_write_text
 from ._io import save_figure as save_figure
 from ._xla import use_compilation_cache as use_compilation_cache

@@ -4,7 +4,7 @@ and the curves of J_s0, J_st around their minimisers (paper fig:example-fine-tun
 Every function draws on the axes it is given (``ax=``) or on a new figure, and returns the
 :class:`matplotlib.figure.Figure`; none selects a backend or writes a file, so the plots show
 inline in Jupyter and a caller that wants a file calls ``fig.savefig(path)`` (or
-``gift_theory._io.save_figure`` for an atomic write).
+``gift_theory.save_figure`` for an atomic write).
 """
 
 from __future__ import annotations

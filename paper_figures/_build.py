@@ -19,7 +19,7 @@ import numpy as np
 
 from ._jobs import unavailable
 from ._scales import SCALES, get_scale, sweeps
-from gift_theory._io import save_figure
+from gift_theory import save_figure
 
 from ._sweep import _git_commit, assemble, load_points, open_client, open_dataset, restrict, run_sweep, save_dataset
 

@@ -138,8 +138,8 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     if train_epochs is not None:
         opts["train_epochs"] = int(train_epochs)
     opts.setdefault("predict_s", prediction_level(s_true, st))
-    from gift_theory import _memo
-    from gift_theory._phases import PhaseClock
+    from gift_theory import memo as _memo
+    from gift_theory.profiling import PhaseClock
 
     if _memo.folder() is None:  # share the in-silico part with the other points, on any worker
         from gift_theory.training import cache_dir
@@ -168,7 +168,7 @@ SHARED_TAGS = ("direction", "curvature", "pair_se", "slope_s0")
 
 def shared_work(before: dict, after: dict) -> dict:
     """``seconds_shared`` (computing the shared in-silico work this point did not find done),
-    ``shared_hits`` and ``shared_misses``, from two :func:`gift_theory._memo.counters`."""
+    ``shared_hits`` and ``shared_misses``, from two :func:`gift_theory.memo.counters`."""
     zero = {"hits": 0, "misses": 0, "seconds_computed": 0.0}
     d = {k: sum(after.get(t, zero)[k] - before.get(t, zero)[k] for t in SHARED_TAGS) for k in zero}
     return {"seconds_shared": float(d["seconds_computed"]), "shared_hits": int(d["hits"]),
@@ -196,8 +196,8 @@ def ceiling_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_k
     ``<kind>_rel_step_acc``, ``<kind>_at_edge``; ``cos_<kind>_gradient`` with the gradient
     among the kinds; the phases' seconds as in :func:`gift_job`.
     """
-    from gift_theory import _memo
-    from gift_theory._phases import PhaseClock
+    from gift_theory import memo as _memo
+    from gift_theory.profiling import PhaseClock
 
     run_ceiling = _run_ceiling()
     s_true, effects = true_noise(noise_kind, st)
@@ -313,7 +313,7 @@ def unavailable(job: str, fixed: dict | None = None) -> str | None:
 def _with_costs(out: dict, s_true: float, clock, memo_before) -> dict:
     """A point's numbers plus the chip's true s, each top-level phase's seconds, the compile
     seconds and the in-silico work it shared with earlier points."""
-    from gift_theory import _memo  # imported in the job, as the workers do
+    from gift_theory import memo as _memo  # imported in the job, as the workers do
 
     out["s_true"] = s_true
     for name, p in clock.phases.items():

@@ -4,7 +4,7 @@ One fresh process (so that compilation is measured from cold) trains one net of 
 scale in silico (30 epochs on mnist5k, into a temporary cache), then runs GIFT points on it as
 the sweep's job does (``finetune_on`` with run_finetune's defaults), each with the chip's true
 noise of a different law, so a structural change of the physics is measured too. Every phase
-(:mod:`gift_theory._phases`) reports wall seconds, seconds JAX spent compiling inside it and
+(:mod:`gift_theory.profiling`) reports wall seconds, seconds JAX spent compiling inside it and
 the programs it compiled; every total carries its credited floating-point work and the ratio
 of its rate to numpy's float32 matmul rate measured in the same run (the roof).
 
@@ -59,9 +59,9 @@ def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
     import jax
 
     import gift_theory as gt
-    from gift_theory._params import cast
-    from gift_theory._phases import PhaseClock, compile_totals, compiled_functions, listen
-    from gift_theory._bench import matmul_gflops
+    from gift_theory import cast_params as cast
+    from gift_theory.profiling import PhaseClock, compile_totals, compiled_functions, listen
+    from gift_theory.profiling import matmul_gflops
     from gift_theory.data import load_dataset
     from gift_theory.finetune import finetune_on, true_physics
     from gift_theory.training import default_config, load_or_train
@@ -90,7 +90,7 @@ def _child(net: str, epochs: int, s0: float, seed: int) -> dict:
     _log(f"training {epochs} epochs: {wall:.1f} s (compile {sgd.get('compile_seconds', 0):.1f} s), "
          f"{train['ratio_to_matmul']:.2f} of matmul")
     w0 = cast(w0, jax.numpy.float32)
-    from gift_theory import _memo
+    from gift_theory import memo as _memo
 
     _memo.use_folder(None)
     os.environ.pop("GIFT_MEMO_DIR", None)  # nothing on disk either
@@ -193,7 +193,7 @@ def main(argv=None) -> int:
         return 0
     r = profile(args.net, args.epochs, args.s0, args.seed, args.compile_cache)
     if args.out:
-        from gift_theory._io import atomic_write_bytes
+        from gift_theory import atomic_write_bytes
 
         atomic_write_bytes(args.out, (json.dumps(r, indent=1, default=float) + "\n").encode())
     sys.stdout.write((json.dumps(r, default=float) if args.json else render(r)) + "\n")

@@ -29,7 +29,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from gift_theory._io import atomic_path, atomic_write_bytes
+from gift_theory import atomic_path, atomic_write_bytes
 
 __all__ = ["Sweep", "run_sweep", "assemble", "load_points", "point_id", "restrict", "atomic_write_bytes", "toy_job"]
 

@@ -16,7 +16,7 @@ and the wall time is work / workers (the sweeps are independent points; the pool
 worker busy).
 
 Points with the same (net, method, s0, seed) share their in-silico work at s0 (the memo of
-:mod:`gift_theory._memo`: direction, curvature, paired se, slope at s0), whatever the chip's
+:mod:`gift_theory.memo`: direction, curvature, paired se, slope at s0), whatever the chip's
 noise level and law. A point records the seconds it spent computing shared work it did not
 find done (``seconds_shared``). So a point's steady seconds exclude them, and
 

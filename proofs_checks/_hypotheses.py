@@ -38,7 +38,7 @@ def activation_expression(activation):
         return None
     import jax.numpy as jnp
 
-    from gift_theory._arch import ACTIVATIONS
+    from gift_theory import ACTIVATIONS
 
     pts = np.linspace(-3.0, 3.0, 7)
     jx = np.asarray(ACTIVATIONS[activation](jnp.asarray(pts)), np.float64)

@@ -82,8 +82,8 @@ def _physics(spec, s, seed):
 def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
     import gift_theory as gt
     from gift_theory.lab import Model, compare, simulate_measurement
-    from gift_theory.lab._diagnose import Session
-    from gift_theory.lab._offset_prior import prior_check, refusing
+    from gift_theory.lab import Session
+    from gift_theory.lab import prior_check, refusing
 
     from gift_theory.lab import identify
 

@@ -8,7 +8,7 @@ independent plain-numpy simulator (:mod:`studies.contract_sim`, written from CON
 from gift's forward pass) with a true value drawn at random, on a random 6-10-8-3 tanh network
 (60 inputs x 24 shots); gift fits the model exactly as ``gift fit FILE --add EFFECT`` does
 (awgn on the fitting half, then the effect on top) and computes the interval of
-:func:`gift_theory.lab._fit.fit_uncertainty`. A row records the truth, the estimate, the
+:func:`gift_theory.lab.fit_uncertainty`. A row records the truth, the estimate, the
 interval and whether it covers the truth.
 
     s      awgn only, s ~ U(0.03, 0.10)                          interval of s
@@ -90,9 +90,9 @@ def run_one(cell: str, seed: int, taps: bool) -> dict:
     import jax
 
     from gift_theory.lab import fit_model
-    from gift_theory.lab._diagnose import split_inputs
-    from gift_theory.lab._fit import fit_uncertainty
-    from gift_theory.lab._fit_moments import MomentProblem
+    from gift_theory.lab import split_inputs
+    from gift_theory.lab import fit_uncertainty
+    from gift_theory.lab import MomentProblem
 
     t0 = time.time()
     meas, truth, s_true = simulate(cell, seed, taps)
@@ -218,7 +218,7 @@ def main(argv=None) -> int:
                                      f"{time.time() - t_start:.0f} s so far)\n")
                     sys.stderr.flush()
     summ = summary(args.out, cells, taps_list)
-    from gift_theory._io import atomic_write
+    from gift_theory import atomic_write
 
     atomic_write(os.path.join(args.out, "summary.json"), lambda fh: fh.write(json.dumps(summ, indent=1).encode()))
     sys.stdout.write(render(summ) + "\n")

@@ -37,6 +37,7 @@ from ._compare import power_notes as power_notes
 from ._compare import power_of as power_of
 from ._compare import predictive_moments as predictive_moments
 from ._diagnose import Candidate as Candidate
+from ._diagnose import Session as Session
 from ._diagnose import Diagnosis as Diagnosis
 from ._diagnose import FitResult as FitResult
 from ._diagnose import compare_measurement as compare_measurement
@@ -48,6 +49,7 @@ from ._diagnose import ranked as ranked
 from ._diagnose import split_inputs as split_inputs
 from ._fit import fit_model as fit_model
 from ._fit import fit_uncertainty as fit_uncertainty
+from ._fit_moments import MomentProblem as MomentProblem
 from ._identify import Identification as Identification
 from ._identify import identify as identify
 from ._figures import error_ladder as error_ladder
@@ -65,6 +67,8 @@ from ._io import save_wide_csv as save_wide_csv
 from ._io import save_measurement as save_measurement
 from ._io import validate_arrays as validate_arrays
 from ._localise import Residuals as Residuals
+from ._offset_prior import prior_check as prior_check
+from ._offset_prior import refusing as refusing
 from ._localise import residuals as residuals
 from ._localise import signatures as signatures
 from ._localise import where_it_fails as where_it_fails

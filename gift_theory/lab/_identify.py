@@ -487,19 +487,21 @@ def _score_given_shape(lay: _Layer, act: str, s2: float, tt, Chat, r: float, ali
         X = X - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, X))
         H = H - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, H))
         k = X.shape[2]
-    # stacked over (input, neuron): the map's design is block-diagonal over neurons, the shape's
-    # columns are shared; both projected off the shape's span
+    # stacked over (input, neuron): the map's design B is block-diagonal over neurons (neuron i's
+    # row of input n is X[n, i] in its own block), the shape's columns H are shared; both are
+    # projected off the shape's span, B' = B - H G with G = (H'H)^+ H'B of rank <= the shape's
+    # columns, so the score's covariance sum_n B'_n^T C_n B'_n is the sandwich meat of B plus
+    # low-rank terms (never the dense (n da) x (da k) design)
     Hs = H.reshape(n * da, -1)
-    Xs = np.zeros((n, da, da, k))
-    Xs[:, np.arange(da), np.arange(da), :] = X
-    Xs = Xs.reshape(n * da, da * k)
     Pi = np.linalg.pinv(Hs.T @ Hs)
-    Xs = Xs - Hs @ (Pi @ (Hs.T @ Xs))
-    es = e.reshape(-1) - Hs @ (Pi @ (Hs.T @ e.reshape(-1)))
-    U = Xs.T @ es
-    Xn = Xs.reshape(n, da, da * k)
+    G = Pi @ np.einsum("nib,nik->bik", H, X).reshape(H.shape[2], da * k)  # (c, da k)
+    es = e - H @ (Pi @ (Hs.T @ e.reshape(-1)))  # (n, da)
+    U = np.einsum("nik,ni->ik", X, es).reshape(-1) - G.T @ (Hs.T @ es.reshape(-1))
     Ca = Chat[:, alive][:, :, alive] / r
-    V = np.einsum("nia,nib->ab", Xn, np.matmul(Ca, Xn))
+    CH = np.matmul(Ca, H)  # (n, da, c)
+    HCB = np.einsum("nic,nik->cik", CH, X).reshape(H.shape[2], da * k)  # sum_n H_n^T C_n B_n
+    HCH = np.einsum("nic,nid->cd", H, CH)
+    V = (_meat(Ca, X).reshape(da * k, da * k) - G.T @ HCB - HCB.T @ G + G.T @ HCH @ G)
     w, Q = np.linalg.eigh(V)
     keep = w > 1e-10 * max(w.max(), 1e-300)
     q = float(np.sum((Q[:, keep].T @ U) ** 2 / w[keep]))

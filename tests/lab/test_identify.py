@@ -25,11 +25,13 @@ def _net(seed, widths=(6, 10, 8, 4)):
 
 
 def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, bias_drift=None, common=None,
-        taps=True):
+        taps=True, act=np.tanh, errors=None):
     """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
     y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
     (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
-    ``common`` (layer, c): c xi added to every neuron of the layer's output, one xi per shot."""
+    ``common`` (layer, c): c xi added to every neuron of the layer's output, one xi per shot;
+    ``act`` the hidden layers' true activation (the programmed one is tanh); ``errors``
+    {layer: e} a fixed weight error E ~ N(0, e^2 rms(W)^2) per entry (W_eff = W + E)."""
     Ws, bs = _net(seed, widths)
     rng = np.random.default_rng(seed + 1)
     x = rng.uniform(0, 1, (n, widths[0]))
@@ -39,9 +41,11 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
     L = len(Ws)
     for l, (W, b) in enumerate(zip(Ws, bs), start=1):
         g = (gains or {}).get(l, 1.0)
+        if errors and l in errors:
+            W = W + errors[l] * np.sqrt(np.mean(W ** 2)) * np.random.default_rng(seed + 100 + l).normal(size=W.shape)
         bb = b[None, None, :] + (bias_drift[1] * t[:, :, None] if bias_drift and bias_drift[0] == l else 0.0)
         z = g * np.einsum("nkp,ip->nki", a, W) + bb + s * rng.normal(size=(n, r, W.shape[0]))
-        a = (np.tanh(z) + s * rng.normal(size=z.shape)) if l < L else z
+        a = (act(z) + s * rng.normal(size=z.shape)) if l < L else z
         if dead and dead[0] == l:
             a[:, :, dead[1]] = s * rng.normal(size=(n, r))
         if common and common[0] == l:
@@ -92,6 +96,22 @@ def test_gain_error_fires_on_a_fixed_gain_and_weight_error_does_not():
     assert not _sig(ident, "weight_error")
     m = _first(ident)
     assert m[0]["mechanism"] == "gain_error" and m[0]["layers"] == [1, 2, 3] and m[0]["p_value"] < 0.01
+
+
+def test_a_transfer_that_is_not_tanh_is_named_not_a_weight_error_and_a_real_one_still_shows():
+    """A sin modulator moves the fitted map too; given a shape of z shared by the neurons the map
+    is the programmed one, so activation_mismatch leads and no map class is named. A weight error
+    on top (layer 2) is not a shared function of z: it still shows there."""
+    meas = sim(21, n=120, r=32, act=np.sin)
+    ident = identify(meas)
+    shape = [r for r in ident.rows() if r["test"] == "shape" and r["layer"] in (1, 2)]
+    assert all(r["p"] < 1e-3 and "given that shape the map is the programmed one" in r["evidence"] for r in shape)
+    assert not _sig(ident, "weight_error") and not _sig(ident, "bias_offset")
+    assert _first(ident)[0]["mechanism"] == "activation_mismatch"
+    both = identify(sim(21, n=120, r=32, act=np.sin, errors={2: 0.3}))
+    assert [r["layer"] for r in _sig(both, "weight_error")] == [2]
+    assert any(r["layer"] == 2 and "deviates beyond that shape too" in r["evidence"]
+               for r in both.rows() if r["test"] == "shape")
 
 
 def test_a_dead_neuron_is_found_and_named():

@@ -218,18 +218,20 @@ def _one_step_pre(W, b, a, physics, layer, depth):
 def noiseless_pre(model: Model, meas: Measurement):
     """The model's noiseless pre-activations z_l (n, d_l) of every layer, through the core's
     forward pass with every draw zero (every effect's hooks apply; gains at 1 + 0)."""
-    pre = _noiseless(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), strong32(model.physics),
-                     meas.arch)[0]
-    return [np.asarray(z, np.float64) for z in pre]
+    return _noiseless_of(model, meas, model.physics)[0]
 
 
 def noiseless_taps(model: Model, meas: Measurement, physics=None):
     """The noiseless outputs a_l (n, d_l) of every layer, every draw zero (float64 numpy), under
     ``physics`` (default the model's)."""
-    physics = model.physics if physics is None else physics
-    taps = _noiseless(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), strong32(physics),
-                      meas.arch)[1]
-    return [np.asarray(a, np.float64) for a in taps]
+    return _noiseless_of(model, meas, model.physics if physics is None else physics)[1]
+
+
+def _noiseless_of(model: Model, meas: Measurement, physics):
+    """(pre-activations, outputs) of every layer, every draw zero, as float64 numpy lists."""
+    pre, taps = _noiseless(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), strong32(physics),
+                           meas.arch)
+    return [np.asarray(z, np.float64) for z in pre], [np.asarray(a, np.float64) for a in taps]
 
 
 @functools.partial(jax.jit, static_argnames=("arch",))

@@ -454,6 +454,15 @@ def _score_omnibus(lay: _Layer, act: str, s2: float, tt, Chat, obs, r: float, al
     return pmin, (_z_of_p(pmin) if pmin < 1.0 else 0.0)
 
 
+def _bin_shares(zref, z):
+    """The :data:`BINS` quantile bins of ``zref`` (outer edges open) and, per input and neuron,
+    the share of ``z``'s shots (n, r, d) in each bin (n, d, BINS)."""
+    edges = np.quantile(zref, np.linspace(0, 1, BINS + 1))
+    edges[0], edges[-1] = -np.inf, np.inf
+    idxb = np.clip(np.searchsorted(edges, z, side="right") - 1, 0, BINS - 1)
+    return edges, np.stack([(idxb == j).mean(1) for j in range(BINS)], axis=-1)
+
+
 def _score_given_shape(lay: _Layer, act: str, s2: float, tt, Chat, r: float, alive, nu: float) -> float:
     """p of the programmed map (W, b; time trends free) by a score test *given* a function of z
     shared by the layer's neurons (the shape test's bins at the programmed z and a polynomial of
@@ -468,16 +477,13 @@ def _score_given_shape(lay: _Layer, act: str, s2: float, tt, Chat, r: float, ali
     X = _design(lay, g0, tt)
     alive = np.asarray(alive, int)
     zz = z0[:, :, alive]
-    edges = np.quantile(zz, np.linspace(0, 1, BINS + 1))
-    edges[0], edges[-1] = -np.inf, np.inf
-    idxb = np.clip(np.searchsorted(edges, zz, side="right") - 1, 0, BINS - 1)
+    Hb = _bin_shares(zz, zz)[1]
     # the shape: the bins of the shape test, and a smooth part (Legendre polynomials of degree
     # 1 to SHAPE_DEGREE in z scaled to [-1, 1]): bins alone leave the within-bin slope of a smooth transfer
     # (tanh + a tanh^2, sin) in the residual, which the map's design picks up at 240 x 32 shots
     u = zz / max(float(np.max(np.abs(zz))), 1e-300)
     poly = np.polynomial.legendre.legvander(u, SHAPE_DEGREE)[..., 1:]  # (n, r, da, SHAPE_DEGREE)
-    H = np.concatenate([np.stack([(idxb == j).mean(1) for j in range(BINS)], axis=-1), poly.mean(1)],
-                       axis=-1)  # (n, da, B + SHAPE_DEGREE)
+    H = np.concatenate([Hb, poly.mean(1)], axis=-1)  # (n, da, B + SHAPE_DEGREE)
     e, X = e[:, alive], X[:, alive]
     da, k = X.shape[1], X.shape[2]
     if tt is not None:  # the time trends are nuisance parameters too, per neuron (as in the omnibus)
@@ -925,10 +931,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     # ---- the activation's shape: binned residual shared by the neurons, beyond each affine map
     ebar = E.mean(1)
     zz = z[:, :, alive] if alive else z
-    edges = np.quantile(zz, np.linspace(0, 1, BINS + 1))
-    edges[0], edges[-1] = -np.inf, np.inf
-    idxb = np.clip(np.searchsorted(edges, z, side="right") - 1, 0, BINS - 1)
-    H = np.stack([(idxb == j).mean(1) for j in range(BINS)], axis=-1)  # (n, d, B)
+    edges, H = _bin_shares(zz, z)  # H: (n, d, B)
     Bx = np.linalg.inv(np.einsum("nip,niq->ipq", X, X) + 1e-12 * np.eye(k))
     proj = np.einsum("nip,ipq,iqb->nib", X, Bx, np.einsum("miq,mib->iqb", X, H))
     Ht = (H - proj)[:, alive]

@@ -1104,12 +1104,15 @@ class Identification:
 
     taps : whether each layer was identified on its own (taps) or only the output
     levels_row : the test of equal noise levels across layers (taps), or None
+    output_candidates : without taps, each candidate mechanism put into the model and its lack
+        of fit of the output's mean (:func:`~gift_theory.lab._explain_output.explain`), else ()
     """
 
     taps: bool
     depth: int
     layers: tuple
     levels_row: dict | None = None
+    output_candidates: tuple = ()
 
     def rows(self) -> list[dict]:
         """Every test with its layer and Holm-adjusted p-value (``p_adj``) over classes x layers."""
@@ -1177,6 +1180,10 @@ def _identify(meas: Measurement, s: float | None) -> Identification:
                 break
             s = out[-1].s
             out = [_identify_layer(lay, act, s, meas.t, meas.arch.depth, False) for lay in _layers(meas, s)]
+    cands = ()
+    if not meas.has_taps and meas.arch.depth > 1:
+        from ._explain_output import explain
+        cands = tuple(explain(meas, out[-1].s))
     levels = None
     if meas.has_taps and len(out) > 1:
         x = np.array([np.log(li.s ** 2) for li in out])
@@ -1195,7 +1202,7 @@ def _identify(meas: Measurement, s: float | None) -> Identification:
                       + f" (layer {out[worst].layer} stands out, z = {zl[worst]:.1f})")
         levels["layer"] = out[worst].layer
         levels["layers"] = bad or [out[worst].layer]
-    return Identification(meas.has_taps, meas.arch.depth, tuple(out), levels)
+    return Identification(meas.has_taps, meas.arch.depth, tuple(out), levels, cands)
 
 
 #: what the output alone cannot separate (no taps); docs/identification.md has the full table

@@ -30,6 +30,7 @@ import numpy as np
 from scipy import stats
 
 from ..effects import MECHANISMS, REGISTRY
+from ._explain_output import order_map_classes
 
 #: without an identification, a class is listed when its evidence stands this many standard deviations out
 THRESHOLD = 4.0
@@ -368,6 +369,8 @@ def mechanisms(ctx: Context) -> list[dict]:
             out.append({"mechanism": cls, "layers": sorted(int(l) for l in layers), "score": float(score),
                         "evidence": text, "p_value": float(p)})
     out.sort(key=lambda m: -m["score"])
+    if ctx.ident is not None and not ctx.taps and getattr(ctx.ident, "output_candidates", ()):
+        out = order_map_classes(out, ctx.ident.output_candidates)
     notes = getattr(ctx.fit_gain, "notes", {})
     if notes and out:
         out[0]["evidence"] += "; " + "; ".join(notes.values())

@@ -1,0 +1,100 @@
+"""Without taps: candidate mechanisms put into the model, and which of them explains the
+output's mean (gift_theory.lab._explain_output).
+
+The files come from test_identify's plain-numpy simulator (CONTRACTS §1-§2, not gift's forward
+pass); the derivative columns are checked against central differences of the propagation
+itself, on the same draws.
+"""
+
+import numpy as np
+import pytest
+
+from gift_theory.lab._explain_output import Z_PASS, _propagate, explain, order_map_classes
+from gift_theory.lab._identify import identify
+
+from .test_identify import _first, _net, sim
+
+
+@pytest.fixture(scope="module")
+def small():
+    Ws, bs = _net(5, (4, 6, 5, 3))
+    x = np.random.default_rng(6).uniform(0, 1, (7, 4))
+    return x, list(zip(Ws, bs))
+
+
+def _deformation(rng):
+    return {("gain", 1): 0.1, ("bias", 2): 0.1 * rng.normal(size=5), ("shape", 1): 0.05 * rng.normal(size=7),
+            ("shape", 2): 0.05 * rng.normal(size=7), ("alpha", 2): 0.1 * rng.normal(size=5),
+            ("beta", 1): 0.1 * rng.normal(size=6), ("alpha", 3): 0.1 * rng.normal(size=3),
+            ("shape", 3): 0.02 * rng.normal(size=7), ("weight", 2): 0.1 * rng.normal(size=30)}
+
+
+@pytest.mark.parametrize("key", [("gain", 1), ("gain", 2), ("gain", 3), ("bias", 1), ("bias", 3), ("alpha", 1),
+                                 ("alpha", 2), ("alpha", 3), ("beta", 1), ("beta", 2), ("shape", 1),
+                                 ("shape", 2), ("shape", 3), ("weight", 1), ("weight", 2), ("weight", 3)])
+def test_each_column_is_the_derivative_of_the_propagated_mean_at_a_deformed_point(small, key):
+    """The chain rule carried back draw by draw, at a point where every kind of deformation is
+    already in place (the Gauss-Newton steps need the columns there), against central
+    differences of the propagated mean on the same draws."""
+    x, params = small
+    _, _, _, scales = _propagate(x, params, "tanh", 0.05, 3, columns=False)
+    base = _deformation(np.random.default_rng(8))
+    _, _, cols, _ = _propagate(x, params, "tanh", 0.05, 3, scales, base, columns=True)
+    J = cols[key]
+    k = J.shape[2]
+    h = 1e-6
+    for i in range(k):
+        def at(sign):
+            d = dict(base)
+            v = np.array(d.get(key, np.zeros(k)), dtype=np.float64, copy=True).reshape(-1)
+            if v.size == 1 and k > 1:
+                v = np.zeros(k)
+            v[i] += sign * h
+            d[key] = float(v[0]) if key[0] == "gain" else v
+            return _propagate(x, params, "tanh", 0.05, 3, scales, d)[0]
+        fd = (at(1) - at(-1)) / (2 * h)
+        assert np.allclose(J[:, :, i], fd, rtol=1e-5, atol=1e-7), (key, i, np.max(np.abs(J[:, :, i] - fd)))
+
+
+def test_without_taps_a_dead_neuron_is_named_by_the_neuron_that_explains_the_mean():
+    meas = sim(12, dead=(2, 3), n=120, r=32, taps=False)
+    ident = identify(meas)
+    cands = {c.name: c for c in ident.output_candidates}
+    assert not cands["programmed"].explains
+    right = cands["neuron 2:4's own gain and offset (dead or stuck)"]
+    assert right.explains and right.k == 3
+    # no other single neuron explains it
+    assert not any(c.explains for n, c in cands.items() if n.startswith("neuron") and c is not right)
+    m = _first(ident)
+    assert m[0]["mechanism"] == "activation_mismatch" and m[0]["layers"] == [2]
+    assert "neuron 2:4" in m[0]["evidence"]
+
+
+def test_without_taps_a_gain_on_every_layer_is_a_gain_error_and_a_null_is_left_alone():
+    gain = identify(sim(11, gains={1: 0.7, 2: 0.7, 3: 0.7}, n=120, r=32, taps=False))
+    cands = {c.name: c for c in gain.output_candidates}
+    assert not cands["programmed"].explains and cands["a gain on every layer"].explains
+    assert _first(gain)[0]["mechanism"] == "gain_error"
+    null = identify(sim(15, n=120, r=32, taps=False))
+    prog = next(c for c in null.output_candidates if c.name == "programmed")
+    assert prog.explains and prog.z < Z_PASS
+    # nothing to reorder on a programmed mean: the mechanism list is the tests' alone
+    mechs = [{"mechanism": "weight_error", "layers": [3], "score": 5.0, "evidence": "", "p_value": 1e-6}]
+    assert order_map_classes(mechs, null.output_candidates) == mechs
+
+
+def test_without_taps_a_transfer_that_is_not_tanh_leads_as_activation_mismatch():
+    meas = sim(21, n=160, r=32, act=np.sin, taps=False)
+    ident = identify(meas)
+    cands = sorted((c for c in ident.output_candidates if c.explains), key=lambda c: (c.k, c.z))
+    assert cands and cands[0].mechanism == "activation_mismatch", [(c.name, c.k, c.z) for c in cands[:4]]
+    assert _first(ident)[0]["mechanism"] == "activation_mismatch"
+
+
+def test_explain_is_deterministic_and_reports_every_class():
+    meas = sim(12, dead=(2, 3), n=120, r=16, taps=False)
+    a = explain(meas, 0.05)
+    b = explain(meas, 0.05)
+    assert [(c.name, c.q) for c in a] == [(c.name, c.q) for c in b]
+    assert {c.mechanism for c in a} >= {"none", "gain_error", "bias_offset", "activation_mismatch",
+                                        "readout_nonlinearity", "weight_error"}

@@ -69,6 +69,12 @@ def render(out) -> str:
             ptext = ((f"p = {p:<9.3g}" if p > 0 else f"{'p < 1e-300':<13s}") if isinstance(p, (int, float))
                      else " " * 13)
             lines.append(f"  {m['mechanism']:<22s} {where:<14s} {m['score']:7.1f}  {ptext} {m['evidence']}")
+    if out.get("output_explanations"):
+        lines.append("without taps, each candidate mechanism put into the model and fitted to the output's mean "
+                     "(lack of fit z; it explains the mean below 2.33):")
+        for c in out["output_explanations"]:
+            lines.append(f"  {c['mechanism']:<22s} {c['parameters']:4d} parameters  z = {c['lack_of_fit_z']:8.1f}  "
+                         + ("explains  " if c["explains"] else "          ") + c["candidate"])
     if not out.get("explained", True) and out.get("reasons"):
         lines.append("why not explained: " + "; ".join(out["reasons"]))
     lines.append("ranking (held-out discrepancy after fitting): the models that pass (by parsimony-penalised "

@@ -78,6 +78,7 @@ from ._localise import (
     where_it_fails,
 )
 from ._identify import identify
+from ._explain_output import summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms
 from ._shots import Model
 from ._verdict import as_json_fields, refusals, time_free, verdict
@@ -416,6 +417,7 @@ class Diagnosis:
     mechanisms: tuple = ()
     evidence: tuple = ()
     not_fitted: tuple = ()
+    output_explanations: tuple = ()
 
     @property
     def missing_effect_detected(self) -> bool:
@@ -431,6 +433,7 @@ class Diagnosis:
                 **as_json_fields(self.explained, self.reasons, self.verdict, self.failing_layers, self.mechanisms),
                 "ranking": [cand.as_json() for cand in self.ranking],
                 "not_fitted": [dict(r) for r in self.not_fitted],
+                **({"output_explanations": list(self.output_explanations)} if self.output_explanations else {}),
                 "evidence": list(self.evidence),
                 "where": list(self.one_step),
                 "signatures": self.signatures,
@@ -636,7 +639,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),
-                     tuple(evidence), tuple(not_fitted))
+                     tuple(evidence), tuple(not_fitted), tuple(summary(ident.output_candidates)))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -431,3 +431,18 @@ def order_map_classes(mechs: list, candidates) -> list:
                 continue
         out.append(m)
     return out if placed else out + lead
+
+
+def summary(candidates, limit: int = 8) -> list[dict]:
+    """The JSON of the candidates worth reading: the programmed model, every candidate that
+    explains the output's mean (fewest parameters first), then each remaining class's best, at
+    most ``limit`` rows besides the programmed one."""
+    cands = list(candidates)
+    prog = [c for c in cands if c.mechanism == "none"]
+    passing = sorted((c for c in cands if c.explains and c.mechanism != "none"), key=lambda c: (c.k, c.z))
+    rest, seen = [], {c.mechanism for c in passing}
+    for c in sorted(cands, key=lambda c: c.z):
+        if c.mechanism not in seen and c.mechanism != "none":
+            seen.add(c.mechanism)
+            rest.append(c)
+    return [c.to_dict() for c in prog + (passing + rest)[:limit]]

@@ -164,6 +164,10 @@ class _Layer:
     b: np.ndarray
     hidden: bool
     draws: int = 0
+    #: (n, r, d) a known additive term of each shot's pre-activation, or None: the additive trend
+    #: in acquisition time read within the inputs' shots (interleaved acquisition), so the map
+    #: is identified at t = 0 and a drift's time average is not read as a shifted map
+    offset: np.ndarray | None = None
 
     @property
     def mean_factor(self) -> float:
@@ -254,6 +258,8 @@ def _mean_model(lay: _Layer, act: str, W_eff, b_eff, s2, vu, tt=None, drift=None
     times (``tt``: t, (n, r)), the trends ``drift`` = (c, k) (d,) each: an additive
     trend c t and a gain trend k t W a of the pre-activation (the map itself is at t = 0)."""
     z = lay.A @ W_eff.T + b_eff
+    if lay.offset is not None:
+        z = z + lay.offset
     if tt is not None and drift is not None:
         z = z + tt[:, :, None] * (drift[0] + drift[1] * (lay.A @ lay.W.T))
     vz = s2 * vu[:, None, :]
@@ -671,7 +677,8 @@ def _curve(lay: _Layer, act: str, s2: float):
                      for j in range(BINS)], axis=-1)
 
 
-def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2: float, vz, Czu_s):
+def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2: float, vz, Czu_s,
+                E_time=None):
     """The noise's tests at one layer from the within-input residuals ``E`` (n, r, d) and their
     variances ``obs`` (n, d); the covariance across neurons ``Chat_s`` on the neurons ``sub``
     (with the model's unit covariance ``Czu_s`` there); ``var`` the model's variance of each
@@ -761,7 +768,7 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
         # trends within an input's shots (acquisition order interleaved across inputs): the
         # within-input residuals against t - its input's mean, additive per neuron and a gain
         tw = t - t.mean(1, keepdims=True)
-        Es = E[:, :, sub]
+        Es = (E if E_time is None else E_time)[:, :, sub]
         Ed = Es - Es.mean(1, keepdims=True)
         gk = np.broadcast_to(g[:, :, sub], Es.shape)
         rows_t = []
@@ -793,6 +800,29 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
         rows.append(_row("time_drift", "time_noise", _two_sided(z_vt), abs(z_vt), z_vt,
                          f"the noise level at layer {l} moves over acquisition time (z = {z_vt:.1f})"))
     return rows, s_lvl, s_se, kurt
+
+
+def _within_trend(E, g, t, obs):
+    """Per neuron the additive trend c of the pre-activation in acquisition time, read within the
+    inputs' shots (residual against ``g (t - mean t)``), when some neuron's is significant
+    (Bonferroni over the neurons at :data:`ALPHA`), else None. Each c's standard error from the
+    shots' variance per input (``obs``)."""
+    if t is None or E.shape[1] < 3:
+        return None
+    t = np.asarray(t, np.float64)
+    tw = t - t.mean(1, keepdims=True)
+    if np.std(tw) == 0:
+        return None
+    D = g * tw[:, :, None]
+    Ed = E - E.mean(1, keepdims=True)
+    S = np.sum(D * D, axis=(0, 1))
+    c = np.sum(D * Ed, axis=(0, 1)) / np.maximum(S, 1e-300)
+    se = np.sqrt(np.sum(np.sum(D * D, axis=1) * obs, axis=0)) / np.maximum(S, 1e-300)
+    zc = c / np.maximum(se, 1e-300)
+    d = E.shape[2]
+    if 2.0 * stats.norm.sf(np.max(np.abs(zc))) * d >= ALPHA:
+        return None
+    return c, se
 
 
 def _unresolved_layer(lay: _Layer, act: str, s_guess: float, t, k: int) -> LayerIdentity:
@@ -869,6 +899,24 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
         obs = _cell_var(_within(E, g, lay.A)) * f2
         s2 = float(np.sum(obs) / np.sum((var / s2).mean(1)))
     W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
+    E_time = None
+    # (the residuals with W_eff's error along each shot's own input removed, as the time tests read them)
+    Ew = _within(E, g, lay.A) if tt is None and t is not None else None
+    trend = _within_trend(Ew, g, t, _cell_var(Ew)) if Ew is not None else None
+    if trend is not None:
+        trend, trend_se = trend
+        # an additive trend within the inputs' shots: the map is read at t = 0 with it in place
+        # (with an interleaved acquisition its time average c mean(t) is a shift of every input's
+        # z alike -- read as a transfer, a bias drift was named activation_mismatch), and the
+        # noise level without it; the time tests read the residuals with it
+        E_time = Ew
+        lay = dataclasses.replace(lay, offset=np.asarray(t, np.float64)[:, :, None] * trend[None, None, :])
+        for _ in range(2):
+            W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
+            W0, b0 = W_eff, b_eff
+            obs = _cell_var(_within(E, g, lay.A)) * f2
+            s2 = float(np.sum(obs) / np.sum((var / s2).mean(1)))
+        W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
     E = _within(E, g, lay.A)
     obs = _cell_var(E) * f2
     # the across-neuron covariance per input where the map's covariance or the shape test needs
@@ -878,6 +926,13 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
 
     # ---- the mean map and its restrictions
     S, full = _covariance(X, Chat, obs, r / mf)
+    if trend is not None:
+        # the biases at t = 0 carry the trend's error times the inputs' mean time
+        extra = (float(np.mean(t)) * trend_se) ** 2
+        if full:
+            S[np.arange(d) * k + p, np.arange(d) * k + p] += extra
+        else:
+            S[np.arange(d), p, p] += extra
     # the covariance's own degrees of freedom: r - 1 per input, inputs weighted by their leverage
     lev = np.einsum("nip->n", X ** 2)
     nu = float(lev.sum() ** 2 / max(np.sum(lev ** 2), 1e-300)) * max(r - 1, 1)
@@ -1092,7 +1147,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     W_n = (lay.W if choice in ("programmed", "bias") else gain * lay.W if choice in ("gain", "gain+bias")
            else W_eff)
     noise_rows, s_lvl, s_se, kurt = _noise_rows(lay, act, l, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2,
-                                                _unit_var(lay, W_n), _unit_cov(lay, W_n, sub))
+                                                _unit_var(lay, W_n), _unit_cov(lay, W_n, sub), E_time)
     rows.extend(noise_rows)
     return LayerIdentity(l, W_eff, b_eff, se, gain, gain_se, tuple(dead), choice, zc, gam, curve,
                          s_lvl, s_se, kurt, tuple(rows))

@@ -25,17 +25,19 @@ def _net(seed, widths=(6, 10, 8, 4)):
 
 
 def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, bias_drift=None, common=None,
-        taps=True, act=np.tanh, errors=None):
+        taps=True, act=np.tanh, errors=None, interleaved=False):
     """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
     y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
     (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
     ``common`` (layer, c): c xi added to every neuron of the layer's output, one xi per shot;
     ``act`` the hidden layers' true activation (the programmed one is tanh); ``errors``
-    {layer: e} a fixed weight error E ~ N(0, e^2 rms(W)^2) per entry (W_eff = W + E)."""
+    {layer: e} a fixed weight error E ~ N(0, e^2 rms(W)^2) per entry (W_eff = W + E);
+    ``interleaved``: shot k of every input is taken before shot k + 1 of any (else input by input)."""
     Ws, bs = _net(seed, widths)
     rng = np.random.default_rng(seed + 1)
     x = rng.uniform(0, 1, (n, widths[0]))
-    t = (np.arange(n)[:, None] * r + np.arange(r)[None, :]) / (n * r - 1.0)
+    t = ((np.arange(r)[None, :] * n + np.arange(n)[:, None]) if interleaved
+         else (np.arange(n)[:, None] * r + np.arange(r)[None, :])) / (n * r - 1.0)
     a = x[:, None, :] + s * rng.normal(size=(n, r, widths[0]))
     outs = []
     L = len(Ws)
@@ -130,6 +132,21 @@ def test_an_additive_time_drift_is_found_at_its_layer():
     assert rows and {r["layer"] for r in rows} == {1}
     m = _first(ident)
     assert m[0]["mechanism"] == "time_drift" and m[0]["layers"] == [1]
+
+
+def test_a_bias_drifting_under_interleaved_acquisition_is_a_time_drift_not_a_shifted_transfer():
+    """Shot k of every input before shot k + 1 of any: the drift's time average is the same shift
+    of every input's z, which the map alone reads as a shifted transfer (activation_mismatch led,
+    and the shared shift looked like correlated noise). Read at t = 0 with the within-input
+    trend in place, only time_drift is named, at its layer; the trend's size is recovered."""
+    meas = sim(13, bias_drift=(1, 0.3), n=80, r=16, interleaved=True)
+    ident = identify(meas)
+    m = _first(ident)
+    assert [x["mechanism"] for x in m] == ["time_drift"] and m[0]["layers"] == [1]
+    row = next(r for r in _sig(ident, "time_drift") if r["test"] == "time_within")
+    assert abs(row["effect"] - 0.3) < 0.05
+    assert ident.by_layer()[1].choice == "programmed"
+    assert not _first(identify(sim(13, n=80, r=16, interleaved=True)))
 
 
 def test_correlated_additive_noise_is_found_at_its_layer():

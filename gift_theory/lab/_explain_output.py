@@ -37,7 +37,7 @@ it would explain anything.
 
 :func:`explain` returns the candidates with their lack of fit; :func:`order_map_classes` puts,
 among the mechanism list's map classes, the classes whose candidates explain the mean first
-(the fewest parameters first) and those none of whose candidates does after them.
+(by an information criterion) and those none of whose candidates does after them.
 """
 
 from __future__ import annotations
@@ -87,6 +87,10 @@ class Candidate:
     q: float
     z: float
     p: float
+    #: the Bayesian information criterion q + k log(cells): how candidates that explain the mean
+    #: are ordered (a single neuron's 3 parameters against a readout's 7 is no reason to prefer
+    #: it when its misfit is larger by 2 sd, and there are as many neuron candidates as neurons)
+    bic: float = 0.0
 
     @property
     def explains(self) -> bool:
@@ -384,25 +388,31 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
         if spec.blocks and id(f_) not in refined and lin[id(f_)] < REFINE_Z:
             continue  # could pass on its linearisation alone, but was not checked: not reported
         z = zval(q, k)
-        out.append(Candidate(spec.mechanism, spec.name, spec.layers, int(k), q, float(z), float(stats.norm.sf(z))))
+        out.append(Candidate(spec.mechanism, spec.name, spec.layers, int(k), q, float(z), float(stats.norm.sf(z)),
+                             float(q + k * np.log(N))))
     return sorted(out, key=lambda c: c.z)
 
 
 def order_map_classes(mechs: list, candidates) -> list:
     """The mechanism list with the output's explanations applied (no taps): when the programmed
     model does not reproduce the output's mean but a candidate mechanism does, its class leads
-    (the candidate with the fewest parameters first: the most specific explanation), scored at
+    (by the information criterion :attr:`Candidate.bic`: the fewest parameters unless more of
+    them fit clearly better), scored at
     least by how far it lowers the lack of fit, with the candidate named in its evidence; a map
     class no candidate of which explains the mean follows them. A class that explains but was
-    not listed is added (its p-value: the chi-square of the lack of fit it removes). Noise
+    not listed is added (its p-value: the chi-square of the lack of fit it removes) -- only when
+    the list already holds a map class: the identification's calibrated tests decide that the
+    mean map is wrong, the candidates only why. Noise
     classes keep their places: the leads take the first map class's. Unchanged when the programmed mean passes or
     no candidate explains (what then remains is said by the tests)."""
     cands = list(candidates)
     prog = next((c for c in cands if c.mechanism == "none"), None)
     if prog is None or prog.explains:
         return list(mechs)
-    passing = sorted((c for c in cands if c.explains and c.mechanism in MAP_CLASSES), key=lambda c: (c.k, c.z))
-    if not passing:
+    passing = sorted((c for c in cands if c.explains and c.mechanism in MAP_CLASSES), key=lambda c: c.bic)
+    if not passing or not any(m["mechanism"] in MAP_CLASSES for m in mechs):
+        # re-attribution only: the identification's own (calibrated) tests must find the mean
+        # map wrong before a candidate names why
         return list(mechs)
     lead, seen = [], set()
     for c in passing:
@@ -435,11 +445,11 @@ def order_map_classes(mechs: list, candidates) -> list:
 
 def summary(candidates, limit: int = 8) -> list[dict]:
     """The JSON of the candidates worth reading: the programmed model, every candidate that
-    explains the output's mean (fewest parameters first), then each remaining class's best, at
+    explains the output's mean (by information criterion), then each remaining class's best, at
     most ``limit`` rows besides the programmed one."""
     cands = list(candidates)
     prog = [c for c in cands if c.mechanism == "none"]
-    passing = sorted((c for c in cands if c.explains and c.mechanism != "none"), key=lambda c: (c.k, c.z))
+    passing = sorted((c for c in cands if c.explains and c.mechanism != "none"), key=lambda c: c.bic)
     rest, seen = [], {c.mechanism for c in passing}
     for c in sorted(cands, key=lambda c: c.z):
         if c.mechanism not in seen and c.mechanism != "none":

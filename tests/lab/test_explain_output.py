@@ -86,7 +86,7 @@ def test_without_taps_a_gain_on_every_layer_is_a_gain_error_and_a_null_is_left_a
 def test_without_taps_a_transfer_that_is_not_tanh_leads_as_activation_mismatch():
     meas = sim(21, n=160, r=32, act=np.sin, taps=False)
     ident = identify(meas)
-    cands = sorted((c for c in ident.output_candidates if c.explains), key=lambda c: (c.k, c.z))
+    cands = sorted((c for c in ident.output_candidates if c.explains), key=lambda c: c.bic)
     assert cands and cands[0].mechanism == "activation_mismatch", [(c.name, c.k, c.z) for c in cands[:4]]
     assert _first(ident)[0]["mechanism"] == "activation_mismatch"
 

@@ -62,8 +62,10 @@ MAX_SHARE = 0.1
 WEIGHT_COLS = 4096
 #: candidates refined by Gauss-Newton steps (those closest to passing, lack of fit z below REFINE_Z)
 REFINE = 4
-REFINE_Z = 60.0
+REFINE_Z = 40.0
 GN_STEPS = 4
+#: the draws of the propagation are kept in memory up to this many floats (else drawn again)
+KEEP_DRAWS = 2e7
 #: the map classes this module orders (noise classes are not a question of the mean)
 DEBUG = False
 MAP_CLASSES = ("gain_error", "bias_offset", "activation_mismatch", "readout_nonlinearity", "weight_error")
@@ -102,28 +104,83 @@ class Candidate:
                 "explains": bool(self.explains)}
 
 
-def _legendre(z, scale):
-    """Legendre polynomials of degree 1..DEGREE of z / scale (clipped to [-1, 1])."""
+def _legendre(z, scale, degree=None):
+    """Legendre polynomials of degree 1..DEGREE of z / scale (clipped to [-1, 1]), stacked on a
+    trailing axis (Bonnet's recursion: numpy's legvander is 5 times slower on these arrays)."""
+    degree = DEGREE if degree is None else degree
     u = np.clip(z / scale, -1.0, 1.0)
-    return np.polynomial.legendre.legvander(u, DEGREE)[..., 1:]
+    out = np.empty(u.shape + (degree,))
+    prev, cur = np.ones_like(u), u
+    out[..., 0] = u
+    for k in range(1, degree):
+        prev, cur = cur, ((2 * k + 1) * u * cur - k * prev) / (k + 1)
+        out[..., k] = cur
+    return out
+
+
+def _legendre_series(z, scale, coef):
+    """sum_j coef[j] P_j(z / scale) (clipped), j from 0, by the recursion: no stacked array of
+    every degree (memory-bound at the sizes here)."""
+    u = np.clip(z / scale, -1.0, 1.0)
+    acc = np.full(u.shape, float(coef[0]))
+    prev, cur = np.ones_like(u), u
+    for k in range(1, len(coef)):
+        if coef[k] != 0.0:
+            acc += coef[k] * cur
+        prev, cur = cur, ((2 * k + 1) * u * cur - k * prev) / (k + 1)
+    return acc
 
 
 def _legendre_slope(z, scale, c):
-    """d/dz of sum_k c_k P_k(z / scale) (0 where z / scale is clipped)."""
-    D = np.zeros((DEGREE, DEGREE))
+    """d/dz of sum_k c_k P_k(z / scale), k = 1..DEGREE (0 where z / scale is clipped):
+    P_k' = sum over j < k, j + k odd, of (2 j + 1) P_j."""
+    D = np.zeros(DEGREE)  # coefficients of sum_k c_k P_k' on P_0 .. P_{DEGREE-1}
     for k in range(1, DEGREE + 1):
-        e = np.zeros(k + 1)
-        e[k] = 1.0
-        dk = np.polynomial.legendre.legder(e)
-        D[:dk.size, k - 1] = dk
-    u = z / scale
-    out = np.polynomial.legendre.legvander(np.clip(u, -1.0, 1.0), DEGREE - 1) @ (D @ c) / scale
-    return np.where(np.abs(u) <= 1.0, out, 0.0)
+        for j in range(k - 1, -1, -2):
+            D[j] += c[k - 1] * (2 * j + 1)
+    return np.where(np.abs(z) <= scale, _legendre_series(z, scale, D), 0.0) / scale
+
+
+class _Draws:
+    """The standard normal draws of the propagation, per chunk of inputs: the same numbers at
+    every call (each chunk its own stream), kept in memory up to :data:`KEEP_DRAWS` floats (the
+    draws were 3/4 of a propagation's time), else drawn again."""
+
+    def __init__(self, seed, n, sizes, chunk):
+        self.seed, self.n, self.sizes, self.chunk = seed, n, sizes, chunk
+        self.keep = n * DRAWS * sum(sizes) <= KEEP_DRAWS
+        self.cache = {}
+
+    def __call__(self, c0):
+        if c0 in self.cache:
+            return self.cache[c0]
+        c = min(self.chunk, self.n - c0)
+        rng = np.random.default_rng([self.seed, c0])
+        out = [rng.standard_normal((c, DRAWS, k)) for k in self.sizes]
+        if self.keep:
+            self.cache[c0] = out
+        return out
+
+
+def _chunk(x, params):
+    o = params[-1][0].shape[0]
+    widest = max([x.shape[1]] + [W.shape[0] for W, _ in params])
+    return max(1, int(3e6 // (DRAWS * o * widest)))
+
+
+def _draws_for(x, params, seed):
+    """The draws of a propagation: the input's noise, then per layer its weighted sum's and (hidden
+    layers) its activation's."""
+    sizes = [x.shape[1]]
+    for l, (W, _) in enumerate(params, start=1):
+        sizes += [W.shape[0]] * (2 if l < len(params) else 1)
+    return _Draws(seed, x.shape[0], sizes, _chunk(x, params))
 
 
 def _propagate(x, params, act, s, seed, scales=None, deform=None, columns=False, want=None):
     """Per input the output's mean (n, o) and its Monte Carlo variance (n, o) through the model
-    with ``deform`` ({(kind, layer): values}) in place; with ``columns``, also the derivative
+    with ``deform`` ({(kind, layer): values}) in place (``seed``: an int or the :class:`_Draws`
+    to use); with ``columns``, also the derivative
     columns {(kind, layer): (n, o, k)} at that point (the weights' only those in ``want``,
     when given), and the scales of the shape polynomials.
 
@@ -132,19 +189,19 @@ def _propagate(x, params, act, s, seed, scales=None, deform=None, columns=False,
     ``z_L + P(z_L) c_L`` with its rows' gains ``(1 + alpha_L)``."""
     f, _ = _ACT[act]
     deform = deform or {}
+    draws = seed if isinstance(seed, _Draws) else _draws_for(x, params, seed)
     L = len(params)
     n, p = x.shape
     o = params[-1][0].shape[0]
-    widest = max([p] + [W.shape[0] for W, _ in params])
-    chunk = max(1, int(3e6 // (DRAWS * o * widest)))
-    rng = np.random.default_rng(seed)
+    chunk = draws.chunk
     mean, vmc = np.empty((n, o)), np.empty((n, o))
     cols = {}
     s = s * (1.0 + float(deform.get(("s", 0), 0.0)))
     for c0 in range(0, n, chunk):
         xc = x[c0:c0 + chunk]
         c = xc.shape[0]
-        a = xc[:, None, :] + s * rng.standard_normal((c, DRAWS, p))
+        normals = iter(draws(c0))
+        a = xc[:, None, :] + s * next(normals)
         rec = []
         for l, (W, b) in enumerate(params, start=1):
             Wd = W * (1.0 + deform.get(("gain", l), 0.0))
@@ -153,7 +210,7 @@ def _propagate(x, params, act, s, seed, scales=None, deform=None, columns=False,
             u_raw = a @ Wd.T  # before the output rows' gains
             alpha = deform.get(("alpha", l), 0.0)
             u = u_raw * (1.0 + alpha) if l == L else u_raw
-            z = u + b + deform.get(("bias", l), 0.0) + s * rng.standard_normal((c, DRAWS, W.shape[0]))
+            z = u + b + deform.get(("bias", l), 0.0) + s * next(normals)
             layer = {"a_in": a, "z": z, "u_prog": a @ W.T, "u_raw": u_raw, "Wd": Wd * (1.0 + alpha)[:, None]
                      if l == L and np.ndim(alpha) else Wd, "alpha": alpha}
             rec.append(layer)
@@ -163,14 +220,14 @@ def _propagate(x, params, act, s, seed, scales=None, deform=None, columns=False,
                 raise ValueError("a shape deformation needs the scales of the first propagation")
             base = f(z)
             if ("shape", l) in deform:
-                base = base + _legendre(z, scales[l - 1]) @ deform[("shape", l)]
+                base = base + _legendre_series(z, scales[l - 1], np.r_[0.0, deform[("shape", l)]])
             fz = base * (1.0 + alpha) + deform.get(("beta", l), 0.0)
             layer["base"] = base
-            a = fz + s * rng.standard_normal(z.shape)
+            a = fz + s * next(normals)
         y0 = z
         if scales is None:  # the shape polynomials' scale per layer: set on the first chunk
             scales = [float(np.quantile(np.abs(r_["z"]), 0.999)) or 1.0 for r_ in rec]
-        y = y0 + _legendre(y0, scales[L - 1]) @ deform[("shape", L)] if ("shape", L) in deform else y0
+        y = y0 + _legendre_series(y0, scales[L - 1], np.r_[0.0, deform[("shape", L)]]) if ("shape", L) in deform else y0
         mean[c0:c0 + chunk] = y.mean(1)
         vmc[c0:c0 + chunk] = y.var(1, ddof=1)
         if columns:
@@ -192,19 +249,27 @@ def _accumulate(cols, c0, c, n, params, act, rec, y0, scales, deform, want):
             cols[key] = np.empty((n,) + val.shape[1:])
         cols[key][c0:c0 + c] = val
 
+    def wanted(key):
+        return want is None or key in want
+
     out = rec[-1]
     ro = (1.0 + _legendre_slope(y0, scales[L - 1], deform[("shape", L)])) if ("shape", L) in deform else np.ones_like(y0)
     eye = np.eye(o)
-    put(("gain", L), (ro * out["u_prog"] * (1.0 + out["alpha"])).mean(1)[:, :, None])
-    put(("bias", L), ro.mean(1)[:, :, None] * eye[None])
-    put(("shape", L), _legendre(y0, scales[L - 1]).mean(1))
-    put(("alpha", L), (ro * out["u_raw"]).mean(1)[:, :, None] * eye[None])
+    if wanted(("gain", L)):
+        put(("gain", L), (ro * out["u_prog"] * (1.0 + out["alpha"])).mean(1)[:, :, None])
+    if wanted(("bias", L)):
+        put(("bias", L), ro.mean(1)[:, :, None] * eye[None])
+    if wanted(("shape", L)):
+        put(("shape", L), _legendre(y0, scales[L - 1]).mean(1))
+    if wanted(("alpha", L)):
+        put(("alpha", L), (ro * out["u_raw"]).mean(1)[:, :, None] * eye[None])
     a_last = out["a_in"]
-    if o * o * a_last.shape[2] <= WEIGHT_COLS and (want is None or ("weight", L) in want):
-        g = np.einsum("cmi,cmk->cik", ro * (1.0 + out["alpha"]), a_last) / M  # (c, o, d_{L-1})
+    if o * o * a_last.shape[2] <= WEIGHT_COLS and wanted(("weight", L)):
+        g = np.matmul((ro * (1.0 + out["alpha"])).transpose(0, 2, 1), a_last) / M  # (c, o, d_{L-1})
         put(("weight", L), (g[:, :, None, :] * eye[None, :, :, None]).reshape(c, o, -1))
     G = ro[:, :, :, None] * out["Wd"]  # d y / d a_{L-1}
-    for l in range(L - 1, 0, -1):
+    deepest = min([l for kind, l in want if kind != "s"], default=1) if want is not None else 1
+    for l in range(L - 1, max(deepest, 1) - 1, -1):
         lay = rec[l - 1]
         z, base, a_in = lay["z"], lay["base"], lay["a_in"]
         alpha = lay["alpha"]
@@ -214,13 +279,27 @@ def _accumulate(cols, c0, c, n, params, act, rec, y0, scales, deform, want):
         slope = slope * (1.0 + alpha)
         d = z.shape[2]
         Gd = G * slope[:, :, None, :]  # d y / d z_l
-        put(("bias", l), Gd.mean(1))
-        put(("gain", l), (np.einsum("cmoj,cmj->co", Gd, lay["u_prog"]) / M)[:, :, None])
-        put(("alpha", l), np.einsum("cmoj,cmj->coj", G, base) / M)
-        put(("beta", l), G.mean(1))
-        put(("shape", l), np.einsum("cmoj,cmjk->cok", G * (1.0 + alpha), _legendre(z, scales[l - 1])) / M)
-        if o * d * a_in.shape[2] <= WEIGHT_COLS and (want is None or ("weight", l) in want):
-            put(("weight", l), np.einsum("cmoj,cmk->cojk", Gd, a_in).reshape(c, o, -1) / M)
+        if wanted(("bias", l)):
+            put(("bias", l), Gd.mean(1))
+        if wanted(("gain", l)):
+            put(("gain", l), (Gd * lay["u_prog"][:, :, None, :]).sum(3).mean(1)[:, :, None])
+        if wanted(("alpha", l)):
+            put(("alpha", l), (G * base[:, :, None, :]).mean(1))
+        if wanted(("beta", l)):
+            put(("beta", l), G.mean(1))
+        if wanted(("shape", l)):
+            # sum over draws and neurons of G (1 + alpha) P(z): one batched matmul per input
+            Ga = (G * (1.0 + alpha)).transpose(0, 2, 1, 3).reshape(c, o, M * d)
+            u = np.clip(z / scales[l - 1], -1.0, 1.0).reshape(c, M * d, 1)
+            col = np.empty((c, o, DEGREE))
+            prev, cur = np.ones_like(u), u
+            for k in range(DEGREE):  # P_{k+1}, one degree at a time (see _legendre_series)
+                col[:, :, k] = np.matmul(Ga, cur)[:, :, 0]
+                prev, cur = cur, ((2 * k + 3) * u * cur - (k + 1) * prev) / (k + 2)
+            put(("shape", l), col / M)
+        if o * d * a_in.shape[2] <= WEIGHT_COLS and wanted(("weight", l)):
+            Gt = Gd.transpose(0, 2, 3, 1).reshape(c, o * d, M)
+            put(("weight", l), np.matmul(Gt, a_in).reshape(c, o, -1) / M)
         if l > 1:
             G = np.matmul(Gd, rec[l - 1]["Wd"])  # d y / d a_{l-1}
 
@@ -325,6 +404,7 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
     hidden = list(range(1, L))
     Y = np.asarray(meas.y, np.float64)
     n, r, o = Y.shape
+    seed = _draws_for(x, params, seed)  # one set of draws for every propagation below
     mu, vmc, cols, scales = _propagate(x, params, act, s, seed, columns=True)
     h = 0.02
     mu_p = _propagate(x, params, act, s, seed, scales, {("s", 0): h})[0]
@@ -362,23 +442,28 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
     refined = set()
     for f_ in cand:
         spec, A, theta, _ = f_
-        want = {(kind, l) for kind, l, _ in spec.blocks}
+        want = {(kind, l) for kind, l, _ in spec.blocks if kind != "shape*"}
+        want |= {("shape", h) for kind, _, _ in spec.blocks if kind == "shape*" for h in hidden}
         best_q = np.inf
-        for _ in range(GN_STEPS):
-            m, _, cols_t, _ = _propagate(x, params, act, s, seed, scales, _deform(spec, theta, cols, hidden, o),
-                                         columns=True, want=want)
+        for step in range(GN_STEPS + 1):
+            deform = _deform(spec, theta, cols, hidden, o)
+            m = _propagate(x, params, act, s, seed, scales, deform)[0]
             e = ybar - m.ravel()
             q = float(np.sum(e * e / w))
             if DEBUG:
                 print("   gauss-newton", spec.name, "lin z", round(lin[id(f_)], 1), "actual z", round(zval(q, A.shape[1]), 1))
-            if q >= best_q * (1.0 - 1e-4):
-                if q < best_q:
-                    best_q, f_[2] = q, theta
+            if q < best_q:
+                gain, best_q, f_[2] = best_q - q, q, theta
+            else:
                 break
-            best_q, f_[2] = q, theta
+            # done: the steps' budget spent, the candidate clearly explains, or the last step
+            # moved its lack of fit by less than a quarter of a standard deviation
+            if step == GN_STEPS or zval(q, A.shape[1]) < Z_PASS - 1.0 or gain < 0.25 * sd:
+                break
+            cols_t = _propagate(x, params, act, s, seed, scales, deform, columns=True, want=want)[2]
             J = np.concatenate([ds] + [_block(cols_t, *b, hidden).reshape(N, -1) for b in spec.blocks], axis=1)
-            step, *_ = np.linalg.lstsq(J * sw[:, None], e * sw, rcond=None)
-            theta = theta + step
+            delta, *_ = np.linalg.lstsq(J * sw[:, None], e * sw, rcond=None)
+            theta = theta + delta
         f_[3] = best_q
         refined.add(id(f_))
     out = []

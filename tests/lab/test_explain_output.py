@@ -56,6 +56,16 @@ def test_each_column_is_the_derivative_of_the_propagated_mean_at_a_deformed_poin
         assert np.allclose(J[:, :, i], fd, rtol=1e-5, atol=1e-7), (key, i, np.max(np.abs(J[:, :, i] - fd)))
 
 
+def test_the_shape_polynomials_are_legendres_and_their_slope_its_derivative():
+    from gift_theory.lab._explain_output import DEGREE, _legendre, _legendre_slope
+
+    z = np.linspace(-3.0, 3.0, 61)
+    assert np.allclose(_legendre(z, 2.5), np.polynomial.legendre.legvander(np.clip(z / 2.5, -1, 1), DEGREE)[:, 1:])
+    c = np.random.default_rng(1).normal(size=DEGREE)
+    ref = np.polynomial.legendre.legval(z / 2.5, np.polynomial.legendre.legder(np.r_[0.0, c])) / 2.5
+    assert np.allclose(_legendre_slope(z, 2.5, c), np.where(np.abs(z) <= 2.5, ref, 0.0))
+
+
 def test_without_taps_a_dead_neuron_is_named_by_the_neuron_that_explains_the_mean():
     meas = sim(12, dead=(2, 3), n=120, r=32, taps=False)
     ident = identify(meas)

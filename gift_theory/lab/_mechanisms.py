@@ -19,7 +19,9 @@ beyond :data:`THRESHOLD`, p-value the normal tail of the score).
 With taps the identification is each layer's own (its input the measured layer before);
 without taps only the output is identified, every layer's deviation folded into it: a class
 found there is reported at the output, and an output transfer is also listed as a possible
-hidden activation (the two cannot be told apart there; docs/identification.md).
+hidden activation (the two cannot be told apart there; docs/identification.md). There the
+candidate mechanisms put into the model (:mod:`._explain_output`) then re-attribute the map
+classes: a class one of whose candidates reproduces the output's mean leads them.
 """
 
 from __future__ import annotations

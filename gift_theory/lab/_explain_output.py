@@ -461,7 +461,12 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
             if step == GN_STEPS or zval(q, A.shape[1]) < Z_PASS - 1.0 or gain < 0.25 * sd:
                 break
             cols_t = _propagate(x, params, act, s, seed, scales, deform, columns=True, want=want)[2]
-            J = np.concatenate([ds] + [_block(cols_t, *b, hidden).reshape(N, -1) for b in spec.blocks], axis=1)
+            # the noise level's column at the deformed point too (a readout's curve bends the
+            # noise into the mean: a square-law detector's E y^2 moves with s^2)
+            ds_t = (_propagate(x, params, act, s, seed, scales, {**deform, ("s", 0): deform[("s", 0)] + h})[0]
+                    - _propagate(x, params, act, s, seed, scales, {**deform, ("s", 0): deform[("s", 0)] - h})[0]
+                    ).reshape(-1, 1) / (2 * h)
+            J = np.concatenate([ds_t] + [_block(cols_t, *b, hidden).reshape(N, -1) for b in spec.blocks], axis=1)
             delta, *_ = np.linalg.lstsq(J * sw[:, None], e * sw, rcond=None)
             theta = theta + delta
         f_[3] = best_q

@@ -56,6 +56,9 @@ from ._qtest import over_inputs
 ALPHA = 0.01
 #: bins of z of the activation's shape
 BINS = 8
+#: a gain trend in time that carries less than this share of the gain's variance within the
+#: inputs' shots is the path of a fluctuating gain, not a drift
+TREND_SHARE = 0.5
 #: Gauss-Hermite nodes of the smoothed activation
 _GH_X, _GH_W = np.polynomial.hermite_e.hermegauss(6)
 _GH_W = _GH_W / _GH_W.sum()
@@ -725,6 +728,7 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
     # covariance across the layer's neurons within a shot, beyond the model's, on the neurons
     # ``sub`` (all of a layer up to WIDE)
     ds = len(sub)
+    gain_var = 0.0
     gs, wgs, obs_s = g.mean(1)[:, sub], wg[:, sub], obs[:, sub]
     if ds > 1:
         off = 1 - np.eye(ds)
@@ -742,9 +746,14 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
             return over_inputs(a / np.maximum(b_, 1e-300)), w, a
 
         z_g, wn, a_g = along(wgs)
-        rows.append(_row("gain_fluctuation", "common_gain", stats.norm.sf(z_g), z_g, z_g,
-                         f"excess covariance along the signal at layer {l} (z = {z_g:.1f}): a gain shared by the "
-                         f"neurons, fluctuating from shot to shot"))
+        # the relative gain variance that excess covariance amounts to: C_ij = v w_i w_j off the
+        # diagonal (w: how the output moves with the gain), v by least squares over the inputs
+        Cex = (Chat_s - Cm) * off
+        ww = wgs[:, :, None] * wgs[:, None, :] * off
+        gain_var = float(np.sum(Cex * ww) / max(np.sum(ww * ww), 1e-300))
+        rows.append(dict(_row("gain_fluctuation", "common_gain", stats.norm.sf(z_g), z_g, z_g,
+                              f"excess covariance along the signal at layer {l} (z = {z_g:.1f}): a gain shared by "
+                              f"the neurons, fluctuating from shot to shot"), variance=gain_var))
         z1 = along(np.ones((n, ds)))[0]
         z_s = along(gs)[0] if lay.hidden else z1
         # any correlation beyond the signal's direction: the off-diagonal covariance, less a fitted
@@ -790,10 +799,20 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
         best = min(rows_t, key=lambda x: x[1])
         zc_ = best[3] / np.sqrt(np.maximum(np.diag(best[4]), 1e-300))
         wi = int(np.argmax(np.abs(zc_)))
-        rows.append(_row("time_drift", "time_within", min(1.0, 2 * best[1]), best[2], float(best[3][wi]),
-                         f"within the inputs' shots, layer {l} moves with acquisition time: {best[0]} trend "
-                         f"{best[3][wi]:+.3g} per unit t at {l}:{int(sub[wi])} (z = {zc_[wi]:.1f}; the layer's "
-                         f"z = {best[2]:.1f})", [int(sub[wi])]))
+        row = _row("time_drift", "time_within", min(1.0, 2 * best[1]), best[2], float(best[3][wi]),
+                   f"within the inputs' shots, layer {l} moves with acquisition time: {best[0]} trend "
+                   f"{best[3][wi]:+.3g} per unit t at {l}:{int(sub[wi])} (z = {zc_[wi]:.1f}; the layer's "
+                   f"z = {best[2]:.1f})", [int(sub[wi])])
+        if best[0] == "gain" and ds > 1 and gain_var > 0:
+            # how much of the gain's variance within an input's shots the trend carries: a drift
+            # carries all of it, a gain fluctuating on a time scale shorter than the campaign
+            # (an AR(1) laser) little -- its realised path has a trend too
+            wv = 1.0 / np.maximum(np.diag(best[4]), 1e-300)
+            kb = float((wv / wv.sum()) @ best[3])
+            share = min(1.0, kb * kb * float(np.mean(tw * tw)) / gain_var)
+            row = dict(row, share=share, evidence=row["evidence"] + f"; the trend carries {share:.0%} of the "
+                       "gain's variance within the inputs' shots")
+        rows.append(row)
     if t is not None and np.std(t.mean(1)) > 0:
         tc = t.mean(1) - t.mean()
         z_vt = over_inputs(tc * rho.mean(1))
@@ -802,27 +821,65 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
     return rows, s_lvl, s_se, kurt
 
 
-def _within_trend(E, g, t, obs):
-    """Per neuron the additive trend c of the pre-activation in acquisition time, read within the
-    inputs' shots (residual against ``g (t - mean t)``), when some neuron's is significant
-    (Bonferroni over the neurons at :data:`ALPHA`), else None. Each c's standard error from the
-    shots' variance per input (``obs``)."""
+def _within_trend(lay: _Layer, E, g, t, obs):
+    """The trend in acquisition time read within the inputs' shots (interleaved acquisition), as
+    a known term of each shot's pre-activation: ``(offset (n, r, d), kind, direction)`` or None.
+    Two readings, the better one kept when it is significant: an additive trend per neuron c_i
+    (residual against ``g (t - mean t)``, Bonferroni over the neurons at :data:`ALPHA`) or one
+    relative gain trend k on the weighted sum (against ``g u (t - mean t)``, u = W a: the
+    drift effect's ``1 + r t``). ``direction``: the map entries the trend's error moves, with
+    its standard error (for the map's covariance): per neuron the bias (additive) or the row of
+    W (gain), each times the inputs' mean time."""
     if t is None or E.shape[1] < 3:
         return None
     t = np.asarray(t, np.float64)
     tw = t - t.mean(1, keepdims=True)
     if np.std(tw) == 0:
         return None
-    D = g * tw[:, :, None]
-    Ed = E - E.mean(1, keepdims=True)
-    S = np.sum(D * D, axis=(0, 1))
-    c = np.sum(D * Ed, axis=(0, 1)) / np.maximum(S, 1e-300)
-    se = np.sqrt(np.sum(np.sum(D * D, axis=1) * obs, axis=0)) / np.maximum(S, 1e-300)
-    zc = c / np.maximum(se, 1e-300)
     d = E.shape[2]
-    if 2.0 * stats.norm.sf(np.max(np.abs(zc))) * d >= ALPHA:
+    u = lay.A @ lay.W.T  # (n, r or 1, d) the weighted sum
+
+    def within(X):  # the within-input part along each shot's own input removed (Frisch-Waugh)
+        X = _within(X, g, lay.A)
+        return X - X.mean(1, keepdims=True)
+
+    # an additive trend's column per neuron, a relative gain trend's (shared by the neurons);
+    # with taps the input drifts too, and the regression on it that _within removes would take
+    # part of a trend with it if done apart (a gain drift of -0.3 read as -0.1 at layer 3)
+    Ed, D, Dg = within(E), within(g * tw[:, :, None]), within(g * u * tw[:, :, None])
+    S = np.sum(D * D, axis=(0, 1))
+    DD = np.sum(D * D, axis=1)
+
+    def additive(R):  # per neuron c, its z, Bonferroni p
+        c = np.sum(D * R, axis=(0, 1)) / np.maximum(S, 1e-300)
+        se = np.sqrt(np.sum(DD * obs, axis=0)) / np.maximum(S, 1e-300)
+        zc = c / np.maximum(se, 1e-300)
+        return c, se, min(1.0, d * 2.0 * float(stats.norm.sf(np.max(np.abs(zc)))))
+
+    def gain(X, R):  # shared k, its se, two-sided p
+        Sx = float(np.sum(X * X))
+        k = float(np.sum(X * R)) / max(Sx, 1e-300)
+        k_se = float(np.sqrt(np.sum(np.sum(X * X, axis=1) * obs))) / max(Sx, 1e-300)
+        return k, k_se, 2.0 * float(stats.norm.sf(abs(k) / max(k_se, 1e-300)))
+
+    c, se, p_add = additive(Ed)
+    k, k_se, p_gain = gain(Dg, Ed)
+    if min(p_add, p_gain) >= ALPHA:
         return None
-    return c, se
+    # nested: the gain beyond per-neuron additive trends (its column with theirs projected out),
+    # and the additive trends beyond the gain; a gain drift (the drift effect's 1 + r t) moves each
+    # neuron's mean too, and an additive one is not along the signal
+    Dg_perp = Dg - D * (np.sum(D * Dg, axis=(0, 1)) / np.maximum(S, 1e-300))
+    k2, k2_se, p_gain_beyond = gain(Dg_perp, Ed)
+    c2, se2, p_add_beyond = additive(Ed - k * Dg)
+    tbar = float(np.mean(t))
+    T = t[:, :, None]
+    if p_gain_beyond < ALPHA and p_add_beyond < ALPHA:  # both: jointly
+        cj = np.sum(D * (Ed - k2 * Dg), axis=(0, 1)) / np.maximum(S, 1e-300)
+        return T * (cj + k2 * u), "gain", tbar * k2_se
+    if p_gain < ALPHA and (p_add_beyond >= ALPHA or p_add >= ALPHA):
+        return T * k * u, "gain", tbar * k_se
+    return T * c[None, None, :], "additive", tbar * se
 
 
 def _unresolved_layer(lay: _Layer, act: str, s_guess: float, t, k: int) -> LayerIdentity:
@@ -867,7 +924,10 @@ def _unresolved_layer(lay: _Layer, act: str, s_guess: float, t, k: int) -> Layer
                          tuple(rows))
 
 
-def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: bool) -> LayerIdentity:
+def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: bool,
+                    trends: bool = True) -> LayerIdentity:
+    """One layer's identification; ``trends``: whether a trend within the inputs' shots may be
+    put into the map (see :func:`_within_trend`)."""
     n, r, d = lay.Y.shape
     p = lay.W.shape[1]
     l = lay.layer
@@ -902,15 +962,16 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     E_time = None
     # (the residuals with W_eff's error along each shot's own input removed, as the time tests read them)
     Ew = _within(E, g, lay.A) if tt is None and t is not None else None
-    trend = _within_trend(Ew, g, t, _cell_var(Ew)) if Ew is not None else None
-    if trend is not None:
-        trend, trend_se = trend
-        # an additive trend within the inputs' shots: the map is read at t = 0 with it in place
-        # (with an interleaved acquisition its time average c mean(t) is a shift of every input's
-        # z alike -- read as a transfer, a bias drift was named activation_mismatch), and the
-        # noise level without it; the time tests read the residuals with it
+    within = _within_trend(lay, E, g, t, _cell_var(Ew)) if Ew is not None and trends else None
+    trend_kind = None
+    if within is not None:
+        offset, trend_kind, trend_se = within
+        # a trend within the inputs' shots: the map is read at t = 0 with it in place (with an
+        # interleaved acquisition its time average is the same shift -- or gain -- of every
+        # input's z: a bias drift was read as a shifted transfer and named activation_mismatch),
+        # and the noise level without it; the time tests read the residuals with it
         E_time = Ew
-        lay = dataclasses.replace(lay, offset=np.asarray(t, np.float64)[:, :, None] * trend[None, None, :])
+        lay = dataclasses.replace(lay, offset=offset)
         for _ in range(2):
             W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
             W0, b0 = W_eff, b_eff
@@ -926,13 +987,21 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
 
     # ---- the mean map and its restrictions
     S, full = _covariance(X, Chat, obs, r / mf)
-    if trend is not None:
-        # the biases at t = 0 carry the trend's error times the inputs' mean time
-        extra = (float(np.mean(t)) * trend_se) ** 2
-        if full:
-            S[np.arange(d) * k + p, np.arange(d) * k + p] += extra
+    if within is not None:
+        # the map at t = 0 carries the trend's error times the inputs' mean time: on the biases
+        # (additive, per neuron) or along W as a common gain (rank one)
+        if trend_kind == "additive":
+            if full:
+                S[np.arange(d) * k + p, np.arange(d) * k + p] += trend_se ** 2
+            else:
+                S[np.arange(d), p, p] += trend_se ** 2
         else:
-            S[np.arange(d), p, p] += extra
+            v = np.zeros((d, k))
+            v[:, :p] = lay.W
+            if full:
+                S += trend_se ** 2 * np.outer(v.ravel(), v.ravel())
+            else:
+                S += trend_se ** 2 * v[:, :, None] * v[:, None, :]
     # the covariance's own degrees of freedom: r - 1 per input, inputs weighted by their leverage
     lev = np.einsum("nip->n", X ** 2)
     nu = float(lev.sum() ** 2 / max(np.sum(lev ** 2), 1e-300)) * max(r - 1, 1)
@@ -1149,6 +1218,13 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     noise_rows, s_lvl, s_se, kurt = _noise_rows(lay, act, l, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2,
                                                 _unit_var(lay, W_n), _unit_cov(lay, W_n, sub), E_time)
     rows.extend(noise_rows)
+    if trend_kind == "gain":
+        share = next((r_.get("share") for r_ in noise_rows if r_["test"] == "time_within"), None)
+        if share is not None and share < TREND_SHARE:
+            # the gain's trend carries little of its variance within the inputs' shots: the path of
+            # a fluctuating gain (an AR(1) laser), whose straight line's value at t = 0 means
+            # nothing -- the map is read without it (put in, it read a gain of 0.89 at t = 0)
+            return _identify_layer(dataclasses.replace(lay, offset=None), act, s_guess, t, depth, taps, trends=False)
     return LayerIdentity(l, W_eff, b_eff, se, gain, gain_se, tuple(dead), choice, zc, gam, curve,
                          s_lvl, s_se, kurt, tuple(rows))
 

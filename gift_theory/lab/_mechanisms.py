@@ -33,6 +33,7 @@ from scipy import stats
 
 from ..effects import MECHANISMS, REGISTRY
 from ._explain_output import order_map_classes
+from ._identify import TREND_SHARE
 
 #: without an identification, a class is listed when its evidence stands this many standard deviations out
 THRESHOLD = 4.0
@@ -371,12 +372,36 @@ def mechanisms(ctx: Context) -> list[dict]:
             out.append({"mechanism": cls, "layers": sorted(int(l) for l in layers), "score": float(score),
                         "evidence": text, "p_value": float(p)})
     out.sort(key=lambda m: -m["score"])
+    out = _fluctuation_before_trend(ctx, out)
     if ctx.ident is not None and not ctx.taps and getattr(ctx.ident, "output_candidates", ()):
         out = order_map_classes(out, ctx.ident.output_candidates)
     notes = getattr(ctx.fit_gain, "notes", {})
     if notes and out:
         out[0]["evidence"] += "; " + "; ".join(notes.values())
     return out
+
+
+def _fluctuation_before_trend(ctx, out: list) -> list:
+    """A gain that fluctuates on a time scale shorter than the campaign (an AR(1) laser) has a
+    realised path with a trend: the within-input trend test then rejects harder (more shots
+    inform a trend) than the shared-gain covariance test. When the strongest time_drift test is
+    such a gain trend and it carries less than :data:`TREND_SHARE` of the gain's variance the
+    covariance measures, gain_fluctuation goes before time_drift (both stay listed): the
+    mechanism is the one that carries the variance."""
+    names = [m["mechanism"] for m in out]
+    if ctx.ident is None or "time_drift" not in names or "gain_fluctuation" not in names:
+        return out
+    it, ig = names.index("time_drift"), names.index("gain_fluctuation")
+    if ig < it:
+        return out
+    rows = _significant(ctx, "time_drift")
+    best = max(rows, key=lambda r: r["z"]) if rows else None
+    if best is None or best.get("share") is None or best["share"] >= TREND_SHARE:
+        return out
+    g = dict(out[ig], evidence=out[ig]["evidence"] + f"; the time trend carries {best['share']:.0%} of the gain's "
+             "variance within the inputs' shots: the gain fluctuates")
+    rest = [m for i, m in enumerate(out) if i != ig]
+    return rest[:it] + [g] + rest[it:]
 
 
 def lead_with_explanation(mechs: list, top, base_cmp) -> list:

@@ -13,9 +13,10 @@ does the model *with H in it* reproduce the per-input mean of every output neuro
   carried back draw by draw (``G_{L-1} = W_L``, ``G_l = G_{l+1} diag(sigma'(z_{l+1})) W_{l+1}``);
   the noise level's column by a central difference on the same draws.
 * Each candidate is fitted by weighted least squares of the per-input mean residuals on its
-  columns (s a nuisance column of every candidate), then refined by chord steps: the model is
-  propagated again with the fitted deformation in place, on the same draws (a dead neuron is
-  not a small deformation, and the deformations of several layers interact).
+  columns (s a nuisance column of every candidate); those closest to passing are then fitted
+  through the model itself by Levenberg-Marquardt from the programmed model, the columns
+  recomputed at each accepted point on the same draws (a dead neuron is not a small
+  deformation, and the deformations of several layers interact).
 * Its lack of fit is the sum over inputs x output neurons of the squared standardised
   residuals (each cell's variance: its shots' over r plus the model's Monte Carlo error), set
   against what noise alone leaves, ``n d kappa - k`` with ``kappa = (r - 1) / (r - 3)`` (a mean

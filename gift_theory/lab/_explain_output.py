@@ -44,6 +44,7 @@ among the mechanism list's map classes, the classes whose candidates explain the
 from __future__ import annotations
 
 import dataclasses
+import sys
 
 import numpy as np
 from scipy import stats
@@ -67,8 +68,9 @@ REFINE_Z = 40.0
 LM_TRIALS = 8
 #: the draws of the propagation are kept in memory up to this many floats (else drawn again)
 KEEP_DRAWS = 2e7
+#: print each refinement trial to stderr (a study's trace; off by default)
+TRACE = False
 #: the map classes this module orders (noise classes are not a question of the mean)
-DEBUG = False
 MAP_CLASSES = ("gain_error", "bias_offset", "activation_mismatch", "readout_nonlinearity", "weight_error")
 
 _ACT = {
@@ -434,8 +436,8 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
 
     # the candidates that could pass, checked through the model itself: the lack of fit above
     # is the linearised one, and a dead neuron is not a small deformation (nor do the
-    # deformations of several layers add up linearly); chord steps from the linear fit, the
-    # residual re-evaluated by a propagation with the deformation in place (same draws)
+    # deformations of several layers add up linearly): Levenberg-Marquardt through propagations
+    # with the deformation in place (same draws)
     lin = {id(f_): zval(f_[3], f_[1].shape[1]) for f_ in fits}
     cand = sorted((f_ for f_ in fits if f_[0].blocks and lin[id(f_)] < REFINE_Z), key=lambda f_: lin[id(f_)])
     neurons = [f_ for f_ in cand if f_[0].blocks[0][2] is not None][:2]
@@ -463,9 +465,9 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
             m_t = _propagate(x, params, act, s, seed, scales, deform)[0]
             e_t = ybar - m_t.ravel()
             q_t = float(np.sum(e_t * e_t / w))
-            if DEBUG:
+            if TRACE:
                 print("   levenberg-marquardt", spec.name, "lin z", round(lin[id(f_)], 1), "trial z",
-                      round(zval(q_t, A.shape[1]), 1), "mu", mu)
+                      round(zval(q_t, A.shape[1]), 1), "mu", mu, file=sys.stderr)
             if q_t >= q:
                 mu *= 10.0
                 continue

@@ -232,6 +232,10 @@ def test_order_of_candidates_and_threads_change_no_number():
         assert sum(c.comparison.replicates > 0 for c in d.ranking) >= 2
         out = d.as_json()
         out.pop("seconds")
+        # without taps: the candidate mechanisms put into the model, the programmed one first
+        assert out["output_explanations"][0]["candidate"] == "programmed"
+        assert {"mechanism", "candidate", "layers", "parameters", "lack_of_fit_z", "p_value", "explains"} \
+            == set(out["output_explanations"][0])
         return json.dumps(out, sort_keys=True, default=str, indent=0)
 
     # one thread in catalogue order against three threads in reverse order (each of the four

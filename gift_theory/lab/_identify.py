@@ -167,9 +167,9 @@ class _Layer:
     b: np.ndarray
     hidden: bool
     draws: int = 0
-    #: (n, r, d) a known additive term of each shot's pre-activation, or None: the additive trend
-    #: in acquisition time read within the inputs' shots (interleaved acquisition), so the map
-    #: is identified at t = 0 and a drift's time average is not read as a shifted map
+    #: (n, r, d) a known term of each shot's pre-activation, or None: the trend in acquisition
+    #: time read within the inputs' shots (interleaved acquisition; additive or a gain), so the
+    #: map is identified at t = 0 and a drift's time average is not read as a changed map
     offset: np.ndarray | None = None
 
     @property
@@ -823,13 +823,14 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
 
 def _within_trend(lay: _Layer, E, g, t, obs):
     """The trend in acquisition time read within the inputs' shots (interleaved acquisition), as
-    a known term of each shot's pre-activation: ``(offset (n, r, d), kind, direction)`` or None.
-    Two readings, the better one kept when it is significant: an additive trend per neuron c_i
-    (residual against ``g (t - mean t)``, Bonferroni over the neurons at :data:`ALPHA`) or one
-    relative gain trend k on the weighted sum (against ``g u (t - mean t)``, u = W a: the
-    drift effect's ``1 + r t``). ``direction``: the map entries the trend's error moves, with
-    its standard error (for the map's covariance): per neuron the bias (additive) or the row of
-    W (gain), each times the inputs' mean time."""
+    a known term of each shot's pre-activation: ``(offset (n, r, d), kind, se)`` or None when no
+    trend is significant. Two readings: an additive trend per neuron c_i (against
+    ``g (t - mean t)``, Bonferroni over the neurons at :data:`ALPHA`) and one relative gain trend
+    k on the weighted sum (against ``g u (t - mean t)``, u = W a: the drift effect's 1 + r t),
+    each also tested beyond the other: both needed, both are put in (``kind`` "gain"); the gain
+    alone when the additive trends add nothing to it; else the additive ones. ``se``: the error
+    the trend puts into the map at t = 0 -- its standard error times the inputs' mean time, on
+    each neuron's bias (additive, (d,)) or on a common gain of W ("gain", a scalar)."""
     if t is None or E.shape[1] < 3:
         return None
     t = np.asarray(t, np.float64)
@@ -871,7 +872,7 @@ def _within_trend(lay: _Layer, E, g, t, obs):
     # neuron's mean too, and an additive one is not along the signal
     Dg_perp = Dg - D * (np.sum(D * Dg, axis=(0, 1)) / np.maximum(S, 1e-300))
     k2, k2_se, p_gain_beyond = gain(Dg_perp, Ed)
-    c2, se2, p_add_beyond = additive(Ed - k * Dg)
+    p_add_beyond = additive(Ed - k * Dg)[2]
     tbar = float(np.mean(t))
     T = t[:, :, None]
     if p_gain_beyond < ALPHA and p_add_beyond < ALPHA:  # both: jointly

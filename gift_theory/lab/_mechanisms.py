@@ -357,7 +357,10 @@ def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float =
 def mechanisms(ctx: Context) -> list[dict]:
     """The ranked mechanism classes the evidence points to, each ``{mechanism, layers, score,
     evidence, p_value}`` (CONTRACTS §6): those whose score exceeds :data:`THRESHOLD` and, with an
-    identification, whose adjusted p-value is below :data:`ALPHA`. Best first."""
+    identification, whose adjusted p-value is below :data:`ALPHA`. Best first: by score, except
+    that a fluctuating gain goes before the trend its path leaves (:func:`_fluctuation_before_trend`)
+    and, without taps, the map classes whose candidate mechanism reproduces the output's mean
+    lead the other map classes (:func:`~gift_theory.lab._explain_output.order_map_classes`)."""
     out = []
     for cls, rule in RULES.items():
         r = rule(ctx)

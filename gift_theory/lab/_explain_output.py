@@ -229,7 +229,9 @@ def _propagate(x, params, act, s, seed, scales=None, deform=None, columns=False,
             a = fz + s * next(normals)
         y0 = z
         if scales is None:  # the shape polynomials' scale per layer: set on the first chunk
-            scales = [float(np.quantile(np.abs(r_["z"]), 0.999)) or 1.0 for r_ in rec]
+            # (half again the largest |z| of the first chunk: a scale at a high quantile clipped
+            # the largest cells' draws, and a square law's y^2 was not a polynomial there)
+            scales = [1.5 * float(np.max(np.abs(r_["z"]))) or 1.0 for r_ in rec]
         y = y0 + _legendre_series(y0, scales[L - 1], np.r_[0.0, deform[("shape", L)]]) if ("shape", L) in deform else y0
         mean[c0:c0 + chunk] = y.mean(1)
         vmc[c0:c0 + chunk] = y.var(1, ddof=1)
@@ -330,20 +332,22 @@ def _specs(L: int, cols: dict) -> list:
     for l in every:
         out.append(_Spec("bias_offset", f"bias shifts at layer {l}", (l,), [("bias", l, None)]))
     out.append(_Spec("bias_offset", "bias shifts at every layer", every, [("bias", l, None) for l in every]))
+    # a shape is its polynomial and a constant, both shared by the layer's neurons (P_0 is not in
+    # the polynomial: a square-law detector's y^2 = (2/3) c^2 P_2(y / c) + c^2 / 3 needs it)
     for l in hidden:
         out.append(_Spec("activation_mismatch", f"layer {l}'s transfer (a shape shared by its neurons)", (l,),
-                         [("shape", l, None)]))
+                         [("shape", l, None), ("const", l, None)]))
     if len(hidden) > 1:
         out.append(_Spec("activation_mismatch", "every hidden transfer (one shape)", tuple(hidden),
-                         [("shape*", 0, None)]))
+                         [("shape*", 0, None)] + [("const", l, None) for l in hidden]))
         out.append(_Spec("activation_mismatch", "every hidden transfer (a shape per layer)", tuple(hidden),
-                         [("shape", l, None) for l in hidden]))
+                         [b for l in hidden for b in (("shape", l, None), ("const", l, None))]))
     for l in hidden:
         for j in range(cols[("alpha", l)].shape[2]):
             out.append(_Spec("activation_mismatch", f"neuron {l}:{j + 1}'s own gain and offset (dead or stuck)",
                              (l,), [("alpha", l, j), ("beta", l, j)]))
     out.append(_Spec("readout_nonlinearity", "the output's transfer (a curve shared by its neurons)", (L,),
-                     [("shape", L, None)]))
+                     [("shape", L, None), ("const", L, None)]))
     out.append(_Spec("readout_nonlinearity", "each output neuron's gain and offset", (L,),
                      [("alpha", L, None), ("bias", L, None)]))
     out.append(_Spec("readout_nonlinearity", "every neuron's detector gain and offset", every,
@@ -357,6 +361,8 @@ def _specs(L: int, cols: dict) -> list:
 def _block(cols, kind, l, j, hidden):
     if kind == "shape*":
         return sum(cols[("shape", h)] for h in hidden)
+    if kind == "const":  # one offset shared by the layer's neurons: the sum of their own offsets' columns
+        return cols[("beta", l) if l in hidden else ("bias", l)].sum(2, keepdims=True)
     v = cols[(kind, l)]
     return v[:, :, j:j + 1] if j is not None else v
 
@@ -372,6 +378,10 @@ def _deform(spec: _Spec, theta, cols, hidden, o) -> dict:
         if kind == "shape*":
             for h in hidden:
                 out[("shape", h)] = out.get(("shape", h), 0.0) + v
+            continue
+        if kind == "const":
+            key = ("beta", l) if l in hidden else ("bias", l)
+            out[key] = out.get(key, 0.0) + np.full(cols[key].shape[2], float(v[0]))
             continue
         if j is not None:
             full = np.zeros(cols[(kind, l)].shape[2])
@@ -446,8 +456,9 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
     q_prog = float(np.sum(e0 * e0 / w))
     for f_ in cand:
         spec, A, theta_lin, _ = f_
-        want = {(kind, l) for kind, l, _ in spec.blocks if kind != "shape*"}
+        want = {(kind, l) for kind, l, _ in spec.blocks if kind not in ("shape*", "const")}
         want |= {("shape", h) for kind, _, _ in spec.blocks if kind == "shape*" for h in hidden}
+        want |= {("beta", l) if l in hidden else ("bias", l) for kind, l, _ in spec.blocks if kind == "const"}
         # Levenberg-Marquardt from the programmed model (theta = 0, where the columns are): the
         # first trial is the linear fit; a trial that does not lower the lack of fit is refused
         # and the damping raised (a detector's gain and offset on 57 parameters: the linear fit's

@@ -511,6 +511,31 @@ def _classes(name: str) -> set:
     return {REGISTRY[e].mechanism for e in name.split("+")}
 
 
+def _trend_refusals(cands: list, ident) -> list:
+    """Rule b'' of :mod:`._verdict`: when the identification finds a trend in acquisition time
+    (a time_drift test rejecting at Holm-adjusted 0.01), a candidate with no effect that acts
+    through the times cannot be what the data show, whatever its held-out test says -- that
+    test compares per-input means, which average an interleaved acquisition's trend away (a
+    bias drift passed as layer_gain without taps, a gain drift as activation_gain). Such a
+    candidate that passes is refused."""
+    if ident is None:
+        return cands
+    rows = [r for r in ident.rows() if r["class"] == "time_drift" and r["p_adj"] < ALPHA]
+    if not rows:
+        return cands
+    best = min(rows, key=lambda r: r["p_adj"])
+    layers = sorted({int(r["layer"]) for r in rows})
+    out = []
+    for c in cands:
+        if c.status == "passes" and not any(REGISTRY[e].needs_times for e in c.effects):
+            why = (f"the identification finds a trend in acquisition time (time_drift at layer(s) "
+                   f"{', '.join(map(str, layers))}, p = {best['p_adj']:.2g}) that awgn + {' + '.join(c.effects)} "
+                   f"has no term for: its held-out test compares per-input means, which average the trend away")
+            c = dataclasses.replace(c, status="refused", refused_because=tuple(c.refused_because) + (why,))
+        out.append(c)
+    return out
+
+
 def _rank(session: Session, names, second, verbose: bool, ident=None, progress=None) -> tuple[list, list]:
     """The candidates fitted, scored, checked and ranked; a second stage on top of the best one
     when every one still fails (see :func:`diagnose`). Returns ``(ranking, not_fitted)``.
@@ -523,8 +548,8 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
     first = [n for n in names if _classes(n) & set(flagged)]
     rest = [n for n in names if n not in first]
     todo = first if first and rest else list(names)
-    ranking = session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")), tuple(n.split("+")))
-                                  for n in todo], progress)
+    ranking = _trend_refusals(session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")),
+                                                   tuple(n.split("+"))) for n in todo], progress), ident)
     not_fitted = []
     if todo is first:
         if any(c.status == "passes" for c in ranking):
@@ -534,8 +559,8 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
                                                                key=rank_key).effects)
                                      + " passes every check"} for n in rest]
         else:
-            ranking += session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")), tuple(n.split("+")))
-                                           for n in rest], progress)
+            ranking += _trend_refusals(session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")),
+                                                            tuple(n.split("+"))) for n in rest], progress), ident)
             todo = first + rest
     for name, cand in zip(todo, ranking):
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
@@ -547,8 +572,8 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
     if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
         first = ranking[0]
         rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
-        stage2 = session.candidates([(first.effects + (name,), first.model, (name,), first.effects + (name,))
-                                     for name in rest], progress)
+        stage2 = _trend_refusals(session.candidates([(first.effects + (name,), first.model, (name,),
+                                                      first.effects + (name,)) for name in rest], progress), ident)
         for cand in stage2:
             _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
                  f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)

@@ -19,6 +19,11 @@
       the file's mean (its time-free twin) must do worse on the held-out half by at least 2 sd
       (the ranking's cost of one parameter, here the trend's) -- else a constant gain does as
       well, and the data say nothing of a trend;
+   b''. when the identification finds a trend in acquisition time (a time_drift test rejecting
+      at Holm-adjusted 0.01), the model has an effect that acts through the times: the held-out
+      test compares per-input means, which average an interleaved acquisition's trend away
+      (without taps a bias drift passed as layer_gain, a gain drift as activation_gain;
+      :func:`~gift_theory.lab._diagnose._trend_refusals`);
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with
       Bonferroni over the layers): the model is right where it acts, not only on average; and
    d. an effect fitted by its scalar parameters buys its keep: its penalised score (held-out

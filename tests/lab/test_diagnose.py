@@ -411,3 +411,20 @@ def test_diagnose_names_layer_gain_first_on_a_lossy_chip():
     top = d.ranking[0]
     assert d.missing_effect_detected and top.effects == ("layer_gain",) and top.status == "passes", d.verdict
     assert top.mechanism() == "gain_error" and d.explained
+
+
+@pytest.mark.slow
+def test_a_passing_time_free_fit_does_not_explain_a_trend_the_identification_finds():
+    """Rule b'': without taps and with an interleaved acquisition the held-out test compares
+    per-input means, which average a bias drift away, so time-free models pass it; the
+    identification's within-input trend test rejects, and they are refused, the data not
+    explained (file from test_identify's plain-numpy simulator)."""
+    from .test_identify import sim
+
+    meas = sim(13, bias_drift=(1, 0.15), n=80, r=16, taps=False, interleaved=True)
+    out = diagnose(jax.random.PRNGKey(0), meas).as_json()
+    assert not out["explained"]
+    assert "time_drift" in [m["mechanism"] for m in out["mechanisms"]]
+    time_free = [r for r in out["ranking"] if r["effect"] != "drift" and r["p_value_after"] >= 0.01]
+    assert time_free and all(r["status"] == "refused" for r in time_free)
+    assert "trend in acquisition time" in out["reasons"][0]

@@ -28,10 +28,10 @@ does the model *with H in it* reproduce the per-input mean of every output neuro
 The candidates (``k`` parameters each, s included): a gain on W_l, or one per layer
 (``gain_error``); shifts of b_l, or of every layer's (``bias_offset``); a deformation of layer
 l's transfer shared by its neurons (Legendre polynomials of degree 1 to :data:`DEGREE` in the
-scaled pre-activation), one shape for every hidden layer, or one per hidden layer
+scaled pre-activation, and a constant), one shape for every hidden layer, or one per hidden layer
 (``activation_mismatch``); one hidden neuron's own gain and offset (``activation_mismatch``: a
 dead or stuck neuron; each neuron its own candidate); the output's transfer, a curve shared by
-its neurons or each output neuron's gain and offset, and every neuron's detector gain and offset
+its neurons (with a constant) or each output neuron's gain and offset, and every neuron's detector gain and offset
 on every layer (``readout_nonlinearity``); a layer's general weight error (``weight_error``).
 A candidate with more than :data:`MAX_SHARE` of the data's cells as parameters is not fitted:
 it would explain anything.

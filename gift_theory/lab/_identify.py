@@ -821,7 +821,7 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
     return rows, s_lvl, s_se, kurt
 
 
-def _within_trend(lay: _Layer, E, g, t, obs):
+def _within_trend(lay: _Layer, Ew, g, t, obs):
     """The trend in acquisition time read within the inputs' shots (interleaved acquisition), as
     a known term of each shot's pre-activation: ``(offset (n, r, d), kind, se)`` or None when no
     trend is significant. Two readings: an additive trend per neuron c_i (against
@@ -831,13 +831,13 @@ def _within_trend(lay: _Layer, E, g, t, obs):
     alone when the additive trends add nothing to it; else the additive ones. ``se``: the error
     the trend puts into the map at t = 0 -- its standard error times the inputs' mean time, on
     each neuron's bias (additive, (d,)) or on a common gain of W ("gain", a scalar)."""
-    if t is None or E.shape[1] < 3:
+    if t is None or Ew.shape[1] < 3:
         return None
     t = np.asarray(t, np.float64)
     tw = t - t.mean(1, keepdims=True)
     if np.std(tw) == 0:
         return None
-    d = E.shape[2]
+    d = Ew.shape[2]
     u = lay.A @ lay.W.T  # (n, r or 1, d) the weighted sum
 
     def within(X):  # the within-input part along each shot's own input removed (Frisch-Waugh)
@@ -847,7 +847,8 @@ def _within_trend(lay: _Layer, E, g, t, obs):
     # an additive trend's column per neuron, a relative gain trend's (shared by the neurons);
     # with taps the input drifts too, and the regression on it that _within removes would take
     # part of a trend with it if done apart (a gain drift of -0.3 read as -0.1 at layer 3)
-    Ed, D, Dg = within(E), within(g * tw[:, :, None]), within(g * u * tw[:, :, None])
+    Ed = Ew - Ew.mean(1, keepdims=True)  # ``Ew``: the residuals with that part already removed
+    D, Dg = within(g * tw[:, :, None]), within(g * u * tw[:, :, None])
     S = np.sum(D * D, axis=(0, 1))
     DD = np.sum(D * D, axis=1)
 
@@ -954,16 +955,21 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     # the within-cell regression (taps, a regressor varying within an input) spends p degrees
     # of freedom per neuron
     f2 = n * (r - 1) / max(n * (r - 1) - p, 1) if lay.A.shape[1] > 1 else 1.0
-    for _ in range(2):
-        W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
-        W0, b0 = W_eff, b_eff
-        obs = _cell_var(_within(E, g, lay.A)) * f2
-        s2 = float(np.sum(obs) / np.sum((var / s2).mean(1)))
-    W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
+
+    def fit_at_level(lay, s2, W0, b0):
+        """The map and the level in two passes, then the map at the level found."""
+        for _ in range(2):
+            W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
+            W0, b0 = W_eff, b_eff
+            obs = _cell_var(_within(E, g, lay.A)) * f2
+            s2 = float(np.sum(obs) / np.sum((var / s2).mean(1)))
+        return _fit_map(lay, act, s2, tt, W0=W0, b0=b0), s2, W0, b0
+
+    (W_eff, b_eff, drift, z, m, g, var, X, E), s2, W0, b0 = fit_at_level(lay, s2, W0, b0)
     E_time = None
     # (the residuals with W_eff's error along each shot's own input removed, as the time tests read them)
     Ew = _within(E, g, lay.A) if tt is None and t is not None else None
-    within = _within_trend(lay, E, g, t, _cell_var(Ew)) if Ew is not None and trends else None
+    within = _within_trend(lay, Ew, g, t, _cell_var(Ew)) if Ew is not None and trends else None
     trend_kind = None
     if within is not None:
         offset, trend_kind, trend_se = within
@@ -973,13 +979,9 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
         # and the noise level without it; the time tests read the residuals with it
         E_time = Ew
         lay = dataclasses.replace(lay, offset=offset)
-        for _ in range(2):
-            W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
-            W0, b0 = W_eff, b_eff
-            obs = _cell_var(_within(E, g, lay.A)) * f2
-            s2 = float(np.sum(obs) / np.sum((var / s2).mean(1)))
-        W_eff, b_eff, drift, z, m, g, var, X, E = _fit_map(lay, act, s2, tt, W0=W0, b0=b0)
-    E = _within(E, g, lay.A)
+        (W_eff, b_eff, drift, z, m, g, var, X, E), s2, W0, b0 = fit_at_level(lay, s2, W0, b0)
+        Ew = None
+    E = _within(E, g, lay.A) if Ew is None else Ew  # (already made for the trend's test)
     obs = _cell_var(E) * f2
     # the across-neuron covariance per input where the map's covariance or the shape test needs
     # it (d^2 floats per input: not for a wide layer, whose noise tests read a subset)

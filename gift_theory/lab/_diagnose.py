@@ -511,29 +511,52 @@ def _classes(name: str) -> set:
     return {REGISTRY[e].mechanism for e in name.split("+")}
 
 
-def _trend_refusals(cands: list, ident) -> list:
-    """Rule b'' of :mod:`._verdict`: when the identification finds a trend in acquisition time
-    (a time_drift test rejecting at Holm-adjusted 0.01), a candidate with no effect that acts
-    through the times cannot be what the data show, whatever its held-out test says -- that
-    test compares per-input means, which average an interleaved acquisition's trend away (a
-    bias drift passed as layer_gain without taps, a gain drift as activation_gain). Such a
-    candidate that passes is refused."""
-    if ident is None:
-        return cands
-    rows = [r for r in ident.rows() if r["class"] == "time_drift" and r["p_adj"] < ALPHA]
+def _refuse(c, why):
+    return dataclasses.replace(c, status="refused", refused_because=tuple(c.refused_because) + (why,))
+
+
+def _where(rows) -> str:
+    best = min(rows, key=lambda r: r["p_adj"])
+    return f"at layer(s) {', '.join(map(str, sorted({int(r['layer']) for r in rows})))}, p = {best['p_adj']:.2g}"
+
+
+def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
+    """Rules b'' and b''' of :mod:`._verdict`: a candidate that passes its held-out test is refused
+    when the identification finds, at Holm-adjusted 0.01, something that test cannot see and the
+    candidate has no term for.
+
+    * b'': a trend in acquisition time (a time_drift test). The held-out test compares
+      per-input means, which average an interleaved acquisition's trend away (a bias drift
+      passed as layer_gain without taps, a gain drift as activation_gain). Refused: a candidate
+      with no effect that acts through the times.
+    * b''': any class, when the baseline itself passes its held-out test (``base_cmp``): that
+      test has no power against what the identification finds (Student-t noise in one layer
+      passed as awgn at p = 0.28 while the kurtosis test rejected awgn at 0.001). Refused: a
+      candidate with no effect of a flagged class."""
+    rows = [] if ident is None else [r for r in ident.rows() if r["p_adj"] < ALPHA]
     if not rows:
         return cands
-    best = min(rows, key=lambda r: r["p_adj"])
-    layers = sorted({int(r["layer"]) for r in rows})
+    trend = [r for r in rows if r["class"] == "time_drift"]
+    silent = base_cmp is not None and base_cmp.p_value >= ALPHA
+    flagged = sorted({r["class"] for r in rows})
     out = []
     for c in cands:
-        if c.status == "passes" and not any(REGISTRY[e].needs_times for e in c.effects):
-            why = (f"the identification finds a trend in acquisition time (time_drift at layer(s) "
-                   f"{', '.join(map(str, layers))}, p = {best['p_adj']:.2g}) that awgn + {' + '.join(c.effects)} "
-                   f"has no term for: its held-out test compares per-input means, which average the trend away")
-            c = dataclasses.replace(c, status="refused", refused_because=tuple(c.refused_because) + (why,))
+        name = " + ".join(c.effects)
+        if c.status == "passes" and trend and not any(REGISTRY[e].needs_times for e in c.effects):
+            c = _refuse(c, f"the identification finds a trend in acquisition time (time_drift {_where(trend)}) that "
+                           f"awgn + {name} has no term for: its held-out test compares per-input means, which "
+                           f"average the trend away")
+        if c.status == "passes" and silent and not _classes("+".join(c.effects)) & set(flagged):
+            found = "; ".join(f"{k} {_where([r for r in rows if r['class'] == k])}" for k in flagged)
+            c = _refuse(c, f"the identification finds {found}, which awgn + {name} has no term for; the held-out "
+                           f"test does not see it (the awgn model passes that test too, p = {base_cmp.p_value:.3g})")
         out.append(c)
     return out
+
+
+def _single(name: str) -> tuple:
+    effects = tuple(name.split("+"))
+    return effects, None, effects, effects
 
 
 def _rank(session: Session, names, second, verbose: bool, ident=None, progress=None) -> tuple[list, list]:
@@ -544,12 +567,14 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
     fitted; when one of them passes every check, the others are not fitted (the identification
     clears their classes, and an explanation has been found) and are listed in ``not_fitted``
     with that reason. Otherwise every candidate is fitted."""
+    def fitted(specs):
+        return _identification_refusals(session.candidates(specs, progress), ident, session.baseline_comparison)
+
     flagged = flagged_classes(ident)
     first = [n for n in names if _classes(n) & set(flagged)]
     rest = [n for n in names if n not in first]
     todo = first if first and rest else list(names)
-    ranking = _trend_refusals(session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")),
-                                                   tuple(n.split("+"))) for n in todo], progress), ident)
+    ranking = fitted([_single(n) for n in todo])
     not_fitted = []
     if todo is first:
         if any(c.status == "passes" for c in ranking):
@@ -559,8 +584,7 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
                                                                key=rank_key).effects)
                                      + " passes every check"} for n in rest]
         else:
-            ranking += _trend_refusals(session.candidates([(tuple(n.split("+")), None, tuple(n.split("+")),
-                                                            tuple(n.split("+"))) for n in rest], progress), ident)
+            ranking += fitted([_single(n) for n in rest])
             todo = first + rest
     for name, cand in zip(todo, ranking):
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
@@ -572,8 +596,7 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
     if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
         first = ranking[0]
         rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
-        stage2 = _trend_refusals(session.candidates([(first.effects + (name,), first.model, (name,),
-                                                      first.effects + (name,)) for name in rest], progress), ident)
+        stage2 = fitted([(first.effects + (name,), first.model, (name,), first.effects + (name,)) for name in rest])
         for cand in stage2:
             _log(f"  + {'+'.join(cand.effects):<30s} {cand.model.describe():<60s} discrepancy "
                  f"{cand.comparison.discrepancy:.3g} p = {cand.comparison.p_value:.3g}", verbose)
@@ -658,8 +681,9 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
                   fit_gains(ranking, base_cmp, session.prior), {r["layer"]: (r["s"], r["level_z"]) for r in steps},
                   ident=ident)
     mechs = mechanisms(ctx)
-    explained, reasons, line = verdict(session, ranking, meas, mechs, failing)
-    if explained and base_cmp.p_value < ALPHA:  # a fitted effect explains: its class leads
+    flagged = flagged_classes(ident)
+    explained, reasons, line = verdict(session, ranking, meas, mechs, failing, flagged)
+    if explained and (base_cmp.p_value < ALPHA or flagged):  # a fitted effect explains: its class leads
         mechs = lead_with_explanation(mechs, ranking[0], base_cmp)
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,

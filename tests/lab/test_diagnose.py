@@ -428,3 +428,24 @@ def test_a_passing_time_free_fit_does_not_explain_a_trend_the_identification_fin
     time_free = [r for r in out["ranking"] if r["effect"] != "drift" and r["p_value_after"] >= 0.01]
     assert time_free and all(r["status"] == "refused" for r in time_free)
     assert "trend in acquisition time" in out["reasons"][0]
+
+
+@pytest.mark.slow
+def test_a_law_change_the_held_out_test_misses_is_not_called_nothing_missing():
+    """Rule 1 of the verdict: Student-t noise (nu = 4.5) in layer 2 of a tapped chip passes the
+    baseline's held-out test (p ~ 0.2 on these seeds), while the identification's kurtosis test
+    rejects awgn at layer 2; the diagnosis names noise_law there, and the explanation, if
+    any, has a noise_law effect (file from test_identify's plain-numpy simulator)."""
+    from .test_identify import sim
+
+    out = diagnose(jax.random.PRNGKey(0), sim(13, n=80, r=16, heavy=(2, 4.5))).as_json()
+    assert not out["missing_effect_detected"]  # CONTRACTS §4: the held-out test's alone
+    assert out["mechanisms"][0]["mechanism"] == "noise_law" and out["mechanisms"][0]["layers"] == [2]
+    assert "nothing is missing" not in " ".join(out["reasons"])
+    if out["explained"]:
+        assert out["ranking"][0]["mechanism"] == "noise_law"
+    # every other candidate that passes the held-out test is refused (rule b''') or, when a
+    # noise_law effect explains, not fitted
+    others = [r for r in out["ranking"] if "noise_law" not in r["mechanism"] and r["p_value_after"] >= 0.01]
+    assert all(r["status"] == "refused" for r in others)
+

@@ -25,7 +25,7 @@ def _net(seed, widths=(6, 10, 8, 4)):
 
 
 def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, bias_drift=None, common=None,
-        taps=True, act=np.tanh, errors=None, interleaved=False, gain_drift=None, ar1_gain=None):
+        taps=True, act=np.tanh, errors=None, interleaved=False, gain_drift=None, ar1_gain=None, heavy=None):
     """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
     y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
     (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
@@ -35,7 +35,8 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
     ``interleaved``: shot k of every input is taken before shot k + 1 of any (else input by input);
     ``gain_drift`` r: every layer's weighted sum times 1 + r t; ``ar1_gain`` (c, tau): times
     1 + c xi, xi a stationary AR(1) in acquisition order with correlation time tau shots, one
-    laser for every layer."""
+    laser for every layer; ``heavy`` (layer, nu): that layer's two noises drawn from Student's t
+    with nu degrees of freedom, scaled to standard deviation s."""
     Ws, bs = _net(seed, widths)
     rng = np.random.default_rng(seed + 1)
     x = rng.uniform(0, 1, (n, widths[0]))
@@ -64,8 +65,14 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
         if errors and l in errors:
             W = W + errors[l] * np.sqrt(np.mean(W ** 2)) * np.random.default_rng(seed + 100 + l).normal(size=W.shape)
         bb = b[None, None, :] + (bias_drift[1] * t[:, :, None] if bias_drift and bias_drift[0] == l else 0.0)
-        z = g * shared[:, :, None] * np.einsum("nkp,ip->nki", a, W) + bb + s * rng.normal(size=(n, r, W.shape[0]))
-        a = (act(z) + s * rng.normal(size=z.shape)) if l < L else z
+        def noise(shape, l=l):
+            if heavy and heavy[0] == l:
+                return s * rng.standard_t(heavy[1], size=shape) / np.sqrt(heavy[1] / (heavy[1] - 2.0))
+            return s * rng.normal(size=shape)
+
+        z = g * shared[:, :, None] * np.einsum("nkp,ip->nki", a, W) + bb + noise((n, r, W.shape[0]))
+        a = (act(z) + noise(z.shape)) if l < L else z
+
         if dead and dead[0] == l:
             a[:, :, dead[1]] = s * rng.normal(size=(n, r))
         if common and common[0] == l:

@@ -322,3 +322,38 @@ def test_layer_gain_is_a_name_on_every_command(tmp_path, capsys):
     assert main(["diagnose", str(path), "--candidates", "layer_gain,shot", "--json", "--quiet"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["ranking"][0]["effect"] == "layer_gain" and out["ranking"][0]["mechanism"] == "gain_error"
+
+
+def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_unexplained():
+    """Rule 1 and b''': the held-out test can pass the awgn model while the identification's
+    signed tests reject it (a law change in one layer); then nothing is "missing" by the
+    held-out test, but the data are not explained, and a passing candidate counts only with an
+    effect of the class the identification flags."""
+    from gift_theory.lab._diagnose import _identification_refusals
+
+    base_passes = _Cmp(0.3)
+    flagged = {"noise_law": 1e-3}
+    ok, why = explanation(None, base_passes, flagged=flagged)
+    assert not ok and "identification rejects" in why[0] and "noise_law (p = 0.001)" in why[0]
+    assert explanation(None, base_passes, flagged={})[0]  # nothing flagged: nothing missing
+    assert explanation(_cand(0.5), base_passes, flagged=flagged)[0]  # a passing candidate that buys its keep
+    assert not explanation(_cand(0.5, score=11.0), base_passes, flagged=flagged)[0]  # ... one that does not
+
+    @dataclasses.dataclass
+    class C:
+        effects: tuple
+        status: str = "passes"
+        refused_because: tuple = ()
+
+    class Ident:
+        def rows(self):
+            return [{"class": "noise_law", "test": "kurtosis", "layer": 2, "p": 1e-4, "p_adj": 1e-3},
+                    {"class": "weight_error", "test": "map", "layer": 1, "p": 0.2, "p_adj": 1.0}]
+
+    cands = [C(("laplace",)), C(("bias_offset",)), C(("uniform",), status="fails")]
+    out = _identification_refusals(cands, Ident(), base_passes)
+    assert [c.status for c in out] == ["passes", "refused", "fails"]
+    assert "noise_law at layer(s) 2, p = 0.001" in out[1].refused_because[0]
+    # when the baseline fails its held-out test, only a time trend refuses (rule b'')
+    assert [c.status for c in _identification_refusals(cands, Ident(), _Cmp(1e-6))] == ["passes", "passes", "fails"]
+    assert _identification_refusals(cands, None, base_passes) == cands

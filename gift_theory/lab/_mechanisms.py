@@ -360,7 +360,8 @@ def mechanisms(ctx: Context) -> list[dict]:
     evidence, p_value}`` (CONTRACTS §6): with an identification, those whose adjusted p-value is
     below :data:`ALPHA`; without one, those whose score exceeds :data:`THRESHOLD`. Best first: by
     score, except
-    that a fluctuating gain goes before the trend its path leaves (:func:`_fluctuation_before_trend`)
+    that a fluctuating gain goes before the trend its path leaves (:func:`_fluctuation_before_trend`),
+    a noise growing with the signal before the levels it raises (:func:`_signal_before_level`)
     and, without taps, the map classes whose candidate mechanism reproduces the output's mean
     lead the other map classes (:func:`~gift_theory.lab._explain_output.order_map_classes`)."""
     out = []
@@ -379,6 +380,7 @@ def mechanisms(ctx: Context) -> list[dict]:
                         "evidence": text, "p_value": float(p)})
     out.sort(key=lambda m: -m["score"])
     out = _fluctuation_before_trend(ctx, out)
+    out = _signal_before_level(ctx, out)
     if ctx.ident is not None and not ctx.taps and getattr(ctx.ident, "output_candidates", ()):
         out = order_map_classes(out, ctx.ident.output_candidates)
     notes = getattr(ctx.fit_gain, "notes", {})
@@ -408,6 +410,32 @@ def _fluctuation_before_trend(ctx, out: list) -> list:
              "variance within the inputs' shots: the gain fluctuates")
     rest = [m for i, m in enumerate(out) if i != ig]
     return rest[:it] + [g] + rest[it:]
+
+
+def _signal_before_level(ctx, out: list) -> list:
+    """A noise whose variance grows with the signal raises a layer's mean level: the layers'
+    levels then differ though the noise at zero signal is the same everywhere. The levels test
+    leaves out the layers whose input-dependence test rejects after correction; when one of the
+    layers it still names has that test below :data:`ALPHA` unadjusted (too weak to be named,
+    strong enough to raise the level), input_dependent_noise goes before noise_level (both stay
+    listed). Weighted-sum noise s (1 + beta |u|) in every hidden layer was named noise_level
+    first, its layer 1 at level 0.051 against the output's 0.041 (the chip's s) with its
+    input-dependence at p = 0.001 unadjusted."""
+    names = [m["mechanism"] for m in out]
+    if ctx.ident is None or "noise_level" not in names or "input_dependent_noise" not in names:
+        return out
+    il, isig = names.index("noise_level"), names.index("input_dependent_noise")
+    if isig < il:
+        return out
+    level_layers = set(out[il]["layers"])
+    weak = sorted({int(r["layer"]) for r in ctx.rows if r["class"] == "input_dependent_noise"
+                   and r["p"] < ALPHA and r["layer"] in level_layers})
+    if not weak:
+        return out
+    sig = dict(out[isig], evidence=out[isig]["evidence"] + f"; it raises the mean noise level of layer(s) "
+               f"{', '.join(map(str, weak))} too (input dependence there at unadjusted p < {ALPHA:g})")
+    rest = [m for i, m in enumerate(out) if i != isig]
+    return rest[:il] + [sig] + rest[il:]
 
 
 def lead_with_explanation(mechs: list, top, base_cmp) -> list:

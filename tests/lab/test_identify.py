@@ -25,7 +25,8 @@ def _net(seed, widths=(6, 10, 8, 4)):
 
 
 def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, bias_drift=None, common=None,
-        taps=True, act=np.tanh, errors=None, interleaved=False, gain_drift=None, ar1_gain=None, heavy=None):
+        taps=True, act=np.tanh, errors=None, interleaved=False, gain_drift=None, ar1_gain=None, heavy=None,
+        levels=None, signal=None):
     """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
     y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
     (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
@@ -36,7 +37,9 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
     ``gain_drift`` r: every layer's weighted sum times 1 + r t; ``ar1_gain`` (c, tau): times
     1 + c xi, xi a stationary AR(1) in acquisition order with correlation time tau shots, one
     laser for every layer; ``heavy`` (layer, nu): that layer's two noises drawn from Student's t
-    with nu degrees of freedom, scaled to standard deviation s."""
+    with nu degrees of freedom, scaled to standard deviation s; ``levels`` {layer: k}: that
+    layer's two noises at k s; ``signal`` beta: the hidden layers' weighted-sum noise
+    s (1 + beta |u|), u = W a."""
     Ws, bs = _net(seed, widths)
     rng = np.random.default_rng(seed + 1)
     x = rng.uniform(0, 1, (n, widths[0]))
@@ -66,11 +69,16 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
             W = W + errors[l] * np.sqrt(np.mean(W ** 2)) * np.random.default_rng(seed + 100 + l).normal(size=W.shape)
         bb = b[None, None, :] + (bias_drift[1] * t[:, :, None] if bias_drift and bias_drift[0] == l else 0.0)
         def noise(shape, l=l):
+            sl = s * (levels or {}).get(l, 1.0)
             if heavy and heavy[0] == l:
-                return s * rng.standard_t(heavy[1], size=shape) / np.sqrt(heavy[1] / (heavy[1] - 2.0))
-            return s * rng.normal(size=shape)
+                return sl * rng.standard_t(heavy[1], size=shape) / np.sqrt(heavy[1] / (heavy[1] - 2.0))
+            return sl * rng.normal(size=shape)
 
-        z = g * shared[:, :, None] * np.einsum("nkp,ip->nki", a, W) + bb + noise((n, r, W.shape[0]))
+
+        u = np.einsum("nkp,ip->nki", a, W)
+        grow = 1.0 + signal * np.abs(u) if signal is not None and l < L else 1.0
+        z = g * shared[:, :, None] * u + bb + grow * noise((n, r, W.shape[0]))
+
         a = (act(z) + noise(z.shape)) if l < L else z
 
         if dead and dead[0] == l:
@@ -352,3 +360,19 @@ def test_without_taps_the_propagation_matches_a_long_simulation():
     emp = np.einsum("nki,nkj->nij", dev, dev) / (A.shape[1] - 1) / 0.08 ** 2
     sd = np.sqrt(np.einsum("nii,njj->nij", emp, emp) * (1 / A.shape[1] + 1 / M))  # entry sd, normal approx
     assert np.max(np.abs(emp - C) / sd) < 5
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_noise_growing_with_the_weighted_sum_is_named_before_the_levels_it_raises(seed):
+    """Weighted-sum noise s (1 + 2 |u|) in the hidden layers raises their mean noise levels above
+    the output's: the levels differ, but the layer's variance changes with |u| (a bias hides it
+    from |z|); input_dependent_noise is named first. A layer whose noise is 1.3 s everywhere is
+    noise_level, with no input dependence named before it."""
+    ident = identify(sim(seed, n=80, r=16, signal=2.0))
+    first = _first(ident)
+    assert first and first[0]["mechanism"] == "input_dependent_noise"
+    assert set(first[0]["layers"]) <= {1, 2}
+    ident = identify(sim(seed, n=80, r=16, levels={2: 1.3}))
+    first = _first(ident)
+    assert first[0]["mechanism"] == "noise_level" and 2 in first[0]["layers"]
+    assert "input_dependent_noise" not in [m["mechanism"] for m in first]

@@ -605,7 +605,8 @@ class LayerIdentity:
     gain, gain_se : the best common gain g (W_eff ~ g W, biases free) and its standard error
     dead : neurons (0-based) whose effective row is 0 while the programmed one is not
     choice : the smallest restricted map the data do not reject: "programmed", "gain",
-        "transfer", "bias", "gain+bias", "rows" (per-neuron gain and shift of z) or "general";
+        "transfer", "bias", "gain+bias", "rows" (per-neuron gain and shift of z), "detector" (a hidden
+        neuron's own gain and offset after the activation, when no map of z fits) or "general";
         "unresolved" when the layer has too few inputs for its parameters (W_eff is then W and
         theta_se infinite: only the programmed map as a whole and the noise are tested)
     z_bins : (B,) centres of the bins of z; shape : (B,) the binned mean residual shared by the
@@ -932,6 +933,83 @@ def _unresolved_layer(lay: _Layer, act: str, s_guess: float, t, k: int) -> Layer
                          tuple(rows))
 
 
+def _shape_given_detector(rows: list, p_shape: float):
+    """The shape test's row, when its layer's neurons have a detector's gain and offset: its
+    p-value is the test's on the detector's residual (no smaller than before: a detector's
+    g_i sigma(z) + o_i is not affine in z, and the neurons' mean gain left a shared shape that
+    named activation_mismatch beside the detector)."""
+    for rw in rows:
+        if rw["test"] == "shape":
+            rw["p"] = max(rw["p"], p_shape)
+            rw["z"] = _z_of_p(rw["p"]) if rw["p"] < 1.0 else 0.0
+            rw["evidence"] += f"; given each neuron's detector gain and offset, p = {p_shape:.2g}"
+
+
+def _detector_or_modulator(lay: _Layer, act: str, s2: float, obs, mf: float, alive, tt=None, iters: int = 8):
+    """``(Q_detector, Q_modulator, Q_programmed, p_shape, p_time)``: on a hidden layer whose neurons each have their own gain and
+    offset, where they sit. A modulator's act on z (``sigma(g_i z + o_i)``), a detector's on the
+    layer's output (``g_i sigma(z) + o_i``: the readout chain D of CONTRACTS §2, a tap measures
+    what it gives). Both are fitted neuron by neuron to the per-input means at the programmed
+    map (two parameters each: least squares for the detector, Gauss-Newton for the modulator);
+    each Q is the weighted sum of squared residuals over the alive neurons (weights: the
+    per-input means' inverse variances), Q_programmed the programmed map's; p_shape the shape
+    test's p-value on the detector's residual (a function of z shared by the neurons beyond
+    their detectors: a shared slope g of the activation is one, a detector is not) and p_time
+    the test of a trend over the inputs' mean times ``tt`` left in it (1 without times): the
+    map's own time test reads a map of z, which a detector is not. Near z = 0 the two agree; where the activation bends
+    they do not. (Detectors' gains and offsets on every layer of a tapped chip were named
+    activation_mismatch, the modulator's class.)"""
+    n, r, _ = lay.Y.shape
+    vu = _unit_var(lay, lay.W)
+    z = lay.A @ lay.W.T + lay.b
+    if lay.offset is not None:
+        z = z + lay.offset
+    z, vz = z[:, :, alive], (s2 * vu[:, None, :])[:, :, alive]
+    Ybar = lay.Y.mean(1)[:, alive]
+    # the per-input means' inverse variances, from r shots each: 1 / (a chi^2 on r - 1 df) is
+    # biased up by (r - 1) / (r - 3), which inflated Q by 15 % at 16 shots
+    w = r / (mf * np.maximum(obs[:, alive], 1e-300)) * (max(r - 3, 1) / max(r - 1, 1))  # (n, da)
+    m0 = smoothed(act, z, np.broadcast_to(vz, z.shape), var=False)[0].mean(1)
+
+    def wls(cols, y):  # per neuron: weighted least squares of y on cols (n, da, c)
+        F = np.einsum("nic,ni,nid->icd", cols, w, cols)
+        b = np.einsum("nic,ni,ni->ic", cols, w, y)
+        return np.linalg.solve(F + 1e-12 * np.eye(cols.shape[2]), b[..., None])[..., 0]
+
+    det = np.stack([m0, np.ones_like(m0)], -1)
+    e_det = Ybar - np.einsum("nic,ic->ni", det, wls(det, Ybar))
+    # the shape of z shared by the neurons that the detector's residual still has (the shape
+    # test's, given the detector): its bins' shares less each neuron's detector columns
+    H = _bin_shares(z, z)[1]  # (n, da, B)
+    H = H - np.einsum("nic,icb->nib", det, np.stack([wls(det, H[:, :, j]) for j in range(H.shape[2])], -1))
+    S = np.einsum("ni,ni,nib->b", w, e_det, H)
+    V = np.einsum("ni,nib,nic->bc", w, H, H)
+    ev, U = np.linalg.eigh(V)
+    keep = ev > 1e-9 * max(ev.max(), 1e-300)
+    q_shape = float(np.sum((U[:, keep].T @ S) ** 2 / ev[keep]))
+    p_shape = float(stats.chi2.sf(q_shape, int(keep.sum())))
+    # a trend in the inputs' acquisition times left in the detector's residual (per neuron)
+    p_time = 1.0
+    if tt is not None:
+        tc = np.broadcast_to((tt[:, 0] - tt.mean())[:, None], m0.shape)
+        tc = tc - np.einsum("nic,ic->ni", det, wls(det, tc))
+        q_t = float(np.sum(np.einsum("ni,ni,ni->i", w, e_det, tc) ** 2 / np.maximum(np.einsum("ni,ni->i", w, tc * tc),
+                                                                                     1e-300)))
+        p_time = float(stats.chi2.sf(q_t, len(alive)))
+    gg, oo = np.ones(len(alive)), np.zeros(len(alive))
+    for _ in range(iters):
+        zz = gg * z + oo
+        m, g = smoothed(act, zz, np.broadcast_to(vz, z.shape), var=False)[:2]
+        e = Ybar - m.mean(1)
+        J = np.stack([(g * z).mean(1), g.mean(1)], -1)
+        step = wls(J, e)
+        gg, oo = gg + step[:, 0], oo + step[:, 1]
+    m = smoothed(act, gg * z + oo, np.broadcast_to(vz, z.shape), var=False)[0]
+    e_mod = Ybar - m.mean(1)
+    return (float(np.sum(w * e_det ** 2)), float(np.sum(w * e_mod ** 2)), float(np.sum(w * (Ybar - m0) ** 2)),
+            p_shape, p_time)
+
+
 def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: bool,
                     trends: bool = True) -> LayerIdentity:
     """One layer's identification; ``trends``: whether a trend within the inputs' shots may be
@@ -1089,6 +1167,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
                      f"near z = {zc[jmax]:.2g} beyond each neuron's affine map"))
     gain, gain_se = 1.0, float("inf")
     choice = "general"
+    p_time_det = 0.0
     rel = 0.0
     W_idx = (np.arange(da)[:, None] * k + np.arange(p)[None, :]).ravel()
     if da:
@@ -1165,12 +1244,39 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
             qr = float(phi_r[:2 * da] @ _solve_psd(Fi_r[:2 * da, :2 * da], phi_r[:2 * da]))
             pr, zr = _chi2(qr, 2 * da, nu)
             gi = phi_r[:da]
-            rows.append(_row(transfer_cls, "neuron_transfer", floor(pr), zr, float(np.sqrt(np.mean(gi ** 2))),
+            where, cls_r = ("detector", "readout_nonlinearity") if not lay.hidden else ("modulator", transfer_cls)
+            text = ""
+            if lay.hidden:
+                q_det, q_mod, _, p_sh, p_tdet = _detector_or_modulator(lay, act, s2, obs, mf, alive, tt)
+                if q_det < q_mod:
+                    where, cls_r = "detector", "readout_nonlinearity"
+                    _shape_given_detector(rows, p_sh)
+                    p_time_det = p_tdet
+                text = (f"; as a {where}'s it fits better: weighted squared residual {min(q_det, q_mod):.4g} "
+                        f"against the {'modulator' if where == 'detector' else 'detector'}'s {max(q_det, q_mod):.4g} "
+                        f"over {n} x {da} means")
+            rows.append(_row(cls_r, "neuron_transfer", floor(pr), zr, float(np.sqrt(np.mean(gi ** 2))),
                              f"each neuron's z at layer {l} scaled and shifted on its own: gains "
                              f"{1 + gi.min():.3f}..{1 + gi.max():.3f} on (W, b) of its row, shifts rms "
-                             f"{np.sqrt(np.mean(phi_r[da:2 * da] ** 2)):.3g} (a "
-                             f"{'modulator' if lay.hidden else 'detector'}'s gain and offset; fits, p = {pfit['rows']:.2g})"))
-        elif choice in ("bias", "gain+bias", "general"):
+                             f"{np.sqrt(np.mean(phi_r[da:2 * da] ** 2)):.3g} (a {where}'s gain and offset; fits, "
+                             f"p = {pfit['rows']:.2g}{text})"))
+        if choice == "general" and lay.hidden:
+            # no restricted map of z fits: the neurons' own gains and offsets may act after the
+            # activation (a detector, D of CONTRACTS §2), which no map of z expresses
+            q_det, q_mod, q_prog, p_sh, p_tdet = _detector_or_modulator(lay, act, s2, obs, mf, alive, tt)
+            df_det = n * da - 2 * da
+            if stats.chi2.sf(q_det, df_det) >= ALPHA:
+                choice = "detector"
+                _shape_given_detector(rows, p_sh)
+                p_time_det = p_tdet
+                p_lr = float(stats.chi2.sf(max(q_prog - q_det, 0.0), 2 * da))
+                rows.append(_row("readout_nonlinearity", "neuron_transfer", floor(p_lr), _z_of_p(max(p_lr, 1e-300)),
+                                 float(np.sqrt(max(q_prog - q_det, 0.0) / max(q_prog, 1e-300))),
+                                 f"each neuron of layer {l} has its own gain and offset after the activation (a "
+                                 f"detector's: g_i sigma(z) + o_i fits the per-input means, chi2 {q_det:.0f} on "
+                                 f"{df_det} df, where no map of z does and a modulator's sigma(g_i z + o_i) leaves "
+                                 f"{q_mod:.0f}; against the programmed map chi2 {q_prog - q_det:.0f} on {2 * da} df)"))
+        if choice in ("bias", "gain+bias", "general"):
             if choice in ("gain+bias", "general"):
                 rows.append(_row("gain_error", "gain", floor(_two_sided(z_gain)), abs(z_gain), g_at - 1.0,
                                  f"common gain {gain:.3f} on W at layer {l} (+- {g_se_tot:.2g} with the rest of "
@@ -1205,6 +1311,8 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
             tr = np.concatenate([np.arange(da) * k + p + 1, np.arange(da) * k + p + 2])
             qt = float(th[tr] @ _solve_psd(_sub(Sa, tr), th[tr]))
             pt, zt = _chi2(qt, tr.size, nu)
+            if p_time_det > pt:  # a detector's layer: the trend read on the detector's residual
+                pt, zt = p_time_det, _z_of_p(p_time_det) if p_time_det < 1.0 else 0.0
             zc_ = th[tr] / np.sqrt(np.maximum((Sa.diag() if isinstance(Sa, _Blocks) else np.diag(Sa))[tr], 1e-300))
             wi = int(np.argmax(np.abs(zc_)))
             rows.append(_row("time_drift", "time_map", pt, zt, float(np.max(np.abs(th[tr]))),
@@ -1222,7 +1330,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     # error is one draw shared by every input, so W_eff C W_eff^T (no taps: C the hidden
     # layers' propagated noise) carried a bias the test over inputs could not average out
     # (correlated_noise on 12 % of null files without taps)
-    W_n = (lay.W if choice in ("programmed", "bias") else gain * lay.W if choice in ("gain", "gain+bias")
+    W_n = (lay.W if choice in ("programmed", "bias", "detector") else gain * lay.W if choice in ("gain", "gain+bias")
            else W_eff)
     noise_rows, s_lvl, s_se, kurt = _noise_rows(lay, act, l, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2,
                                                 _unit_var(lay, W_n), _unit_cov(lay, W_n, sub), E_time)

@@ -26,7 +26,7 @@ def _net(seed, widths=(6, 10, 8, 4)):
 
 def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, bias_drift=None, common=None,
         taps=True, act=np.tanh, errors=None, interleaved=False, gain_drift=None, ar1_gain=None, heavy=None,
-        levels=None, signal=None):
+        levels=None, signal=None, detector=None):
     """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
     y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
     (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
@@ -39,7 +39,9 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
     laser for every layer; ``heavy`` (layer, nu): that layer's two noises drawn from Student's t
     with nu degrees of freedom, scaled to standard deviation s; ``levels`` {layer: k}: that
     layer's two noises at k s; ``signal`` beta: the hidden layers' weighted-sum noise
-    s (1 + beta |u|), u = W a."""
+    s (1 + beta |u|), u = W a; ``detector`` (gain_sd, offset_sd): every layer's output (the
+    readout chain D) mapped to g_i v + o_i, g_i ~ 1 + N(0, gain_sd^2), o_i ~ N(0, offset_sd^2)
+    per neuron, fixed."""
     Ws, bs = _net(seed, widths)
     rng = np.random.default_rng(seed + 1)
     x = rng.uniform(0, 1, (n, widths[0]))
@@ -80,6 +82,10 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
         z = g * shared[:, :, None] * u + bb + grow * noise((n, r, W.shape[0]))
 
         a = (act(z) + noise(z.shape)) if l < L else z
+        if detector is not None:
+            dr = np.random.default_rng(seed + 200 + l)
+            a = (1.0 + detector[0] * dr.normal(size=a.shape[-1])) * a + detector[1] * dr.normal(size=a.shape[-1])
+
 
         if dead and dead[0] == l:
             a[:, :, dead[1]] = s * rng.normal(size=(n, r))
@@ -376,3 +382,24 @@ def test_noise_growing_with_the_weighted_sum_is_named_before_the_levels_it_raise
     first = _first(ident)
     assert first[0]["mechanism"] == "noise_level" and 2 in first[0]["layers"]
     assert "input_dependent_noise" not in [m["mechanism"] for m in first]
+
+
+@pytest.mark.parametrize("seed", [4, 7])
+def test_a_detectors_gain_and_offset_is_told_from_a_modulators(seed):
+    """Every layer's output through its own detector gain and offset (the readout chain D of
+    CONTRACTS §2, so a tap measures g_i a + o_i): with taps the hidden layers' neurons are read
+    as detectors (g_i sigma(z) + o_i fits where sigma(g_i z + o_i) does not), and the class is
+    readout_nonlinearity at every layer, not activation_mismatch (the modulator's)."""
+    ident = identify(sim(seed, n=80, r=16, detector=(0.1, 0.05)))
+    first = _first(ident)
+    assert first[0]["mechanism"] == "readout_nonlinearity" and first[0]["layers"] == [1, 2, 3]
+    assert "activation_mismatch" not in [m["mechanism"] for m in first]
+    # a modulator's own gain and offset (z scaled per neuron) stays activation_mismatch
+    ident = identify(sim(seed, n=80, r=16, act=_modulated(seed)))
+    assert _first(ident)[0]["mechanism"] == "activation_mismatch"
+
+
+def _modulated(seed):
+    g = 1.0 + 0.15 * np.random.default_rng(seed + 300).normal(size=64)
+    o = 0.1 * np.random.default_rng(seed + 301).normal(size=64)
+    return lambda z: np.tanh(g[:z.shape[-1]] * z + o[:z.shape[-1]])

@@ -65,6 +65,8 @@ WEIGHT_COLS = 4096
 #: candidates refined by Levenberg-Marquardt trials (those closest to passing, lack of fit z below REFINE_Z)
 REFINE = 4
 REFINE_Z = 40.0
+#: the shape polynomials' range: this many times the largest |z| of the first propagation
+SCALE_HEADROOM = 1.5
 LM_TRIALS = 8
 #: the draws of the propagation are kept in memory up to this many floats (else drawn again)
 KEEP_DRAWS = 2e7
@@ -231,8 +233,9 @@ def _propagate(x, params, act, s, seed, scales=None, deform=None, columns=False,
         if scales is None:  # the shape polynomials' scale per layer: set on the first chunk
             # (half again the largest |z| of the first chunk: a scale at a high quantile clipped
             # the largest cells' draws, and a square law's y^2 was not a polynomial there)
-            scales = [1.5 * float(np.max(np.abs(r_["z"]))) or 1.0 for r_ in rec]
+            scales = [SCALE_HEADROOM * float(np.max(np.abs(r_["z"]))) or 1.0 for r_ in rec]
         y = y0 + _legendre_series(y0, scales[L - 1], np.r_[0.0, deform[("shape", L)]]) if ("shape", L) in deform else y0
+        y = y + deform.get(("post", L), 0.0)
         mean[c0:c0 + chunk] = y.mean(1)
         vmc[c0:c0 + chunk] = y.var(1, ddof=1)
         if columns:
@@ -362,7 +365,10 @@ def _block(cols, kind, l, j, hidden):
     if kind == "shape*":
         return sum(cols[("shape", h)] for h in hidden)
     if kind == "const":  # one offset shared by the layer's neurons: the sum of their own offsets' columns
-        return cols[("beta", l) if l in hidden else ("bias", l)].sum(2, keepdims=True)
+        if l not in hidden:  # the output's: added after its curve, so its column is 1 at every point
+            n_, o_ = cols[("bias", l)].shape[:2] if ("bias", l) in cols else cols[("shape", l)].shape[:2]
+            return np.ones((n_, o_, 1))
+        return cols[("beta", l)].sum(2, keepdims=True)
     v = cols[(kind, l)]
     return v[:, :, j:j + 1] if j is not None else v
 
@@ -380,7 +386,12 @@ def _deform(spec: _Spec, theta, cols, hidden, o) -> dict:
                 out[("shape", h)] = out.get(("shape", h), 0.0) + v
             continue
         if kind == "const":
-            key = ("beta", l) if l in hidden else ("bias", l)
+            if l not in hidden:  # the output's constant, after its curve (not a shift of z_L, which the
+                # curve would bend: with a square law's large coefficients the model left z = 255080
+                # where the linear fit was z = 2)
+                out[("post", l)] = out.get(("post", l), 0.0) + float(v[0])
+                continue
+            key = ("beta", l)
             out[key] = out.get(key, 0.0) + np.full(cols[key].shape[2], float(v[0]))
             continue
         if j is not None:
@@ -454,16 +465,21 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
     cand = [f_ for f_ in cand if f_[0].blocks[0][2] is None][:REFINE] + neurons
     refined = set()
     q_prog = float(np.sum(e0 * e0 / w))
-    for f_ in cand:
-        spec, A, theta_lin, _ = f_
-        want = {(kind, l) for kind, l, _ in spec.blocks if kind not in ("shape*", "const")}
-        want |= {("shape", h) for kind, _, _ in spec.blocks if kind == "shape*" for h in hidden}
-        want |= {("beta", l) if l in hidden else ("bias", l) for kind, l, _ in spec.blocks if kind == "const"}
-        # Levenberg-Marquardt from the programmed model (theta = 0, where the columns are): the
-        # first trial is the linear fit; a trial that does not lower the lack of fit is refused
-        # and the damping raised (a detector's gain and offset on 57 parameters: the linear fit's
-        # lack of fit z = 1 was z = 906 through the model, and plain Gauss-Newton went on to 984)
+    var_y = Y.var(1, ddof=1) / r
+
+    def refine(spec, A, theta_lin, want, s_free):
+        """Levenberg-Marquardt from the programmed model (theta = 0, where the columns are): the
+        first trial is the linear fit; a trial that does not lower the lack of fit is refused
+        and the damping raised (a detector's gain and offset on 57 parameters: the linear fit's
+        lack of fit z = 1 was z = 906 through the model, and plain Gauss-Newton went on to
+        984). With ``s_free`` False the noise level stays where it is (its column zero). Each
+        trial's lack of fit weighs by the deformed model's own Monte Carlo variance (a curve
+        that bends the noise -- a square law's -- makes its draws' mean noisier than the
+        programmed model's)."""
         theta, q, e, J = np.zeros_like(theta_lin), q_prog, e0, A / sw[:, None]
+        if not s_free:
+            J = J.copy()
+            J[:, 0] = 0.0
         mu, trials = 1e-6, 0
         while trials < LM_TRIALS:
             trials += 1
@@ -473,11 +489,11 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
                                     Aw.T @ (e * sw))
             trial = theta + delta
             deform = _deform(spec, trial, cols, hidden, o)
-            m_t = _propagate(x, params, act, s, seed, scales, deform)[0]
+            m_t, v_t = _propagate(x, params, act, s, seed, scales, deform)[:2]
             e_t = ybar - m_t.ravel()
-            q_t = float(np.sum(e_t * e_t / w))
+            q_t = float(np.sum(e_t * e_t / (var_y + v_t / DRAWS).ravel()))
             if TRACE:
-                print("   levenberg-marquardt", spec.name, "lin z", round(lin[id(f_)], 1), "trial z",
+                print("   levenberg-marquardt", spec.name, "s free" if s_free else "s fixed", "trial z",
                       round(zval(q_t, A.shape[1]), 1), "mu", mu, file=sys.stderr)
             if q_t >= q:
                 mu *= 10.0
@@ -491,10 +507,25 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
             cols_t = _propagate(x, params, act, s, seed, scales, deform, columns=True, want=want)[2]
             # the noise level's column at the new point too (a readout's curve bends the noise
             # into the mean: a square-law detector's E y^2 moves with s^2)
-            ds_t = (_propagate(x, params, act, s, seed, scales, {**deform, ("s", 0): deform[("s", 0)] + h})[0]
-                    - _propagate(x, params, act, s, seed, scales, {**deform, ("s", 0): deform[("s", 0)] - h})[0]
-                    ).reshape(-1, 1) / (2 * h)
+            ds_t = ((_propagate(x, params, act, s, seed, scales, {**deform, ("s", 0): deform[("s", 0)] + h})[0]
+                     - _propagate(x, params, act, s, seed, scales, {**deform, ("s", 0): deform[("s", 0)] - h})[0]
+                     ).reshape(-1, 1) / (2 * h) if s_free else np.zeros((N, 1)))
             J = np.concatenate([ds_t] + [_block(cols_t, *b, hidden).reshape(N, -1) for b in spec.blocks], axis=1)
+        return theta, q
+
+    for f_ in cand:
+        spec, A, theta_lin, _ = f_
+        want = {(kind, l) for kind, l, _ in spec.blocks if kind not in ("shape*", "const")}
+        want |= {("shape", h) for kind, _, _ in spec.blocks if kind == "shape*" for h in hidden}
+        want |= {("beta", l) if l in hidden else ("bias", l) for kind, l, _ in spec.blocks if kind == "const"}
+        theta, q = refine(spec, A, theta_lin, want, True)
+        if zval(q, A.shape[1]) >= Z_PASS:
+            # the level's linearisation can send a trial far (a square law's mean moved by the
+            # noise level: its linear fit passed, the trials through the model did not): the
+            # deformation again at the level found
+            theta2, q2 = refine(spec, A, theta_lin, want, False)
+            if q2 < q:
+                theta, q = theta2, q2
         f_[2], f_[3] = theta, q
         refined.add(id(f_))
     out = []

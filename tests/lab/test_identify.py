@@ -26,7 +26,7 @@ def _net(seed, widths=(6, 10, 8, 4)):
 
 def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, bias_drift=None, common=None,
         taps=True, act=np.tanh, errors=None, interleaved=False, gain_drift=None, ar1_gain=None, heavy=None,
-        levels=None, signal=None, detector=None):
+        levels=None, signal=None, detector=None, square_law=False):
     """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
     y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
     (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
@@ -41,7 +41,7 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
     layer's two noises at k s; ``signal`` beta: the hidden layers' weighted-sum noise
     s (1 + beta |u|), u = W a; ``detector`` (gain_sd, offset_sd): every layer's output (the
     readout chain D) mapped to g_i v + o_i, g_i ~ 1 + N(0, gain_sd^2), o_i ~ N(0, offset_sd^2)
-    per neuron, fixed."""
+    per neuron, fixed; ``square_law``: the output detector measures intensity, y = z_L^2."""
     Ws, bs = _net(seed, widths)
     rng = np.random.default_rng(seed + 1)
     x = rng.uniform(0, 1, (n, widths[0]))
@@ -92,7 +92,10 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
         if common and common[0] == l:
             a = a + common[1] * rng.normal(size=(n, r, 1))
         outs.append(a)
+    if square_law:
+        outs[-1] = outs[-1] ** 2
     params = tuple(Layer(W, b) for W, b in zip(Ws, bs))
+
     return Measurement(x=x, y=outs[-1], params=params, taps=tuple(outs[:-1]) if taps else None, t=t)
 
 

@@ -79,7 +79,8 @@ from ._localise import (
 )
 from ._identify import identify
 from ._explain_output import summary
-from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms
+from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
+
 from ._shots import Model
 from ._verdict import as_json_fields, refusals, time_free, verdict
 
@@ -522,7 +523,8 @@ def _where(rows) -> str:
 
 def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
     """Rules b'' and b''' of :mod:`._verdict`: a candidate that passes its held-out test is refused
-    when the identification finds, at Holm-adjusted 0.01, something that test cannot see and the
+    when the identification finds (:func:`~gift_theory.lab._mechanisms.named`: Holm-adjusted
+    0.01, and without taps z > 4) something that test cannot see and the
     candidate has no term for.
 
     * b'': a trend in acquisition time (a time_drift test). The held-out test compares
@@ -533,7 +535,7 @@ def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
       test has no power against what the identification finds (Student-t noise in one layer
       passed as awgn at p = 0.28 while the kurtosis test rejected awgn at 0.001). Refused: a
       candidate with no effect of a flagged class."""
-    rows = [] if ident is None else [r for r in ident.rows() if r["p_adj"] < ALPHA]
+    rows = [] if ident is None else [r for r in ident.rows() if named(r, ident.taps)]
     if not rows:
         return cands
     trend = [r for r in rows if r["class"] == "time_drift"]
@@ -681,7 +683,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
                   fit_gains(ranking, base_cmp, session.prior), {r["layer"]: (r["s"], r["level_z"]) for r in steps},
                   ident=ident)
     mechs = mechanisms(ctx)
-    flagged = flagged_classes(ident)
+    flagged = named_classes(ident)
     explained, reasons, line = verdict(session, ranking, meas, mechs, failing, flagged)
     if explained and (base_cmp.p_value < ALPHA or flagged):  # a fitted effect explains: its class leads
         mechs = lead_with_explanation(mechs, ranking[0], base_cmp)

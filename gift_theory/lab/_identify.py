@@ -45,8 +45,10 @@ effect size and its layer; :mod:`._mechanisms` turns them into the ``mechanisms`
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
+
 from scipy import stats
 
 from .._measurement import Measurement
@@ -1363,7 +1365,12 @@ class Identification:
     output_candidates: tuple = ()
 
     def rows(self) -> list[dict]:
-        """Every test with its layer and Holm-adjusted p-value (``p_adj``) over classes x layers."""
+        """Every test with its layer and Holm-adjusted p-value (``p_adj``) over classes x layers
+        (fresh dicts: a caller may change them)."""
+        return [dict(r_) for r_ in self._rows]
+
+    @functools.cached_property
+    def _rows(self) -> tuple:
         out = []
         for li in self.layers:
             for rw in li.rows:
@@ -1380,7 +1387,7 @@ class Identification:
             adj[i] = run
         for r_, a in zip(out, adj):
             r_["p_adj"] = float(a)
-        return out
+        return tuple(out)
 
     def by_layer(self) -> dict:
         return {li.layer: li for li in self.layers}

@@ -78,7 +78,7 @@ from ._localise import (
     where_it_fails,
 )
 from ._identify import identify
-from ._explain_output import summary
+from ._explain_output import mean_refusal, summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
 
 from ._shots import Model
@@ -522,7 +522,7 @@ def _where(rows) -> str:
 
 
 def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
-    """Rules b'' and b''' of :mod:`._verdict`: a candidate that passes its held-out test is refused
+    """Rules b'', b''' and e of :mod:`._verdict`: a candidate that passes its held-out test is refused
     when the identification finds (:func:`~gift_theory.lab._mechanisms.named`: Holm-adjusted
     0.01, and without taps z > 4) something that test cannot see and the
     candidate has no term for.
@@ -534,10 +534,17 @@ def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
     * b''': any class, when the baseline itself passes its held-out test (``base_cmp``): that
       test has no power against what the identification finds (Student-t noise in one layer
       passed as awgn at p = 0.28 while the kurtosis test rejected awgn at 0.001). Refused: a
-      candidate with no effect of a flagged class."""
-    rows = [] if ident is None else [r for r in ident.rows() if named(r, ident.taps)]
-    if not rows:
+      candidate with no effect of a flagged class.
+    * e (without taps): the candidate mechanisms put into the model
+      (:mod:`._explain_output`) say its class does not reproduce the output's mean while another
+      class does (:func:`~gift_theory.lab._explain_output.mean_refusal`): the detectors' gain and
+      offset passed as layer_gain (p = 0.22) while no gain put into the model fitted every
+      input's mean and each output neuron's own gain and offset did."""
+
+    if ident is None:
         return cands
+    rows = [r for r in ident.rows() if named(r, ident.taps)]
+    cands_out = getattr(ident, "output_candidates", ()) if not ident.taps else ()
     trend = [r for r in rows if r["class"] == "time_drift"]
     silent = base_cmp is not None and base_cmp.p_value >= ALPHA
     flagged = sorted({r["class"] for r in rows})
@@ -548,7 +555,10 @@ def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
             c = _refuse(c, f"the identification finds a trend in acquisition time (time_drift {_where(trend)}) that "
                            f"awgn + {name} has no term for: its held-out test compares per-input means, which "
                            f"average the trend away")
-        if c.status == "passes" and silent and not _classes("+".join(c.effects)) & set(flagged):
+        why = mean_refusal(_classes("+".join(c.effects)), cands_out) if c.status == "passes" and cands_out else None
+        if why:
+            c = _refuse(c, f"awgn + {name}: {why}")
+        if c.status == "passes" and silent and flagged and not _classes("+".join(c.effects)) & set(flagged):
             found = "; ".join(f"{k} {_where([r for r in rows if r['class'] == k])}" for k in flagged)
             c = _refuse(c, f"the identification finds {found}, which awgn + {name} has no term for; the held-out "
                            f"test does not see it (the awgn model passes that test too, p = {base_cmp.p_value:.3g})")

@@ -463,6 +463,8 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
     cand = sorted((f_ for f_ in fits if f_[0].blocks and lin[id(f_)] < REFINE_Z), key=lambda f_: lin[id(f_)])
     neurons = [f_ for f_ in cand if f_[0].blocks[0][2] is not None][:2]
     cand = [f_ for f_ in cand if f_[0].blocks[0][2] is None][:REFINE] + neurons
+
+
     refined = set()
     q_prog = float(np.sum(e0 * e0 / w))
     var_y = Y.var(1, ddof=1) / r
@@ -603,3 +605,30 @@ def summary(candidates, limit: int = 8) -> list[dict]:
             seen.add(c.mechanism)
             rest.append(c)
     return [c.to_dict() for c in prog + (passing + rest)[:limit]]
+
+
+#: without taps, classes of the mean map that the output cannot tell apart (an activation's
+#: shape from a readout's transfer): one group for :func:`mean_refusal`
+_GROUPS = {"activation_mismatch": "transfer", "readout_nonlinearity": "transfer"}
+
+
+def mean_refusal(classes, candidates) -> str | None:
+    """Why a fitted effect of ``classes`` does not explain the output's mean, or None: every
+    candidate of its classes' group (a transfer's classes are one group without taps), put into
+    the model and fitted to every input's mean, leaves a lack of fit beyond :data:`Z_PASS`, while
+    a candidate of another group of the mean map reproduces it. None when its classes have no
+    candidate here (noise classes) or none was checked through the model."""
+    def group(c):
+        return _GROUPS.get(c, c)
+
+    mine = {group(c) for c in classes if c in MAP_CLASSES}
+    if not mine:
+        return None
+    own = [c for c in candidates if group(c.mechanism) in mine]
+    other = [c for c in candidates if c.mechanism in MAP_CLASSES and group(c.mechanism) not in mine and c.explains]
+    if not own or any(c.explains for c in own) or not other:
+        return None
+    best, alt = min(own, key=lambda c: c.z), min(other, key=lambda c: c.bic)
+    return (f"put into the model and fitted to every input's mean, {best.mechanism} does not reproduce the "
+            f"output's mean (its best, {best.name}: lack of fit z = {best.z:.1f}), while {alt.name} does "
+            f"(z = {alt.z:.1f}): the held-out test passes what the means reject")

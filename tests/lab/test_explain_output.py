@@ -122,3 +122,24 @@ def test_without_taps_a_square_law_detector_is_the_outputs_transfer(seed, widths
     assert not cands["programmed"].explains
     assert cands["the output's transfer (a curve shared by its neurons)"].explains
     assert _first(ident)[0]["mechanism"] == "readout_nonlinearity"
+
+
+def test_a_class_whose_candidates_fail_the_mean_is_refused_when_another_class_reproduces_it():
+    """Rule e of the verdict (no taps): a fitted effect whose class, put into the model, leaves
+    the output's mean unexplained while another class reproduces it is no explanation; a
+    transfer's two classes are one group there (an activation's shape and a readout's curve
+    cannot be told apart without taps); noise classes and unchecked classes are not judged."""
+    from gift_theory.lab._explain_output import Candidate, mean_refusal
+
+    def c(mech, name, z):
+        return Candidate(mech, name, (1,), 4, 100.0, z, 0.5, 100.0 + z)
+
+    cands = [c("none", "programmed", 14.0), c("gain_error", "a gain on every layer", 6.0),
+             c("readout_nonlinearity", "each output neuron's gain and offset", 0.5)]
+    why = mean_refusal({"gain_error"}, cands)
+    assert why and "gain_error does not reproduce" in why and "each output neuron's gain and offset" in why
+    assert mean_refusal({"readout_nonlinearity"}, cands) is None  # its own class explains
+    assert mean_refusal({"activation_mismatch"}, cands) is None  # one group with the readout
+    assert mean_refusal({"noise_law"}, cands) is None  # no mean candidate
+    assert mean_refusal({"bias_offset"}, cands) is None  # not checked through the model
+    assert mean_refusal({"gain_error"}, cands[:2]) is None  # nothing else explains either

@@ -33,10 +33,12 @@
    b'''. when the baseline passes its held-out test but the identification rejects it (rule 1),
       a candidate with no effect of a class the identification flags is refused: that test
       did not see what the identification found, so its passing says nothing;
-   e. without taps, its class, put into the model and fitted to every input's mean
-      (:mod:`._explain_output`), reproduces the output's mean when it was checked there and
-      another class's candidate does (an activation's shape and a readout's curve are one
-      group there): the held-out test, on half the inputs, can pass what all the means reject;
+   e. without taps, it is not the case that every candidate of its class, put into the model and
+      fitted to every input's mean (:mod:`._explain_output`), fails to reproduce the output's
+      mean while another class's candidate reproduces it (an activation's shape and a readout's
+      curve are one group there): the held-out test, on half the inputs, can pass what all the
+      means reject;
+
 
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with
       Bonferroni over the layers): the model is right where it acts, not only on average; and

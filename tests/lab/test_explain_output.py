@@ -110,13 +110,15 @@ def test_explain_is_deterministic_and_reports_every_class():
                                         "readout_nonlinearity", "weight_error"}
 
 
-@pytest.mark.parametrize("seed,widths", [(21, (4, 12, 5)), (23, (6, 10, 8, 4))])
+@pytest.mark.parametrize("seed,widths", [(21, (4, 12, 5)), (22, (4, 12, 5)), (23, (6, 10, 8, 4))])
 def test_without_taps_a_square_law_detector_is_the_outputs_transfer(seed, widths):
     """y = z_L^2 (an intensity detector): the output's mean is E (z + n)^2, a polynomial of z; the
     output's curve with its constant added after it reproduces it through the model (the
     constant as a shift of z_L before the curve was bent by the curve's large coefficients:
     z = 255080 through the model where the linear fit had z = 2), and readout_nonlinearity
-    leads the mechanisms."""
+    leads the mechanisms. Seed 22: the level the output's spread gives (0.061 against the
+    chip's 0.1) leaves the curve at z = 3.2; fitted again over a few levels it explains."""
+
     ident = identify(sim(seed, widths=widths, n=160, r=32, s=0.1, taps=False, square_law=True))
     cands = {c.name: c for c in ident.output_candidates}
     assert not cands["programmed"].explains

@@ -78,7 +78,8 @@ from ._localise import (
     where_it_fails,
 )
 from ._identify import identify
-from ._explain_output import mean_refusal, summary
+from ._explain_output import also_explaining, mean_refusal, summary
+
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
 
 from ._shots import Model
@@ -697,6 +698,10 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     explained, reasons, line = verdict(session, ranking, meas, mechs, failing, flagged)
     if explained and (base_cmp.p_value < ALPHA or flagged):  # a fitted effect explains: its class leads
         mechs = lead_with_explanation(mechs, ranking[0], base_cmp)
+        also = None if taps else also_explaining(_classes("+".join(ranking[0].effects)), ident.output_candidates)
+        if also:  # said, not hidden: the explanation is one of several the output allows
+            reasons = list(reasons) + [also]
+            line += "; " + also
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),

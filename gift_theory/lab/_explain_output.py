@@ -664,3 +664,23 @@ def mean_refusal(classes, candidates) -> str | None:
     return (f"put into the model and fitted to every input's mean, {best.mechanism} does not reproduce the "
             f"output's mean (its best, {best.name}: lack of fit z = {best.z:.1f}), while {alt.name} does "
             f"(z = {alt.z:.1f}): the held-out test passes what the means reject")
+
+
+def also_explaining(classes, candidates) -> str | None:
+    """Without taps: the sentence naming the candidates of other groups of the mean map (a
+    transfer's two classes are one group) that reproduce the output's mean as well as a fitted
+    effect of ``classes`` explains the data, or None. The output alone cannot tell them apart:
+    the detectors' gain and offset were explained by layer_gain while each output neuron's own
+    gain and offset reproduced the mean too (z = 0.5 against a gain on every layer's 1.8)."""
+    mine = {_GROUPS.get(c, c) for c in classes}
+    other = sorted((c for c in candidates if c.explains and c.mechanism in MAP_CLASSES
+                    and _GROUPS.get(c.mechanism, c.mechanism) not in mine), key=lambda c: c.bic)
+    if not other:
+        return None
+    seen, names = set(), []
+    for c in other:
+        if c.mechanism not in seen:
+            seen.add(c.mechanism)
+            names.append(f"{c.name} ({c.mechanism}, lack of fit z = {c.z:.1f})")
+    return ("without taps the output's mean is reproduced as well by " + "; ".join(names[:3])
+            + ": the output alone does not tell these apart (taps on the hidden layers would)")

@@ -145,3 +145,21 @@ def test_a_class_whose_candidates_fail_the_mean_is_refused_when_another_class_re
     assert mean_refusal({"noise_law"}, cands) is None  # no mean candidate
     assert mean_refusal({"bias_offset"}, cands) is None  # not checked through the model
     assert mean_refusal({"gain_error"}, cands[:2]) is None  # nothing else explains either
+
+
+def test_an_explanation_names_the_other_classes_that_reproduce_the_mean_as_well():
+    """Without taps several classes can reproduce the output's mean; an explanation by one of
+    them says which others do as well (a transfer's two classes are one group)."""
+    from gift_theory.lab._explain_output import Candidate, also_explaining
+
+    def c(mech, name, z, k=4):
+        return Candidate(mech, name, (1,), k, 100.0, z, 0.5, 100.0 + z + k)
+
+    cands = [c("none", "programmed", 14.0), c("gain_error", "a gain on every layer", 1.8),
+             c("readout_nonlinearity", "each output neuron's gain and offset", 0.5, 7),
+             c("activation_mismatch", "layer 1's transfer", 0.9, 9), c("weight_error", "W2", 5.0)]
+    text = also_explaining({"gain_error"}, cands)
+    assert "each output neuron's gain and offset" in text and "layer 1's transfer" in text and "W2" not in text
+    assert also_explaining({"readout_nonlinearity"}, cands).count("gain on every layer") == 1
+    assert "transfer" not in also_explaining({"readout_nonlinearity"}, cands).split("as well by")[1]
+    assert also_explaining({"gain_error"}, cands[:2]) is None

@@ -145,8 +145,13 @@ def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None, flagged=
                        f"the baseline's p = {baseline_cmp.p_value:.3g})"]
     status = getattr(top, "status", "")
     why = list(top.refused_because) if status else refusals(top, baseline_cmp, top_steps, prior, twin)
+    if why and baseline_cmp.p_value >= ALPHA and flagged:  # rule 1 first: what the user must read
+        why = [f"the awgn model passes its held-out test (p = {baseline_cmp.p_value:.3g}), but the "
+               f"identification rejects it: {_found(flagged)}; no candidate with a term for it explains the "
+               f"data"] + why
     if why:
         return False, why
+
     return True, [f"awgn + {name} passes its held-out test (p = {top.comparison.p_value:.3g}) and every check of "
                   f"its fitted values"]
 
@@ -174,10 +179,11 @@ def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failin
         where = "; look at " + ", then ".join(parts)
     elif failing:
         where = f"; look at layer(s) {', '.join(map(str, failing))}"
-    if top is not None and top.comparison.p_value >= ALPHA:
-        best += f"; awgn + {' + '.join(top.effects)} passes its test, but {reasons[0]}"
-    elif baseline_cmp.p_value >= ALPHA and flagged:  # rule 1: the awgn model passes, the identification rejects it
+    if baseline_cmp.p_value >= ALPHA and flagged:  # rule 1: the awgn model passes, the identification rejects it
         best = (best + "; " if best else "") + reasons[0]
+    elif top is not None and top.comparison.p_value >= ALPHA:
+        best += f"; awgn + {' + '.join(top.effects)} passes its test, but {reasons[0]}"
+
     return "NOT EXPLAINED: nothing gift knows explains these data -- " + best + where
 
 

@@ -79,9 +79,7 @@ from ._localise import (
 )
 from ._identify import identify
 from ._explain_output import also_explaining, mean_refusal, summary
-
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
-
 from ._shots import Model
 from ._verdict import as_json_fields, refusals, time_free, verdict
 
@@ -533,15 +531,14 @@ def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
       passed as layer_gain without taps, a gain drift as activation_gain). Refused: a candidate
       with no effect that acts through the times.
     * b''': any class, when the baseline itself passes its held-out test (``base_cmp``): that
-      test has no power against what the identification finds (Student-t noise in one layer
-      passed as awgn at p = 0.28 while the kurtosis test rejected awgn at 0.001). Refused: a
+      test has no power against what the identification finds (Student-t noise in one layer of a
+      tapped chip passed as awgn at p = 0.40 while the kurtosis test rejected awgn with z = 10.7). Refused: a
       candidate with no effect of a flagged class.
     * e (without taps): the candidate mechanisms put into the model
       (:mod:`._explain_output`) say its class does not reproduce the output's mean while another
       class does (:func:`~gift_theory.lab._explain_output.mean_refusal`): the detectors' gain and
       offset passed as layer_gain (p = 0.22) while no gain put into the model fitted every
       input's mean and each output neuron's own gain and offset did."""
-
     if ident is None:
         return cands
     rows = [r for r in ident.rows() if named(r, ident.taps)]

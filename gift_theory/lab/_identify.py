@@ -948,19 +948,24 @@ def _shape_given_detector(rows: list, p_shape: float):
 
 
 def _detector_or_modulator(lay: _Layer, act: str, s2: float, obs, mf: float, alive, tt=None, iters: int = 8):
-    """``(Q_detector, Q_modulator, Q_programmed, p_shape, p_time)``: on a hidden layer whose neurons each have their own gain and
-    offset, where they sit. A modulator's act on z (``sigma(g_i z + o_i)``), a detector's on the
-    layer's output (``g_i sigma(z) + o_i``: the readout chain D of CONTRACTS §2, a tap measures
-    what it gives). Both are fitted neuron by neuron to the per-input means at the programmed
-    map (two parameters each: least squares for the detector, Gauss-Newton for the modulator);
-    each Q is the weighted sum of squared residuals over the alive neurons (weights: the
-    per-input means' inverse variances), Q_programmed the programmed map's; p_shape the shape
-    test's p-value on the detector's residual (a function of z shared by the neurons beyond
-    their detectors: a shared slope g of the activation is one, a detector is not) and p_time
-    the test of a trend over the inputs' mean times ``tt`` left in it (1 without times): the
-    map's own time test reads a map of z, which a detector is not. Near z = 0 the two agree; where the activation bends
-    they do not. (Detectors' gains and offsets on every layer of a tapped chip were named
-    activation_mismatch, the modulator's class.)"""
+    """Where a hidden layer's per-neuron gains and offsets sit: on z, a modulator's
+    ``sigma(g_i z + o_i)``, or on the layer's output, a detector's ``g_i sigma(z) + o_i`` (the
+    readout chain D of CONTRACTS §2; a tap measures what it gives). Near z = 0 the two agree;
+    where the activation bends they do not (detectors on every layer of a tapped chip were named
+    activation_mismatch, the modulator's class).
+
+    Both are fitted neuron by neuron to the per-input means at the programmed map, two
+    parameters each (least squares for the detector, Gauss-Newton for the modulator).
+
+    Returns
+    -------
+    (Q_detector, Q_modulator, Q_programmed, p_shape, p_time) : each Q the weighted sum of squared
+        residuals over the alive neurons (weights: the per-input means' inverse variances),
+        Q_programmed the programmed map's; p_shape the shape test's p-value on the detector's
+        residual (a function of z shared by the neurons beyond their detectors); p_time the test
+        of a trend over the inputs' mean times ``tt`` left in it (1 without times: the map's own
+        time test reads a map of z, which a detector is not)
+    """
     n, r, _ = lay.Y.shape
     vu = _unit_var(lay, lay.W)
     z = lay.A @ lay.W.T + lay.b
@@ -1441,7 +1446,8 @@ def _identify(meas: Measurement, s: float | None) -> Identification:
         cands = tuple(explain(meas, out[-1].s))
     levels = None
     # a layer whose noise variance changes with its signal (its input-dependence test rejects at
-    # ALPHA, Bonferroni over every test, so no more often than a class is named) has no one level: its mean level rises with its signals, and the layers'
+    # ALPHA, Bonferroni over every test, so no more often than a class is named) has no one
+    # level: its mean level rises with its signals, and the layers'
     # levels differ though each one's noise at zero signal is the chip's (weighted-sum noise
     # s (1 + beta |u|) in the hidden layers was named noise_level first: levels 0.051-0.058 there
     # against the output's 0.041, the chip's s); the levels are compared over the others

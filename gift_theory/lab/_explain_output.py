@@ -468,11 +468,16 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
     cand = sorted((f_ for f_ in fits if f_[0].blocks and lin[id(f_)] < REFINE_Z), key=lambda f_: lin[id(f_)])
     neurons = [f_ for f_ in cand if f_[0].blocks[0][2] is not None][:2]
     cand = [f_ for f_ in cand if f_[0].blocks[0][2] is None][:REFINE] + neurons
-
-
     refined = set()
     q_prog = float(np.sum(e0 * e0 / w))
     var_y = Y.var(1, ddof=1) / r
+
+    def through_model(deform):
+        """The lack of fit of the model with ``deform`` in place, weighed by its own Monte Carlo
+        variance, and its residual."""
+        m_t, v_t = _propagate(x, params, act, s, seed, scales, deform)[:2]
+        e_t = ybar - m_t.ravel()
+        return float(np.sum(e_t * e_t / (var_y + v_t / DRAWS).ravel())), e_t
 
     def refine(spec, A, theta_lin, want, s_free):
         """Levenberg-Marquardt from the programmed model (theta = 0, where the columns are): the
@@ -496,9 +501,7 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
                                     Aw.T @ (e * sw))
             trial = theta + delta
             deform = _deform(spec, trial, cols, hidden, o)
-            m_t, v_t = _propagate(x, params, act, s, seed, scales, deform)[:2]
-            e_t = ybar - m_t.ravel()
-            q_t = float(np.sum(e_t * e_t / (var_y + v_t / DRAWS).ravel()))
+            q_t, e_t = through_model(deform)
             if TRACE:
                 print("   levenberg-marquardt", spec.name, "s free" if s_free else "s fixed", "trial z",
                       round(zval(q_t, A.shape[1]), 1), "mu", mu, file=sys.stderr)
@@ -550,9 +553,7 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
             e_k = ybar - m_k.ravel()
             J_k = np.concatenate([_block(cols_k, *b, hidden).reshape(N, -1) for b in f_[0].blocks], axis=1)
             th = np.r_[k_s - 1.0, np.linalg.lstsq(J_k * sw[:, None], e_k * sw, rcond=None)[0]]
-            m_t, v_t = _propagate(x, params, act, s, seed, scales, _deform(f_[0], th, cols_k, hidden, o))[:2]
-            e_t = ybar - m_t.ravel()
-            return float(np.sum(e_t * e_t / (var_y + v_t / DRAWS).ravel())), th
+            return through_model(_deform(f_[0], th, cols_k, hidden, o))[0], th
 
         tried = {k_s: at_level(k_s) for k_s in LEVELS}
         k_best = min(tried, key=lambda k_: tried[k_][0])
@@ -562,7 +563,6 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
         if tried[k_best][0] < f_[3]:
             f_[3], f_[2] = tried[k_best]
     out = []
-
     for f_ in fits:
         spec, A, theta, q = f_
         k = A.shape[1]
@@ -644,20 +644,21 @@ def summary(candidates, limit: int = 8) -> list[dict]:
 _GROUPS = {"activation_mismatch": "transfer", "readout_nonlinearity": "transfer"}
 
 
+def _group(cls: str) -> str:
+    return _GROUPS.get(cls, cls)
+
+
 def mean_refusal(classes, candidates) -> str | None:
     """Why a fitted effect of ``classes`` does not explain the output's mean, or None: every
     candidate of its classes' group (a transfer's classes are one group without taps), put into
     the model and fitted to every input's mean, leaves a lack of fit beyond :data:`Z_PASS`, while
     a candidate of another group of the mean map reproduces it. None when its classes have no
     candidate here (noise classes) or none was checked through the model."""
-    def group(c):
-        return _GROUPS.get(c, c)
-
-    mine = {group(c) for c in classes if c in MAP_CLASSES}
+    mine = {_group(c) for c in classes if c in MAP_CLASSES}
     if not mine:
         return None
-    own = [c for c in candidates if group(c.mechanism) in mine]
-    other = [c for c in candidates if c.mechanism in MAP_CLASSES and group(c.mechanism) not in mine and c.explains]
+    own = [c for c in candidates if _group(c.mechanism) in mine]
+    other = [c for c in candidates if c.mechanism in MAP_CLASSES and _group(c.mechanism) not in mine and c.explains]
     if not own or any(c.explains for c in own) or not other:
         return None
     best, alt = min(own, key=lambda c: c.z), min(other, key=lambda c: c.bic)
@@ -672,9 +673,9 @@ def also_explaining(classes, candidates) -> str | None:
     effect of ``classes`` explains the data, or None. The output alone cannot tell them apart:
     the detectors' gain and offset were explained by layer_gain while each output neuron's own
     gain and offset reproduced the mean too (z = 0.5 against a gain on every layer's 1.8)."""
-    mine = {_GROUPS.get(c, c) for c in classes}
+    mine = {_group(c) for c in classes}
     other = sorted((c for c in candidates if c.explains and c.mechanism in MAP_CLASSES
-                    and _GROUPS.get(c.mechanism, c.mechanism) not in mine), key=lambda c: c.bic)
+                    and _group(c.mechanism) not in mine), key=lambda c: c.bic)
     if not other:
         return None
     seen, names = set(), []

@@ -48,7 +48,6 @@ import dataclasses
 import functools
 
 import numpy as np
-
 from scipy import stats
 
 from .._measurement import Measurement
@@ -733,7 +732,6 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
     rows.append(_row("input_dependent_noise", "variance", min(1.0, (3 if lay.hidden else 2) * _two_sided(zi)), zi,
                      slope_own, f"the noise variance at layer {l} changes with {which} (z = {z_own:.1f} own "
                      f"signal |z|, {z_u:.1f} weighted sum, {z_en:.1f} input energy)"))
-
     # covariance across the layer's neurons within a shot, beyond the model's, on the neurons
     # ``sub`` (all of a layer up to WIDE)
     ds = len(sub)
@@ -1423,6 +1421,41 @@ def identify(meas: Measurement, s: float | None = None) -> Identification:
         return _identify(meas, s)
 
 
+def _levels_row(out: list) -> dict | None:
+    """The test of equal noise levels across the layers (taps), or None with fewer than two
+    layers of one level. A layer whose noise variance changes with its signal (its
+    input-dependence test rejects at ALPHA, Bonferroni over every test, so no more often than a
+    class is named) has no one level: its mean level rises with its signals, and the layers'
+    levels differ though each one's noise at zero signal is the chip's (weighted-sum noise
+    s (1 + beta |u|) in the hidden layers was named noise_level first: levels 0.051-0.058 there
+    against the output's 0.041, the chip's s); the levels are compared over the others."""
+    m_tests = 1 + sum(r_["class"] != "_omnibus" for li in out for r_ in li.rows)
+    lv = [li for li in out if not any(r_["class"] == "input_dependent_noise" and r_["p"] * m_tests < ALPHA
+                                      for r_ in li.rows)]
+    if len(lv) < 2:
+        return None
+    x = np.array([np.log(li.s ** 2) for li in lv])
+    se = np.array([2 * li.s_se / max(li.s, 1e-300) for li in lv])
+    w = 1.0 / np.maximum(se ** 2, 1e-300)
+    xb = float(np.sum(w * x) / np.sum(w))
+    # levels within LEVEL_TOLERANCE of each other (in log s^2) are one level: the layers' unit
+    # variances are modelled to about 1 % at 16 shots per input (measured on null files)
+    q = float(np.sum(w * np.maximum(np.abs(x - xb) - LEVEL_TOLERANCE, 0.0) ** 2))
+    p, z = _chi2(q, len(lv) - 1)
+    zl = np.sign(x - xb) * np.maximum(np.abs(x - xb) - LEVEL_TOLERANCE, 0.0) * np.sqrt(w)
+    bad = [li.layer for li, zz in zip(lv, zl) if abs(zz) > 3.0]
+    worst = int(np.argmax(np.abs(zl)))
+    levels = _row("noise_level", "levels", p, z, float(lv[worst].s),
+                  "noise levels per layer " + ", ".join(f"{li.s:.3g}" for li in lv)
+                  + f" (layer {lv[worst].layer} stands out, z = {zl[worst]:.1f})")
+    levels["layer"] = lv[worst].layer
+    levels["layers"] = bad or [lv[worst].layer]
+    if len(lv) < len(out):
+        levels["evidence"] += (" (layer(s) " + ", ".join(str(li.layer) for li in out if li not in lv)
+                               + " left out: their noise variance changes with the signal)")
+    return levels
+
+
 def _identify(meas: Measurement, s: float | None) -> Identification:
     act = meas.activation if meas.activation in _ACT else "tanh"
     if s is None:
@@ -1444,38 +1477,7 @@ def _identify(meas: Measurement, s: float | None) -> Identification:
     if not meas.has_taps and meas.arch.depth > 1:
         from ._explain_output import explain
         cands = tuple(explain(meas, out[-1].s))
-    levels = None
-    # a layer whose noise variance changes with its signal (its input-dependence test rejects at
-    # ALPHA, Bonferroni over every test, so no more often than a class is named) has no one
-    # level: its mean level rises with its signals, and the layers'
-    # levels differ though each one's noise at zero signal is the chip's (weighted-sum noise
-    # s (1 + beta |u|) in the hidden layers was named noise_level first: levels 0.051-0.058 there
-    # against the output's 0.041, the chip's s); the levels are compared over the others
-    m_tests = 1 + sum(r_["class"] != "_omnibus" for li in out for r_ in li.rows)
-    one_level = [li for li in out if not any(r_["class"] == "input_dependent_noise" and r_["p"] * m_tests < ALPHA
-                                             for r_ in li.rows)]
-    if meas.has_taps and len(one_level) > 1:
-        out_all, out = out, one_level
-        x = np.array([np.log(li.s ** 2) for li in out])
-        se = np.array([2 * li.s_se / max(li.s, 1e-300) for li in out])
-        w = 1.0 / np.maximum(se ** 2, 1e-300)
-        xb = float(np.sum(w * x) / np.sum(w))
-        # levels within LEVEL_TOLERANCE of each other (in log s^2) are one level: the layers' unit
-        # variances are modelled to about 1 % at 16 shots per input (measured on null files)
-        q = float(np.sum(w * np.maximum(np.abs(x - xb) - LEVEL_TOLERANCE, 0.0) ** 2))
-        p, z = _chi2(q, len(out) - 1)
-        zl = np.sign(x - xb) * np.maximum(np.abs(x - xb) - LEVEL_TOLERANCE, 0.0) * np.sqrt(w)
-        bad = [li.layer for li, zz in zip(out, zl) if abs(zz) > 3.0]
-        worst = int(np.argmax(np.abs(zl)))
-        levels = _row("noise_level", "levels", p, z, float(out[worst].s),
-                      "noise levels per layer " + ", ".join(f"{li.s:.3g}" for li in out)
-                      + f" (layer {out[worst].layer} stands out, z = {zl[worst]:.1f})")
-        levels["layer"] = out[worst].layer
-        levels["layers"] = bad or [out[worst].layer]
-        if len(out) < len(out_all):
-            levels["evidence"] += (" (layer(s) " + ", ".join(str(li.layer) for li in out_all if li not in out)
-                                   + " left out: their noise variance changes with the signal)")
-        out = out_all
+    levels = _levels_row(out) if meas.has_taps and len(out) > 1 else None
     return Identification(meas.has_taps, meas.arch.depth, tuple(out), levels, cands)
 
 

@@ -7,7 +7,6 @@ classes x layers), an effect size and its layers. A class is listed when a test 
 (:func:`named`: adjusted p-value below :data:`ALPHA`, and without taps a z beyond
 :data:`THRESHOLD`), with the layers where it is, its score (the strongest test's z,
 unbounded) and one line of evidence; the list is sorted by score. The catalogue effects fitted by the
-
 diagnosis then confirm and quantify: a fitted effect of a listed class adds its gain in
 held-out discrepancy to the evidence line (it never lists a class by itself).
 
@@ -379,10 +378,8 @@ def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float =
 def mechanisms(ctx: Context) -> list[dict]:
     """The ranked mechanism classes the evidence points to, each ``{mechanism, layers, score,
     evidence, p_value}`` (CONTRACTS §6): with an identification, those its tests name
-    (:func:`named`); without one, those whose score exceeds :data:`THRESHOLD`.
- Best first: by
-    score, except
-    that a fluctuating gain goes before the trend its path leaves (:func:`_fluctuation_before_trend`),
+    (:func:`named`); without one, those whose score exceeds :data:`THRESHOLD`. Best first: by
+    score, except that a fluctuating gain goes before the trend its path leaves (:func:`_fluctuation_before_trend`),
     a noise growing with the signal before the levels it raises (:func:`_signal_before_level`)
     and, without taps, the map classes whose candidate mechanism reproduces the output's mean
     lead the other map classes (:func:`~gift_theory.lab._explain_output.order_map_classes`)."""
@@ -417,20 +414,15 @@ def _fluctuation_before_trend(ctx, out: list) -> list:
     such a gain trend and it carries less than :data:`TREND_SHARE` of the gain's variance the
     covariance measures, gain_fluctuation goes before time_drift (both stay listed): the
     mechanism is the one that carries the variance."""
-    names = [m["mechanism"] for m in out]
-    if ctx.ident is None or "time_drift" not in names or "gain_fluctuation" not in names:
-        return out
-    it, ig = names.index("time_drift"), names.index("gain_fluctuation")
-    if ig < it:
+    pair = _out_of_order(ctx, out, "gain_fluctuation", "time_drift")
+    if pair is None:
         return out
     rows = _significant(ctx, "time_drift")
     best = max(rows, key=lambda r: r["z"]) if rows else None
     if best is None or best.get("share") is None or best["share"] >= TREND_SHARE:
         return out
-    g = dict(out[ig], evidence=out[ig]["evidence"] + f"; the time trend carries {best['share']:.0%} of the gain's "
-             "variance within the inputs' shots: the gain fluctuates")
-    rest = [m for i, m in enumerate(out) if i != ig]
-    return rest[:it] + [g] + rest[it:]
+    return _put_before(out, *pair, f"; the time trend carries {best['share']:.0%} of the gain's variance within "
+                                    "the inputs' shots: the gain fluctuates")
 
 
 def _signal_before_level(ctx, out: list) -> list:
@@ -442,21 +434,34 @@ def _signal_before_level(ctx, out: list) -> list:
     listed). Weighted-sum noise s (1 + beta |u|) in every hidden layer was named noise_level
     first, its layer 1 at level 0.051 against the output's 0.041 (the chip's s) with its
     input-dependence at p = 0.001 unadjusted."""
-    names = [m["mechanism"] for m in out]
-    if ctx.ident is None or "noise_level" not in names or "input_dependent_noise" not in names:
+    pair = _out_of_order(ctx, out, "input_dependent_noise", "noise_level")
+    if pair is None:
         return out
-    il, isig = names.index("noise_level"), names.index("input_dependent_noise")
-    if isig < il:
-        return out
-    level_layers = set(out[il]["layers"])
+    level_layers = set(out[pair[1]]["layers"])
     weak = sorted({int(r["layer"]) for r in ctx.rows if r["class"] == "input_dependent_noise"
                    and r["p"] < ALPHA and r["layer"] in level_layers})
     if not weak:
         return out
-    sig = dict(out[isig], evidence=out[isig]["evidence"] + f"; it raises the mean noise level of layer(s) "
-               f"{', '.join(map(str, weak))} too (input dependence there at unadjusted p < {ALPHA:g})")
-    rest = [m for i, m in enumerate(out) if i != isig]
-    return rest[:il] + [sig] + rest[il:]
+    return _put_before(out, *pair, f"; it raises the mean noise level of layer(s) {', '.join(map(str, weak))} too "
+                                    f"(input dependence there at unadjusted p < {ALPHA:g})")
+
+
+def _out_of_order(ctx, out: list, first: str, second: str):
+    """``(i_first, i_second)`` when both classes are listed (with an identification) and
+    ``first`` comes after ``second``, else None."""
+    names = [m["mechanism"] for m in out]
+    if ctx.ident is None or first not in names or second not in names:
+        return None
+    i1, i2 = names.index(first), names.index(second)
+    return (i1, i2) if i1 > i2 else None
+
+
+def _put_before(out: list, i_move: int, i_target: int, note: str) -> list:
+    """``out`` with entry ``i_move`` (after ``i_target``) moved just before ``i_target``, ``note``
+    added to its evidence."""
+    moved = dict(out[i_move], evidence=out[i_move]["evidence"] + note)
+    rest = [m for i, m in enumerate(out) if i != i_move]
+    return rest[:i_target] + [moved] + rest[i_target:]
 
 
 def lead_with_explanation(mechs: list, top, base_cmp) -> list:

@@ -3,7 +3,8 @@
 **The rule** (CONTRACTS §6 ``explained``). The data are explained when
 
 1. the baseline (awgn, s fitted) passes its held-out test (p >= 0.01) and the layer-wise
-   identification rejects none of its assumptions (no test at Holm-adjusted 0.01): nothing is
+   identification rejects none of its assumptions (no test names a class:
+   :func:`~gift_theory.lab._mechanisms.named`, Holm-adjusted 0.01 and without taps z > 4): nothing is
    missing. ``missing_effect_detected`` is still the held-out test's alone (CONTRACTS §4): when
    only the identification rejects, the data are not explained while no missing effect is
    "detected". The held-out test compares per-input laws on half the inputs and has little
@@ -39,8 +40,6 @@
       mean while another class's candidate reproduces it (an activation's shape and a readout's
       curve are one group there): the held-out test, on half the inputs, can pass what all the
       means reject;
-
-
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with
       Bonferroni over the layers): the model is right where it acts, not only on average; and
    d. an effect fitted by its scalar parameters buys its keep: its penalised score (held-out
@@ -123,8 +122,11 @@ def refusals(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[str]:
     return why
 
 
-def _found(flagged: dict) -> str:
-    return ", ".join(f"{k} (p = {v:.2g})" for k, v in sorted(flagged.items(), key=lambda kv: kv[1]))
+def _rejected(baseline_cmp, flagged: dict, tail: str) -> str:
+    """Rule 1's reason: the awgn model passes its held-out test, the identification rejects it."""
+    found = ", ".join(f"{k} (p = {v:.2g})" for k, v in sorted(flagged.items(), key=lambda kv: kv[1]))
+    return (f"the awgn model passes its held-out test (p = {baseline_cmp.p_value:.3g}), but the identification "
+            f"rejects it: {found}; {tail}")
 
 
 def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None, flagged=None) -> tuple[bool, list[str]]:
@@ -132,12 +134,11 @@ def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None, flagged=
     why not (or, when explained, what passed). A candidate that carries its status (ranked by
     :func:`~gift_theory.lab._diagnose.diagnose`) is judged by it; otherwise its checks are
     made here from ``top_steps``, ``prior`` and ``twin`` (:func:`refusals`). ``flagged``:
-    ``{class: Holm-adjusted p}`` of the identification's tests that reject at 0.01 (rule 1)."""
+    ``{class: Holm-adjusted p}`` of the classes the identification's tests name (rule 1)."""
     if baseline_cmp.p_value >= ALPHA and not flagged:
         return True, [f"the awgn model passes (p = {baseline_cmp.p_value:.3g}): nothing is missing"]
     if baseline_cmp.p_value >= ALPHA and (top is None or top.comparison.p_value < ALPHA):
-        return False, [f"the awgn model passes its held-out test (p = {baseline_cmp.p_value:.3g}), but the "
-                       f"identification rejects it: {_found(flagged)}; the held-out test does not see this"]
+        return False, [_rejected(baseline_cmp, flagged, "the held-out test does not see this")]
     if top is None:
         return False, ["no candidate was tried"]
     name = " + ".join(top.effects)
@@ -147,12 +148,9 @@ def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None, flagged=
     status = getattr(top, "status", "")
     why = list(top.refused_because) if status else refusals(top, baseline_cmp, top_steps, prior, twin)
     if why and baseline_cmp.p_value >= ALPHA and flagged:  # rule 1 first: what the user must read
-        why = [f"the awgn model passes its held-out test (p = {baseline_cmp.p_value:.3g}), but the "
-               f"identification rejects it: {_found(flagged)}; no candidate with a term for it explains the "
-               f"data"] + why
+        why = [_rejected(baseline_cmp, flagged, "no candidate with a term for it explains the data")] + why
     if why:
         return False, why
-
     return True, [f"awgn + {name} passes its held-out test (p = {top.comparison.p_value:.3g}) and every check of "
                   f"its fitted values"]
 
@@ -184,7 +182,6 @@ def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failin
         best = (best + "; " if best else "") + reasons[0]
     elif top is not None and top.comparison.p_value >= ALPHA:
         best += f"; awgn + {' + '.join(top.effects)} passes its test, but {reasons[0]}"
-
     return "NOT EXPLAINED: nothing gift knows explains these data -- " + best + where
 
 

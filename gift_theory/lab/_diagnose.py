@@ -523,8 +523,7 @@ def _where(rows) -> str:
 def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
     """Rules b'', b''' and e of :mod:`._verdict`: a candidate that passes its held-out test is refused
     when the identification finds (:func:`~gift_theory.lab._mechanisms.named`: Holm-adjusted
-    0.01, and without taps z > 4) something that test cannot see and the
-    candidate has no term for.
+    0.01) something that test cannot see and the candidate has no term for.
 
     * b'': a trend in acquisition time (a time_drift test). The held-out test compares
       per-input means, which average an interleaved acquisition's trend away (a bias drift

@@ -172,6 +172,9 @@ class _Layer:
     #: time read within the inputs' shots (interleaved acquisition; additive or a gain), so the
     #: map is identified at t = 0 and a drift's time average is not read as a changed map
     offset: np.ndarray | None = None
+    #: (2, n, d) or None: per input and neuron the model's mean sample excess kurtosis and mean
+    #: Anscombe-Glynn z of r shots (no taps: read off the propagation's draws, r at a time)
+    law: np.ndarray | None = None
 
     @property
     def mean_factor(self) -> float:
@@ -185,7 +188,11 @@ def _propagate(meas: Measurement, s: float):
     level s), the standard normal draws fixed (the same numbers at every s), inputs in chunks.
     Exact up to the draws' error -- a linearised propagation missed the activation's curvature,
     which looked like a gain fluctuating along the signal and like correlated noise (15 % of
-    null files flagged, studies/results/2026-11-25e). Returns (mean, cov, draws)."""
+    null files flagged, studies/results/2026-11-25e). With ``r`` shots per input and at least
+    2 r draws, also the model's law of the output's r-shot samples (:class:`_Layer` ``law``):
+    the draws r at a time through the output layer, its own Gaussian noise added -- a sample's
+    kurtosis at r shots, skewness terms and all, as the shots are measured. Returns (mean, cov,
+    draws, law or None)."""
     act = _ACT[meas.activation if meas.activation in _ACT else "tanh"][0]
     x = np.asarray(meas.x, np.float64)
     params = [(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in meas.params[:-1]]
@@ -193,10 +200,15 @@ def _propagate(meas: Measurement, s: float):
     macs = sum(W.size for W, _ in params) + p
     M = int(max(MC_MIN_DRAWS, min(MC_DRAWS, MC_FLOPS / max(n * macs, 1))))
     d = params[-1][0].shape[0]
+    W_L = np.asarray(meas.params[-1][0], np.float64)
+    r = meas.r
+    G = M // r if r >= 5 else 0
     rng = np.random.default_rng(20261127)
-    chunk = max(1, int(4e6 // (M * max(p, *(W.shape[0] for W, _ in params)))))
+    rng_law = np.random.default_rng(20261128)
+    chunk = max(1, int(4e6 // (M * max(p, W_L.shape[0], *(W.shape[0] for W, _ in params)))))
     mean = np.empty((n, d))
     cov = np.empty((n, d, d))
+    law = np.empty((2, n, W_L.shape[0])) if G >= 2 else None
     for c0 in range(0, n, chunk):
         xc = x[c0:c0 + chunk]
         a = xc[:, None, :] + s * rng.standard_normal((xc.shape[0], M, p))
@@ -207,7 +219,11 @@ def _propagate(meas: Measurement, s: float):
         dev = a - mu[:, None, :]
         mean[c0:c0 + chunk] = mu
         cov[c0:c0 + chunk] = np.einsum("nki,nkj->nij", dev, dev) / ((M - 1) * s * s)
-    return mean, cov, M
+        if law is not None:
+            v = (a[:, :G * r] @ W_L.T).reshape(a.shape[0], G, r, -1)
+            v = v + s * rng_law.standard_normal(v.shape)
+            law[:, c0:c0 + chunk] = _sample_law(np.moveaxis(v, 2, -1), r).mean(2)
+    return mean, cov, M, law
 
 
 def _layers(meas: Measurement, s: float) -> list:
@@ -228,8 +244,8 @@ def _layers(meas: Measurement, s: float) -> list:
     W, b = (np.asarray(v, np.float64) for v in meas.params[-1])
     if L == 1:
         return [_Layer(1, x[:, None, :], np.asarray(meas.y, np.float64), np.eye(p), W, b, False)]
-    m, C, M = _propagate(meas, s)
-    return [_Layer(L, m[:, None, :], np.asarray(meas.y, np.float64), C, W, b, False, M)]
+    m, C, M, law = _propagate(meas, s)
+    return [_Layer(L, m[:, None, :], np.asarray(meas.y, np.float64), C, W, b, False, M, law=law)]
 
 
 def _unit_cov(lay: _Layer, W_eff, rows=None):
@@ -640,15 +656,43 @@ def _row(cls, test, p, z, effect, evidence, neurons=()):
             "evidence": evidence, "neurons": tuple(int(i) for i in neurons)}
 
 
-def _expected_kurtosis(act: str, z, vz, s2: float, r: int):
-    """Per input and neuron (n, d): the mean sample excess kurtosis (m4 / m2^2 - 3 of r shots,
-    as measured) of sigma(z + sqrt(vz) xi) + s eta, xi and eta standard normal -- a Gaussian
-    pre-activation noise bent by the activation plus the layer's own output noise -- by Monte
-    Carlo, independent draws per cell (fixed seed). A sample's kurtosis is biased at r shots
-    by -6/(r+1) for a normal law and by terms in the skewness for a bent one; both are here
-    (the law's own kurtosis alone, by quadrature, left layer 1 of 12-24-12-6 flagged on 4 % of
-    null files at 0.01)."""
-    f = _ACT[act][0]
+def _ag_z(b2, r: int):
+    """Anscombe and Glynn's (1983) normalising transform of a sample kurtosis b2 = m4 / m2^2 of r
+    values (r >= 5): near N(0, 1) for a normal sample (``scipy.stats.kurtosistest``'s statistic),
+    its skewness 0.14 at r = 16 where b2's own is ~3. A mean over cells of b2 is dominated by
+    its right tail, and a test over inputs of it was not calibrated at 80 inputs (the t-statistic
+    of a skewed quantity: no-taps null files rejected at 0.01 on 5 % of random networks)."""
+    b2 = np.asarray(b2, np.float64)
+    E = 3.0 * (r - 1) / (r + 1)
+    varb2 = 24.0 * r * (r - 2) * (r - 3) / ((r + 1) ** 2 * (r + 3) * (r + 5))
+    x = (b2 - E) / np.sqrt(varb2)
+    sb1 = 6.0 * (r * r - 5 * r + 2) / ((r + 7) * (r + 9)) * np.sqrt(6.0 * (r + 3) * (r + 5) / (r * (r - 2) * (r - 3)))
+    A = 6.0 + 8.0 / sb1 * (2.0 / sb1 + np.sqrt(1.0 + 4.0 / sb1 ** 2))
+    denom = 1.0 + x * np.sqrt(2.0 / (A - 4.0))
+    term2 = np.sign(denom) * np.cbrt((1.0 - 2.0 / A) / np.maximum(np.abs(denom), 1e-300))
+    return (1.0 - 2.0 / (9.0 * A) - term2) / np.sqrt(2.0 / (9.0 * A))
+
+
+def _sample_law(x, r: int):
+    """(2, ...): the sample excess kurtosis and its Anscombe-Glynn z of the r values along the
+    last axis of ``x`` (r >= 5)."""
+    x = x - x.mean(-1, keepdims=True)
+    x = x * x  # squares (x ** 4 is a general power in numpy: 20 times slower than a square of squares)
+    m2 = np.mean(x, -1)
+    b2 = np.mean(x * x, -1) / np.maximum(m2 * m2, 1e-300)
+    return np.stack([b2 - 3.0, _ag_z(b2, r)])
+
+
+def _expected_kurtosis(act: str | None, z, vz, s2: float, r: int):
+    """Per input and neuron (2, n, d): the mean sample excess kurtosis (m4 / m2^2 - 3 of r shots,
+    as measured) and the mean of its Anscombe-Glynn z (:func:`_ag_z`) of
+    sigma(z + sqrt(vz) xi) + s eta, xi and eta standard normal -- a Gaussian pre-activation noise
+    bent by the activation plus the layer's own output noise; ``act`` None: z + sqrt(vz) xi, a
+    Gaussian layer without activation -- by Monte Carlo, independent draws per cell (fixed seed).
+    A sample's kurtosis is biased at r shots by -6/(r+1) for a normal law and by terms in the
+    skewness for a bent one; both are here (the law's own kurtosis alone, by quadrature, left
+    layer 1 of 12-24-12-6 flagged on 4 % of null files at 0.01)."""
+    f = _ACT[act][0] if act is not None else None
     n, d = z.shape
     # draws per cell: few are enough -- the Monte Carlo error is independent across inputs, so
     # the test over inputs counts it in its own variance (calibrated at any B, a little less
@@ -656,16 +700,14 @@ def _expected_kurtosis(act: str, z, vz, s2: float, r: int):
     B = int(max(4, min(32, 2e6 / max(n * d * r, 1))))
     rng = np.random.default_rng(20261127)
     sd, s_ = np.sqrt(np.maximum(vz, 0.0)), np.sqrt(s2)
-    out = np.empty((n, d))
+    out = np.empty((2, n, d))
     chunk = max(1, int(4e6 // max(d * B * r, 1)))
     for c0 in range(0, n, chunk):
         zc, sc = z[c0:c0 + chunk, :, None, None], sd[c0:c0 + chunk, :, None, None]
         shape = zc.shape[:2] + (B, r)
-        x = f(zc + sc * rng.standard_normal(shape)) + s_ * rng.standard_normal(shape)
-        x = x - x.mean(-1, keepdims=True)
-        x *= x  # squares (x ** 4 is a general power in numpy: 20 times slower than a square of squares)
-        m2 = np.mean(x, -1)
-        out[c0:c0 + chunk] = (np.mean(x * x, -1) / np.maximum(m2 * m2, 1e-300) - 3.0).mean(-1)
+        x = (f(zc + sc * rng.standard_normal(shape)) + s_ * rng.standard_normal(shape) if f is not None
+             else sc * rng.standard_normal(shape))
+        out[:, c0:c0 + chunk] = _sample_law(x, r).mean(-1)
     return out
 
 
@@ -698,17 +740,20 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
     Tl = np.sum(obs - s2 * vcell, axis=1)
     s_lvl = float(np.sqrt(s2))
     s_se = float(np.sqrt(n * np.var(Tl, ddof=1)) / max(np.sum(vcell), 1e-300) / (2 * s_lvl))
-    dev = (E - E.mean(1, keepdims=True)) / np.sqrt(np.maximum(var, 1e-300))
-    m2 = np.mean(dev ** 2, 1)
-    kurt_cell = np.mean(np.square(dev * dev), 1) / np.maximum(m2 * m2, 1e-300) - 3.0
-    # a normal sample's kurtosis is biased by -6/(r+1); an activation bends a Gaussian
-    # pre-activation noise into a law of its own (layer 1: the input's noise through W as well),
-    # whose excess kurtosis the model predicts (measured before this was subtracted: layer 1 of
-    # 12-24-12-6 flagged on 15 % of null files)
-    k_exp = (_expected_kurtosis(act, z.mean(1), s2 * vz, s2, r) if lay.hidden and r >= 4
-             else np.full((n, d), -6.0 / (r + 1)))
-    kz = over_inputs((kurt_cell - k_exp).mean(1)) if r >= 4 else 0.0
-    kurt = float(np.mean(kurt_cell - k_exp))
+    kz, kurt, k_exp = 0.0, 0.0, np.full((n, d), -6.0 / (r + 1))
+    if r >= 5:
+        # per cell the sample kurtosis and its normalising transform; the model's own law of r
+        # shots: an activation bends a Gaussian pre-activation noise into a law of its own
+        # (layer 1: the input's noise through W as well; no taps: the hidden layers' noise
+        # propagated), and a normal sample's kurtosis is biased by -6/(r+1) (before the model's
+        # was subtracted: layer 1 of 12-24-12-6 flagged on 15 % of null files)
+        dev = (E - E.mean(1, keepdims=True)) / np.sqrt(np.maximum(var, 1e-300))  # a shot's own variance
+        k_cell = _sample_law(np.moveaxis(dev, 1, -1), r)
+        law = (lay.law if lay.law is not None
+               else _expected_kurtosis(act if lay.hidden else None, z.mean(1), s2 * vz, s2, r))
+        k_exp = law[0]
+        kz = over_inputs((k_cell[1] - law[1]).mean(1))
+        kurt = float(np.mean(k_cell[0] - k_exp))
     rows.append(_row("noise_law", "kurtosis", _two_sided(kz), abs(kz), kurt,
                      f"excess kurtosis {kurt:+.2f} of the standardised shots at layer {l} beyond the model's "
                      f"{float(np.mean(k_exp)) + 6.0 / (r + 1):+.2f} (0 for a Gaussian law; the model's: its Gaussian "
@@ -1337,6 +1382,15 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     # (correlated_noise on 12 % of null files without taps)
     W_n = (lay.W if choice in ("programmed", "bias", "detector") else gain * lay.W if choice in ("gain", "gain+bias")
            else W_eff)
+    if lay.Cin is not None and W_n is not W_eff:
+        # ... and so the noise variance and level: the unmeasured input noise reaches the layer
+        # through W, and W_eff's error, larger along directions the inputs barely span, only adds
+        # to W_eff C W_eff^T (no taps, a 3-neuron hidden layer upstream: the level read 0.033 at
+        # s = 0.061, and the variance's input dependence was named on 4 % of null files at 0.01)
+        for _ in range(2):
+            var = _mean_model(lay, act, W_eff, b_eff, s2, _unit_var(lay, W_n), tt, drift)[3]
+            s2 = float(np.sum(obs) / np.sum((var / s2).mean(1)))
+        var = _mean_model(lay, act, W_eff, b_eff, s2, _unit_var(lay, W_n), tt, drift)[3]
     noise_rows, s_lvl, s_se, kurt = _noise_rows(lay, act, l, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2,
                                                 _unit_var(lay, W_n), _unit_cov(lay, W_n, sub), E_time)
     rows.extend(noise_rows)

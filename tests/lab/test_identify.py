@@ -346,21 +346,41 @@ def test_expected_kurtosis_of_a_normal_sample_is_minus_6_over_r_plus_1():
 
     r = 12
     k = _expected_kurtosis("identity", np.zeros((50, 40)), np.full((50, 40), 0.3), 0.01, r)
-    B = k.size * int(max(4, min(32, 2e6 / (k.size * r))))  # the draws per cell _expected_kurtosis uses
+    assert k.shape == (2, 50, 40)
+    B = k[0].size * int(max(4, min(32, 2e6 / (k[0].size * r))))  # the draws per cell _expected_kurtosis uses
     se = np.sqrt(24.0 / r) / np.sqrt(B)  # sd of one sample's excess kurtosis ~ sqrt(24 / r) (an upper bound here)
-    assert abs(k.mean() + 6.0 / (r + 1)) < 4 * se
+    assert abs(k[0].mean() + 6.0 / (r + 1)) < 4 * se
+    # its Anscombe-Glynn z: the mean of scipy's kurtosistest statistic over other normal samples
+    # (sd of one z about 1; the two Monte Carlo means independent)
+    ref = stats.kurtosistest(np.random.default_rng(5).standard_normal((B, r)), axis=1).statistic
+    assert abs(k[1].mean() - ref.mean()) < 4 * np.sqrt(1.0 / B + ref.var() / B)
+    # no activation (the output layer): a normal law as well
+    k0 = _expected_kurtosis(None, np.zeros((50, 40)), np.full((50, 40), 0.3), 0.01, r)
+    assert abs(k0[0].mean() + 6.0 / (r + 1)) < 4 * se and abs(k0[1].mean() - ref.mean()) < 4 * np.sqrt(2.0 / B)
     # tanh bends the law: a wide pre-activation noise at z = 0 flattens the tails (negative excess)
     kt = _expected_kurtosis("tanh", np.zeros((20, 20)), np.full((20, 20), 1.0), 1e-4, 48)
-    assert kt.mean() < -6.0 / 49 - 0.2
+    assert kt[0].mean() < -6.0 / 49 - 0.2 and kt[1].mean() < -1.0
+
+
+def test_kurtosis_transform_is_scipys_kurtosistest():
+    from gift_theory.lab._identify import _sample_law
+
+    rng = np.random.default_rng(3)
+    for r in (5, 9, 16, 48):
+        x = rng.standard_t(4, (200, r))
+        law = _sample_law(x, r)
+        assert np.allclose(law[0], stats.kurtosis(x, axis=1), atol=1e-12)
+        assert np.allclose(law[1], stats.kurtosistest(x, axis=1).statistic, atol=1e-10)
 
 
 def test_without_taps_the_propagation_matches_a_long_simulation():
     # the output layer's regressor and input covariance by Monte Carlo against 20000 shots of
     # the plain-numpy simulator at the same level (its own independent draws)
-    from gift_theory.lab._identify import _propagate
+    from gift_theory.lab._identify import _propagate, _sample_law
 
     meas = sim(3, n=4, r=20000, s=0.08, taps=True)
-    m, C, M = _propagate(meas, 0.08)
+    m, C, M, law = _propagate(meas, 0.08)
+    assert law is None  # fewer than two samples of r shots among the draws
     A = np.asarray(meas.taps[-1], np.float64)
     mu = A.mean(1)
     se = np.sqrt(A.var(1) * (1 / A.shape[1] + 1 / M))
@@ -369,6 +389,16 @@ def test_without_taps_the_propagation_matches_a_long_simulation():
     emp = np.einsum("nki,nkj->nij", dev, dev) / (A.shape[1] - 1) / 0.08 ** 2
     sd = np.sqrt(np.einsum("nii,njj->nij", emp, emp) * (1 / A.shape[1] + 1 / M))  # entry sd, normal approx
     assert np.max(np.abs(emp - C) / sd) < 5
+    # the law of 16-shot samples of the output (kurtosis and its z, per input and neuron): the
+    # long simulation's output cut into samples of 16 shots
+    r = 16
+    law = _propagate(sim(3, n=4, r=r, s=0.08, taps=False), 0.08)[3]
+    G = M // r
+    Y = np.asarray(meas.y, np.float64)
+    Y = Y[:, :Y.shape[1] // r * r].reshape(4, -1, r, Y.shape[-1])
+    ref = _sample_law(np.moveaxis(Y, 2, -1), r)  # (2, n, groups, d)
+    se = np.sqrt(ref.var(2) / ref.shape[2] + ref.var(2) / G)
+    assert np.max(np.abs(law - ref.mean(2)) / se) < 4.5
 
 
 @pytest.mark.parametrize("seed", [4, 5])

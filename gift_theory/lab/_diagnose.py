@@ -77,10 +77,11 @@ from ._localise import (
     signatures,
     where_it_fails,
 )
-from ._identify import identify
+from ._identify import _sample_law, _two_sided, identify
+from ._qtest import over_inputs
 from ._explain_output import also_explaining, mean_refusal, summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
-from ._shots import Model
+from ._shots import Model, model_shots
 from ._verdict import as_json_fields, refusals, time_free, verdict
 
 #: the significance level of the goodness-of-fit test (CONTRACTS §4)
@@ -520,7 +521,48 @@ def _where(rows) -> str:
     return f"at layer(s) {', '.join(map(str, sorted({int(r['layer']) for r in rows})))}, p = {best['p_adj']:.2g}"
 
 
-def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
+def _law_check(session: "Session", ident):
+    """Rule f of :mod:`._verdict`, or None when it has nothing to read: when the identification
+    names noise_law by its kurtosis test, a passing candidate must reproduce the shots' tails
+    there. Its own shots (4 r per input, the measurement's inputs and times, a key named by the
+    candidate's effects) are cut into samples of r, and each cell's Anscombe-Glynn z of their
+    kurtosis compared with the measured one's over the inputs (two-sided, Bonferroni over the
+    layers named): a two-sample test, no model law assumed. Without it uniform noise "explained"
+    Student-t noise in one layer (the kurtosis test had named noise_law, +0.22 beyond awgn's; a
+    law with lighter tails than the Gaussian's lowered the held-out discrepancy by 0.1 sd)."""
+    meas = session.meas
+    rows = [r for r in ([] if ident is None else ident.rows())
+            if r["class"] == "noise_law" and r["test"] == "kurtosis" and named(r, ident.taps)]
+    if not rows or meas.r < 5:
+        return None
+    ids, data, r = list(meas.layer_ids()), meas.layers(), meas.r
+
+    def law(shots):
+        n, K, d = shots.shape
+        return _sample_law(np.moveaxis(np.asarray(shots, np.float64).reshape(n, K // r, r, d), 2, -1), r).mean(2)
+
+    def check(c) -> str | None:
+        name = " + ".join(c.effects)
+        own = model_shots(named_subkey(session.k_cmp, "law/" + "+".join(c.effects)), c.model, meas, 4 * r)
+        worst = None
+        for row in rows:
+            i = ids.index(int(row["layer"]))
+            ld, lc = law(data[i]), law(own[i])
+            z = over_inputs((ld[1] - lc[1]).mean(1))
+            p = min(1.0, len(rows) * _two_sided(z))
+            if p < ALPHA and (worst is None or p < worst[0]):
+                worst = (p, z, int(row["layer"]), float(ld[0].mean()), float(lc[0].mean()))
+        if worst is None:
+            return None
+        p, z, l, kd, kc = worst
+        return (f"awgn + {name} does not reproduce the shots' tails at layer {l}, where the identification names "
+                f"noise_law: sample excess kurtosis {kd:+.2f} measured, {kc:+.2f} in its own shots (z = {z:.1f}, "
+                f"p = {p:.2g})")
+
+    return check
+
+
+def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> list:
     """Rules b'', b''' and e of :mod:`._verdict`: a candidate that passes its held-out test is refused
     when the identification finds (:func:`~gift_theory.lab._mechanisms.named`: Holm-adjusted
     0.01) something that test cannot see and the candidate has no term for.
@@ -537,7 +579,9 @@ def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
       (:mod:`._explain_output`) say its class does not reproduce the output's mean while another
       class does (:func:`~gift_theory.lab._explain_output.mean_refusal`): the detectors' gain and
       offset passed as layer_gain (p = 0.22) while no gain put into the model fitted every
-      input's mean and each output neuron's own gain and offset did."""
+      input's mean and each output neuron's own gain and offset did.
+    * f: ``law`` (:func:`_law_check`), when the identification names noise_law by its kurtosis:
+      a candidate whose own shots' tails differ from the measured ones."""
     if ident is None:
         return cands
     rows = [r for r in ident.rows() if named(r, ident.taps)]
@@ -559,6 +603,9 @@ def _identification_refusals(cands: list, ident, base_cmp=None) -> list:
             found = "; ".join(f"{k} {_where([r for r in rows if r['class'] == k])}" for k in flagged)
             c = _refuse(c, f"the identification finds {found}, which awgn + {name} has no term for; the held-out "
                            f"test does not see it (the awgn model passes that test too, p = {base_cmp.p_value:.3g})")
+        why = law(c) if c.status == "passes" and law is not None else None
+        if why:
+            c = _refuse(c, why)
         out.append(c)
     return out
 
@@ -577,7 +624,10 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
     clears their classes, and an explanation has been found) and are listed in ``not_fitted``
     with that reason. Otherwise every candidate is fitted."""
     def fitted(specs):
-        return _identification_refusals(session.candidates(specs, progress), ident, session.baseline_comparison)
+        return _identification_refusals(session.candidates(specs, progress), ident, session.baseline_comparison,
+                                        law)
+
+    law = _law_check(session, ident)
 
     flagged = flagged_classes(ident)
     first = [n for n in names if _classes(n) & set(flagged)]

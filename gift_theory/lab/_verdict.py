@@ -40,6 +40,10 @@
       mean while another class's candidate reproduces it (an activation's shape and a readout's
       curve are one group there): the held-out test, on half the inputs, can pass what all the
       means reject;
+   f. when the identification names noise_law by its kurtosis test, the model's own shots have
+      the measured tails there (a two-sample test of each cell's kurtosis over the inputs,
+      :func:`~gift_theory.lab._diagnose._law_check`): a law change in the wrong direction can
+      lower the held-out discrepancy (uniform noise passed on Student-t noise in one layer);
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with
       Bonferroni over the layers): the model is right where it acts, not only on average; and
    d. an effect fitted by its scalar parameters buys its keep: its penalised score (held-out
@@ -48,7 +52,7 @@
 
 A model that fits anything is not an explanation: (a) and (b) refuse one that passed only
 because it could follow whatever the chip did. The same checks give every candidate of the
-ranking its status (:func:`refusals`; ``"refused"`` when one of a-d refuses a candidate that
+ranking its status (:func:`refusals`; ``"refused"`` when one of a-f refuses a candidate that
 passes its test), and the top-ranked model is the first that passes, else the first refused,
 else the closest of those the data reject -- the one the verdict line names.
 

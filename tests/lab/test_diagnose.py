@@ -7,6 +7,7 @@ rates over many seeds and the without-taps case are measured by
 """
 
 import json
+import types
 
 import jax
 import numpy as np
@@ -449,3 +450,24 @@ def test_a_law_change_the_held_out_test_misses_is_not_called_nothing_missing():
     others = [r for r in out["ranking"] if "noise_law" not in r["mechanism"] and r["p_value_after"] >= 0.01]
     assert all(r["status"] == "refused" for r in others)
 
+
+
+@pytest.mark.slow
+def test_a_law_with_the_wrong_tails_is_refused_and_the_right_law_is_not():
+    """Rule f: when the identification names noise_law by its kurtosis, a passing candidate must
+    reproduce the shots' tails (a two-sample test against its own shots). On a Laplace chip
+    (heavy tails in every layer) uniform noise (light tails) is refused by it, Laplace is not;
+    on an awgn chip the kurtosis names nothing and the rule has nothing to read."""
+    from gift_theory.lab._diagnose import Session, _law_check, _single
+    from gift_theory.lab._identify import identify
+
+    meas = _chip(HIDDEN["laplace"], seed=2, n=60, r=24)
+    session = Session(jax.random.PRNGKey(5), meas)
+    check = _law_check(session, identify(meas))
+    assert check is not None
+    lap, uni = session.candidates([_single("laplace"), _single("uniform")])
+    why = check(uni)
+    assert why and "does not reproduce the shots' tails" in why and "measured" in why
+    assert check(lap) is None
+    null = _chip({}, seed=2, n=60, r=24)
+    assert _law_check(types.SimpleNamespace(meas=null), identify(null)) is None

@@ -175,6 +175,9 @@ class _Layer:
     #: (2, n, d) or None: per input and neuron the model's mean sample excess kurtosis and mean
     #: Anscombe-Glynn z of r shots (no taps: read off the propagation's draws, r at a time)
     law: np.ndarray | None = None
+    #: (n, d, d) or None: per input an orthonormal basis the noise's law is read in (no taps: the
+    #: eigenvectors of the output's model covariance; ``law`` is in it), else the neurons
+    basis: np.ndarray | None = None
 
     @property
     def mean_factor(self) -> float:
@@ -191,8 +194,11 @@ def _propagate(meas: Measurement, s: float):
     null files flagged, studies/results/2026-11-25e). With ``r`` shots per input and at least
     2 r draws, also the model's law of the output's r-shot samples (:class:`_Layer` ``law``):
     the draws r at a time through the output layer, its own Gaussian noise added -- a sample's
-    kurtosis at r shots, skewness terms and all, as the shots are measured. Returns (mean, cov,
-    draws, law or None)."""
+    kurtosis at r shots, skewness terms and all, as the shots are measured. The law is read in
+    each input's eigenbasis of the output's model covariance, W_L C W_L^T + I (:class:`_Layer`
+    ``basis``; up to :data:`WIDE` outputs): the output's own noise is a larger share of its minor
+    components than of any neuron, where the hidden layers' propagated noise dilutes a law
+    change of the output's own. Returns (mean, cov, draws, law or None, basis or None)."""
     act = _ACT[meas.activation if meas.activation in _ACT else "tanh"][0]
     x = np.asarray(meas.x, np.float64)
     params = [(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in meas.params[:-1]]
@@ -209,6 +215,7 @@ def _propagate(meas: Measurement, s: float):
     mean = np.empty((n, d))
     cov = np.empty((n, d, d))
     law = np.empty((2, n, W_L.shape[0])) if G >= 2 else None
+    basis = np.empty((n, W_L.shape[0], W_L.shape[0])) if W_L.shape[0] <= WIDE else None
     for c0 in range(0, n, chunk):
         xc = x[c0:c0 + chunk]
         a = xc[:, None, :] + s * rng.standard_normal((xc.shape[0], M, p))
@@ -219,11 +226,18 @@ def _propagate(meas: Measurement, s: float):
         dev = a - mu[:, None, :]
         mean[c0:c0 + chunk] = mu
         cov[c0:c0 + chunk] = np.einsum("nki,nkj->nij", dev, dev) / ((M - 1) * s * s)
+        V = None
+        if basis is not None:
+            V = np.linalg.eigh(W_L @ cov[c0:c0 + chunk] @ W_L.T + np.eye(W_L.shape[0]))[1]
+            basis[c0:c0 + chunk] = V
         if law is not None:
-            v = (a[:, :G * r] @ W_L.T).reshape(a.shape[0], G, r, -1)
+            v = a[:, :G * r] @ W_L.T
             v = v + s * rng_law.standard_normal(v.shape)
+            if V is not None:
+                v = np.matmul(v, V)
+            v = v.reshape(a.shape[0], G, r, -1)
             law[:, c0:c0 + chunk] = _sample_law(np.moveaxis(v, 2, -1), r).mean(2)
-    return mean, cov, M, law
+    return mean, cov, M, law, basis
 
 
 def _layers(meas: Measurement, s: float) -> list:
@@ -244,8 +258,8 @@ def _layers(meas: Measurement, s: float) -> list:
     W, b = (np.asarray(v, np.float64) for v in meas.params[-1])
     if L == 1:
         return [_Layer(1, x[:, None, :], np.asarray(meas.y, np.float64), np.eye(p), W, b, False)]
-    m, C, M, law = _propagate(meas, s)
-    return [_Layer(L, m[:, None, :], np.asarray(meas.y, np.float64), C, W, b, False, M, law=law)]
+    m, C, M, law, basis = _propagate(meas, s)
+    return [_Layer(L, m[:, None, :], np.asarray(meas.y, np.float64), C, W, b, False, M, law=law, basis=basis)]
 
 
 def _unit_cov(lay: _Layer, W_eff, rows=None):
@@ -747,7 +761,10 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
         # (layer 1: the input's noise through W as well; no taps: the hidden layers' noise
         # propagated), and a normal sample's kurtosis is biased by -6/(r+1) (before the model's
         # was subtracted: layer 1 of 12-24-12-6 flagged on 15 % of null files)
-        dev = (E - E.mean(1, keepdims=True)) / np.sqrt(np.maximum(var, 1e-300))  # a shot's own variance
+        if lay.basis is not None:  # the model covariance's components (kurtosis: no scale needed)
+            dev = np.matmul(E - E.mean(1, keepdims=True), lay.basis)
+        else:  # each neuron, a shot by its own variance
+            dev = (E - E.mean(1, keepdims=True)) / np.sqrt(np.maximum(var, 1e-300))
         k_cell = _sample_law(np.moveaxis(dev, 1, -1), r)
         law = (lay.law if lay.law is not None
                else _expected_kurtosis(act if lay.hidden else None, z.mean(1), s2 * vz, s2, r))
@@ -755,7 +772,9 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
         kz = over_inputs((k_cell[1] - law[1]).mean(1))
         kurt = float(np.mean(k_cell[0] - k_exp))
     rows.append(_row("noise_law", "kurtosis", _two_sided(kz), abs(kz), kurt,
-                     f"excess kurtosis {kurt:+.2f} of the standardised shots at layer {l} beyond the model's "
+                     f"excess kurtosis {kurt:+.2f} of the "
+                     + ("output's noise along its model covariance's eigenvectors" if lay.basis is not None
+                        else "standardised shots") + f" at layer {l} beyond the model's "
                      f"{float(np.mean(k_exp)) + 6.0 / (r + 1):+.2f} (0 for a Gaussian law; the model's: its Gaussian "
                      f"noise bent by the activation)"))
     # variance against the neuron's own signal and the input's energy

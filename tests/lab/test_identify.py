@@ -379,7 +379,7 @@ def test_without_taps_the_propagation_matches_a_long_simulation():
     from gift_theory.lab._identify import _propagate, _sample_law
 
     meas = sim(3, n=4, r=20000, s=0.08, taps=True)
-    m, C, M, law = _propagate(meas, 0.08)
+    m, C, M, law, basis = _propagate(meas, 0.08)
     assert law is None  # fewer than two samples of r shots among the draws
     A = np.asarray(meas.taps[-1], np.float64)
     mu = A.mean(1)
@@ -389,12 +389,14 @@ def test_without_taps_the_propagation_matches_a_long_simulation():
     emp = np.einsum("nki,nkj->nij", dev, dev) / (A.shape[1] - 1) / 0.08 ** 2
     sd = np.sqrt(np.einsum("nii,njj->nij", emp, emp) * (1 / A.shape[1] + 1 / M))  # entry sd, normal approx
     assert np.max(np.abs(emp - C) / sd) < 5
-    # the law of 16-shot samples of the output (kurtosis and its z, per input and neuron): the
-    # long simulation's output cut into samples of 16 shots
+    # the law of 16-shot samples of the output (kurtosis and its z, per input and component of
+    # the model covariance's eigenbasis): the long simulation's output cut into samples of 16
+    # shots, in the same basis
     r = 16
-    law = _propagate(sim(3, n=4, r=r, s=0.08, taps=False), 0.08)[3]
+    _, _, _, law, V = _propagate(sim(3, n=4, r=r, s=0.08, taps=False), 0.08)
+    assert np.allclose(np.matmul(V.transpose(0, 2, 1), V), np.eye(V.shape[-1]), atol=1e-10)
     G = M // r
-    Y = np.asarray(meas.y, np.float64)
+    Y = np.matmul(np.asarray(meas.y, np.float64), V)
     Y = Y[:, :Y.shape[1] // r * r].reshape(4, -1, r, Y.shape[-1])
     ref = _sample_law(np.moveaxis(Y, 2, -1), r)  # (2, n, groups, d)
     se = np.sqrt(ref.var(2) / ref.shape[2] + ref.var(2) / G)

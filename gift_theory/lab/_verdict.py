@@ -41,7 +41,8 @@
       curve are one group there): the held-out test, on half the inputs, can pass what all the
       means reject;
    f. when the identification names noise_law by its kurtosis test, the model's own shots have
-      the measured tails there (a two-sample test of each cell's kurtosis over the inputs,
+      the measured tails there, or at least tails moved from the baseline's towards them (each
+      cell's kurtosis over the inputs against the model's and the baseline's own shots,
       :func:`~gift_theory.lab._diagnose._law_check`): a law change in the wrong direction can
       lower the held-out discrepancy (uniform noise passed on Student-t noise in one layer);
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with

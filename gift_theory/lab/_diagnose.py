@@ -577,7 +577,7 @@ def _law_check(session: "Session", ident):
 
 
 def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> list:
-    """Rules b'', b''' and e of :mod:`._verdict`: a candidate that passes its held-out test is refused
+    """Rules b'', b''', e and f of :mod:`._verdict`: a candidate that passes its held-out test is refused
     when the identification finds (:func:`~gift_theory.lab._mechanisms.named`: Holm-adjusted
     0.01) something that test cannot see and the candidate has no term for.
 
@@ -595,7 +595,8 @@ def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> lis
       offset passed as layer_gain (p = 0.22) while no gain put into the model fitted every
       input's mean and each output neuron's own gain and offset did.
     * f: ``law`` (:func:`_law_check`), when the identification names noise_law by its kurtosis:
-      a candidate whose own shots' tails differ from the measured ones."""
+      a candidate whose own shots' tails differ from the measured ones and have not moved
+      towards them from the baseline's."""
     if ident is None:
         return cands
     rows = [r for r in ident.rows() if named(r, ident.taps)]

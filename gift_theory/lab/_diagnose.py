@@ -78,7 +78,7 @@ from ._localise import (
     signatures,
     where_it_fails,
 )
-from ._identify import _sample_law, _two_sided, identify
+from ._identify import _shots_law, _two_sided, identify
 from ._qtest import over_inputs
 from ._explain_output import also_explaining, mean_refusal, summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
@@ -543,15 +543,11 @@ def _law_check(session: "Session", ident):
     ids, data, r = list(meas.layer_ids()), meas.layers(), meas.r
     m = len(rows)
 
-    def law(shots):
-        n, K, d = shots.shape
-        return _sample_law(np.moveaxis(np.asarray(shots, np.float64).reshape(n, K // r, r, d), 2, -1), r).mean(2)
-
     def laws(model, name):
         own = model_shots(named_subkey(session.k_cmp, "law/" + name), model, meas, 4 * r)
-        return [law(own[ids.index(int(row["layer"]))]) for row in rows]
+        return [_shots_law(own[ids.index(int(row["layer"]))], r) for row in rows]
 
-    measured = [law(data[ids.index(int(row["layer"]))]) for row in rows]
+    measured = [_shots_law(data[ids.index(int(row["layer"]))], r) for row in rows]
     base = []  # the baseline's, made at the first candidate that needs them
 
     def check(c) -> str | None:

@@ -235,8 +235,7 @@ def _propagate(meas: Measurement, s: float):
             v = v + s * rng_law.standard_normal(v.shape)
             if V is not None:
                 v = np.matmul(v, V)
-            v = v.reshape(a.shape[0], G, r, -1)
-            law[:, c0:c0 + chunk] = _sample_law(np.moveaxis(v, 2, -1), r).mean(2)
+            law[:, c0:c0 + chunk] = _shots_law(v, r)
     return mean, cov, M, law, basis
 
 
@@ -697,6 +696,15 @@ def _sample_law(x, r: int):
     return np.stack([b2 - 3.0, _ag_z(b2, r)])
 
 
+def _shots_law(shots, r: int):
+    """(2, n, d): per input and neuron the mean of :func:`_sample_law` over the K // r samples of
+    r consecutive shots of ``shots`` (n, K, d) -- a measurement's r shots (one sample) or a
+    model's K."""
+    n, K, d = shots.shape
+    x = np.asarray(shots, np.float64)[:, :K // r * r].reshape(n, K // r, r, d)
+    return _sample_law(np.moveaxis(x, 2, -1), r).mean(2)
+
+
 def _expected_kurtosis(act: str | None, z, vz, s2: float, r: int):
     """Per input and neuron (2, n, d): the mean sample excess kurtosis (m4 / m2^2 - 3 of r shots,
     as measured) and the mean of its Anscombe-Glynn z (:func:`_ag_z`) of
@@ -765,7 +773,7 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
             dev = np.matmul(E - E.mean(1, keepdims=True), lay.basis)
         else:  # each neuron, a shot by its own variance
             dev = (E - E.mean(1, keepdims=True)) / np.sqrt(np.maximum(var, 1e-300))
-        k_cell = _sample_law(np.moveaxis(dev, 1, -1), r)
+        k_cell = _shots_law(dev, r)
         law = (lay.law if lay.law is not None
                else _expected_kurtosis(act if lay.hidden else None, z.mean(1), s2 * vz, s2, r))
         k_exp = law[0]

@@ -78,7 +78,7 @@ from ._localise import (
     signatures,
     where_it_fails,
 )
-from ._identify import _shots_law, _two_sided, identify
+from ._identify import _shots_law, _subset, _two_sided, identify
 from ._qtest import over_inputs
 from ._explain_output import also_explaining, mean_refusal, summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
@@ -134,6 +134,8 @@ class Candidate:
     nominal : the parameters it adds, every offset counted as one
     status : ``"passes"``, ``"refused"`` or ``"fails"`` (see the module); empty until checked
     refused_because : why a candidate that passes its test is not an explanation (status refused)
+    lacks : refused (also) for something the identification finds that it has no term for (rules
+        b'', b''', e, f, g): a second effect on top of it may be what is missing
     """
 
     effects: tuple
@@ -145,6 +147,7 @@ class Candidate:
     nominal: int = 0
     status: str = ""
     refused_because: tuple = ()
+    lacks: bool = False
 
     @property
     def name(self) -> str:
@@ -446,12 +449,16 @@ class Diagnosis:
                 "seconds": self.seconds}
 
 
+def _status(c: Candidate) -> str:
+    return c.status or ("fails" if c.comparison.p_value < ALPHA else "passes")
+
+
 def rank_key(c: Candidate):
     """The order of the ranking (CONTRACTS §6): those that pass, then the refused ones, then those
     the data reject; among those that pass by penalised score (the parsimony of CONTRACTS §4),
     among the others by held-out discrepancy; ties by name (the order never depends on the
     order the candidates were scored in)."""
-    status = c.status or ("fails" if c.comparison.p_value < ALPHA else "passes")
+    status = _status(c)
     within = c.score if status == "passes" else c.comparison.discrepancy
     return (STATUSES.index(status), within, c.name)
 
@@ -513,8 +520,9 @@ def _classes(name: str) -> set:
     return {REGISTRY[e].mechanism for e in name.split("+")}
 
 
-def _refuse(c, why):
-    return dataclasses.replace(c, status="refused", refused_because=tuple(c.refused_because) + (why,))
+def _refuse(c, why, lacks: bool = False):
+    return dataclasses.replace(c, status="refused", refused_because=tuple(c.refused_because) + (why,),
+                               lacks=c.lacks or lacks)
 
 
 def _where(rows) -> str:
@@ -572,8 +580,88 @@ def _law_check(session: "Session", ident):
     return check
 
 
+def _shots_corr(shots, r: int):
+    """(n,): per input the mean over the K // r samples of r consecutive shots of ``shots``
+    (n, K, d) of the mean squared correlation between two neurons (on at most
+    :data:`~gift_theory.lab._identify.WIDE` of them) -- a measurement's r shots (one sample) or a
+    model's K. Without correlation each square is near 1 / (r - 1), alike for both."""
+    n, K, d = shots.shape
+    sub = _subset(d)
+    x = np.asarray(shots, np.float64)[:, :K // r * r, sub].reshape(n, K // r, r, len(sub))
+    x = x - x.mean(2, keepdims=True)
+    x = x / np.maximum(np.sqrt(np.sum(x * x, 2, keepdims=True)), 1e-300)
+    c2 = np.einsum("nkri,nkrj->nkij", x, x) ** 2
+    ds = len(sub)
+    return ((c2.sum((2, 3)) - np.einsum("nkii->nk", c2)) / max(ds * (ds - 1), 1)).mean(1)
+
+
+def _cov_check(session: "Session", ident):
+    """Rule g of :mod:`._verdict`, or None when it has nothing to read: when the identification
+    names gain_fluctuation or correlated_noise (a covariance across a layer's neurons within a
+    shot), a passing candidate must move the shots' correlations from the baseline's towards
+    the measured ones. The held-out test compares each neuron's law on its own and cannot see
+    a correlation: per-neuron multiplicative noise "explained" multiplicative + common-mode
+    noise (p = 0.054) while the identification found the shared gain at z = 14. Its own shots and
+    the baseline's (4 r per input, keys named by the effects) are cut into samples of r and each
+    input's mean squared correlation between neurons (:func:`_shots_corr`) compared over the
+    inputs (Bonferroni over the layers named): refused where it differs from the measured one
+    (two-sided) and has not moved towards it from the baseline's (one-sided, both at 0.01)."""
+    meas = session.meas
+    rows = {int(r["layer"]): r for r in ([] if ident is None else ident.rows())
+            if r["class"] in ("gain_fluctuation", "correlated_noise") and named(r, ident.taps)}
+    ids, data, r = list(meas.layer_ids()), meas.layers(), meas.r
+    layers = sorted(l for l in rows if data[ids.index(l)].shape[-1] > 1)
+    if not layers or r < 3:
+        return None
+    m = len(layers)
+
+    def corr(model, name):
+        own = model_shots(named_subkey(session.k_cmp, "corr/" + name), model, meas, 4 * r)
+        return [_shots_corr(own[ids.index(l)], r) for l in layers]
+
+    measured = [_shots_corr(data[ids.index(l)], r) for l in layers]
+    base = []  # the baseline's, made at the first candidate that needs them
+
+    def check(c) -> str | None:
+        name = " + ".join(c.effects)
+        if not base:
+            base.extend(corr(session.baseline, "awgn"))
+        worst = None
+        for l, qd, qb, qc in zip(layers, measured, base, corr(c.model, "+".join(c.effects))):
+            z = over_inputs(qd - qc)
+            p = min(1.0, m * _two_sided(z))
+            toward = np.sign(float(np.mean(qd - qb))) * over_inputs(qc - qb)
+            p_toward = min(1.0, m * float(stats.norm.sf(toward)))
+            if p < ALPHA and p_toward >= ALPHA and (worst is None or p < worst[0]):
+                worst = (p, z, l, float(qd.mean()), float(qc.mean()), float(qb.mean()))
+        if worst is None:
+            return None
+        p, z, l, qd, qc, qb = worst
+        return (f"awgn + {name} does not move the correlations between the neurons of layer {l} towards the "
+                f"measured ones, where the identification names {rows[l]['class']}: mean squared correlation "
+                f"{qd:.3f} measured, {qc:.3f} in its own shots, {qb:.3f} in the baseline's (z = {z:.1f}, p = {p:.2g})")
+
+    return check
+
+
+def _checks(*checks):
+    """The first reason any of ``checks`` (each None or ``check(c) -> reason | None``) gives."""
+    live = [c for c in checks if c is not None]
+    if not live:
+        return None
+
+    def check(c):
+        for ch in live:
+            why = ch(c)
+            if why:
+                return why
+        return None
+
+    return check
+
+
 def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> list:
-    """Rules b'', b''', e and f of :mod:`._verdict`: a candidate that passes its held-out test is refused
+    """Rules b'', b''', e, f and g of :mod:`._verdict`: a candidate that passes its held-out test is refused
     when the identification finds (:func:`~gift_theory.lab._mechanisms.named`: Holm-adjusted
     0.01) something that test cannot see and the candidate has no term for.
 
@@ -590,9 +678,13 @@ def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> lis
       class does (:func:`~gift_theory.lab._explain_output.mean_refusal`): the detectors' gain and
       offset passed as layer_gain (p = 0.22) while no gain put into the model fitted every
       input's mean and each output neuron's own gain and offset did.
-    * f: ``law`` (:func:`_law_check`), when the identification names noise_law by its kurtosis:
-      a candidate whose own shots' tails differ from the measured ones and have not moved
-      towards them from the baseline's."""
+    * f and g: ``law`` (:func:`_law_check` and :func:`_cov_check`, composed), when the
+      identification names noise_law by its kurtosis, or a covariance across a layer's neurons:
+      a candidate whose own shots' tails, or correlations, differ from the measured ones and
+      have not moved towards them from the baseline's.
+
+    Each refusal here marks the candidate ``lacks``: when none passes, the greedy second step
+    builds on it."""
     if ident is None:
         return cands
     rows = [r for r in ident.rows() if named(r, ident.taps)]
@@ -606,17 +698,18 @@ def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> lis
         if c.status == "passes" and trend and not any(REGISTRY[e].needs_times for e in c.effects):
             c = _refuse(c, f"the identification finds a trend in acquisition time (time_drift {_where(trend)}) that "
                            f"awgn + {name} has no term for: its held-out test compares per-input means, which "
-                           f"average the trend away")
+                           f"average the trend away", lacks=True)
         why = mean_refusal(_classes("+".join(c.effects)), cands_out) if c.status == "passes" and cands_out else None
         if why:
-            c = _refuse(c, f"awgn + {name}: {why}")
+            c = _refuse(c, f"awgn + {name}: {why}", lacks=True)
         if c.status == "passes" and silent and flagged and not _classes("+".join(c.effects)) & set(flagged):
             found = "; ".join(f"{k} {_where([r for r in rows if r['class'] == k])}" for k in flagged)
             c = _refuse(c, f"the identification finds {found}, which awgn + {name} has no term for; the held-out "
-                           f"test does not see it (the awgn model passes that test too, p = {base_cmp.p_value:.3g})")
+                           f"test does not see it (the awgn model passes that test too, p = {base_cmp.p_value:.3g})",
+                        lacks=True)
         why = law(c) if c.status == "passes" and law is not None else None
         if why:
-            c = _refuse(c, why)
+            c = _refuse(c, why, lacks=True)
         out.append(c)
     return out
 
@@ -638,7 +731,7 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
         return _identification_refusals(session.candidates(specs, progress), ident, session.baseline_comparison,
                                         law)
 
-    law = _law_check(session, ident)
+    law = _checks(_law_check(session, ident), _cov_check(session, ident))
 
     flagged = flagged_classes(ident)
     first = [n for n in names if _classes(n) & set(flagged)]
@@ -663,7 +756,11 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
         _log(f"  not fitted (the identification clears their classes): {', '.join(r['effect'] for r in not_fitted)}",
              verbose)
     ranking.sort(key=search_key)
-    if second != 0 and ranking and ranking[0].comparison.p_value < ALPHA and len(ranking) > 1:
+    if (second != 0 and len(ranking) > 1 and not any(_status(c) == "passes" for c in ranking)
+            and (ranking[0].comparison.p_value < ALPHA or ranking[0].lacks)):
+        # none passes, and the best fails its test or is refused for something the identification
+        # finds that it has no term for (multiplicative noise, refused by rule g on
+        # multiplicative + common-mode noise): the runners-up, each on top of it
         first = ranking[0]
         rest = [c.effects[0] for c in ranking[1:] if _compatible(first, c.effects[0])][:second]
         stage2 = fitted([(first.effects + (name,), first.model, (name,), first.effects + (name,)) for name in rest])

@@ -45,6 +45,14 @@
       cell's kurtosis over the inputs against the model's and the baseline's own shots,
       :func:`~gift_theory.lab._diagnose._law_check`): a law change in the wrong direction can
       lower the held-out discrepancy (uniform noise passed on Student-t noise in one layer);
+   g. when the identification names gain_fluctuation or correlated_noise (a covariance across a
+      layer's neurons within a shot), the model's own shots have the measured correlations
+      there, or at least correlations moved from the baseline's towards them (each input's mean
+      squared correlation between neurons, :func:`~gift_theory.lab._diagnose._cov_check`): the
+      held-out test reads each neuron's law alone, so per-neuron multiplicative noise passed on
+      multiplicative + common-mode noise (p = 0.054, the shared gain at z = 14). A candidate
+      refused by b'', b''', e, f or g lacks something the data show: when no candidate passes,
+      the runners-up are fitted on top of the best one, as for one that fails its test;
    c. with taps, every layer of the fitted model passes its one-step check (at 0.01 with
       Bonferroni over the layers): the model is right where it acts, not only on average; and
    d. an effect fitted by its scalar parameters buys its keep: its penalised score (held-out
@@ -53,7 +61,7 @@
 
 A model that fits anything is not an explanation: (a) and (b) refuse one that passed only
 because it could follow whatever the chip did. The same checks give every candidate of the
-ranking its status (:func:`refusals`; ``"refused"`` when one of a-f refuses a candidate that
+ranking its status (:func:`refusals`; ``"refused"`` when one of a-g refuses a candidate that
 passes its test), and the top-ranked model is the first that passes, else the first refused,
 else the closest of those the data reject -- the one the verdict line names.
 

@@ -471,3 +471,27 @@ def test_a_law_with_the_wrong_tails_is_refused_and_the_right_law_is_not():
     assert check(lap) is None
     null = _chip({}, seed=2, n=60, r=24)
     assert _law_check(types.SimpleNamespace(meas=null), identify(null)) is None
+
+
+@pytest.mark.slow
+def test_a_model_without_the_measured_correlation_is_refused_and_one_with_it_is_not():
+    """Rule g: when the identification names a covariance across a layer's neurons
+    (gain_fluctuation, correlated_noise), a passing candidate must reproduce the shots'
+    correlations (a two-sample test against its own shots). On a chip with per-neuron and
+    shared gain noise (multiplicative + common_mode) the per-neuron noise alone is refused by it,
+    the pair is not; on an awgn chip the rule has nothing to read."""
+    from gift_theory.lab._diagnose import Session, _cov_check, _single
+    from gift_theory.lab._identify import identify
+
+    meas = _chip({"multiplicative": 0.3, "common_mode": 0.3}, seed=2, n=60, r=24)
+    session = Session(jax.random.PRNGKey(5), meas)
+    ident = identify(meas)
+    assert "gain_fluctuation" in {r["class"] for r in ident.rows() if r["p_adj"] < 0.01}
+    check = _cov_check(session, ident)
+    assert check is not None
+    mult, pair = session.candidates([_single("multiplicative"), _single("multiplicative+common_mode")])
+    why = check(mult)
+    assert why and "does not move the correlations between the neurons" in why
+    assert check(pair) is None
+    null = _chip({}, seed=2, n=60, r=24)
+    assert _cov_check(types.SimpleNamespace(meas=null), identify(null)) is None

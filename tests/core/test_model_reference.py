@@ -194,6 +194,7 @@ def test_differentiable_in_every_continuous_parameter(x64):
     def f(ph):
         return jnp.sum(gt.forward(params, x, noise, ph, arch, t=t).y ** 2)
 
+    f = jax.jit(f)  # one program for the gradient and every finite difference (Physics is a pytree)
     g = jax.grad(f)(phys)
     h = 1e-6
     for e_auto, e in zip(g.effects, phys.effects):

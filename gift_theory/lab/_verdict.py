@@ -46,10 +46,11 @@
       :func:`~gift_theory.lab._diagnose._law_check`): a law change in the wrong direction can
       lower the held-out discrepancy (uniform noise passed on Student-t noise in one layer);
    g. when the identification names gain_fluctuation or correlated_noise (a covariance across a
-      layer's neurons within a shot), the model's own shots have the measured correlations
-      there, or at least correlations moved from the baseline's towards them (each input's mean
-      squared correlation between neurons, :func:`~gift_theory.lab._diagnose._cov_check`): the
-      held-out test reads each neuron's law alone, so per-neuron multiplicative noise passed on
+      layer's neurons within a shot), the model's own shots have the measured pattern of
+      correlations between neurons there (each pair's Fisher z, against the model's own spread
+      over samples of r shots, :func:`~gift_theory.lab._diagnose._cov_check`), or one moved
+      from the baseline's towards it and not far from it (p >= 1e-4): the held-out test reads
+      each neuron's law alone, so per-neuron multiplicative noise passed on
       multiplicative + common-mode noise (p = 0.054, the shared gain at z = 14). A candidate
       refused by b'', b''', e, f or g lacks something the data show: when no candidate passes,
       the runners-up are fitted on top of the best one, as for one that fails its test;

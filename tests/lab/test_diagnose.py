@@ -491,7 +491,7 @@ def test_a_model_without_the_measured_correlation_is_refused_and_one_with_it_is_
     assert check is not None
     mult, pair = session.candidates([_single("multiplicative"), _single("multiplicative+common_mode")])
     why = check(mult)
-    assert why and "does not move the correlations between the neurons" in why
+    assert why and "does not reproduce the correlations between the neurons" in why
     assert check(pair) is None
     null = _chip({}, seed=2, n=60, r=24)
     assert _cov_check(types.SimpleNamespace(meas=null), identify(null)) is None

@@ -344,6 +344,7 @@ def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_une
         effects: tuple
         status: str = "passes"
         refused_because: tuple = ()
+        lacks: bool = False
 
     class Ident:
         taps = True
@@ -355,6 +356,7 @@ def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_une
     cands = [C(("laplace",)), C(("bias_offset",)), C(("uniform",), status="fails")]
     out = _identification_refusals(cands, Ident(), base_passes)
     assert [c.status for c in out] == ["passes", "refused", "fails"]
+    assert [c.lacks for c in out] == [False, True, False]  # refused for what it lacks: the second step builds on it
     assert "noise_law at layer(s) 2, p = 0.001" in out[1].refused_because[0]
     # when the baseline fails its held-out test, only a time trend refuses (rule b'')
     assert [c.status for c in _identification_refusals(cands, Ident(), _Cmp(1e-6))] == ["passes", "passes", "fails"]

@@ -1437,13 +1437,14 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
             robust = ""
             if p_rob > pt:
                 pt, zt = p_rob, _z_of_p(p_rob) if p_rob < 1.0 else 0.0
-                robust = f"; {p_rob:.2g} against the inputs' own scatter"
+                robust = f"; p = {p_rob:.2g} against the inputs' own scatter, which counts the mean's misfit"
             zc_ = th[tr] / np.sqrt(np.maximum((Sa.diag() if isinstance(Sa, _Blocks) else np.diag(Sa))[tr], 1e-300))
             wi = int(np.argmax(np.abs(zc_)))
             rows.append(_row("time_drift", "time_map", pt, zt, float(np.max(np.abs(th[tr]))),
                              f"the map at layer {l} moves over acquisition time: "
                              f"{'additive' if wi < da else 'gain'} trend {th[tr][wi]:+.3g} per unit t at "
-                             f"{l}:{alive[wi % da]} (z = {zc_[wi]:.1f}; chi2 z = {zt:.1f} over the layer{robust})",
+                             f"{l}:{alive[wi % da]} (z = {zc_[wi]:.1f}{' against the noise alone' if robust else ''}; "
+                             f"chi2 z = {zt:.1f} over the layer{robust})",
                              [alive[wi % da]]))
 
     curve = _curve(lay, act, s2)

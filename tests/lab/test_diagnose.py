@@ -507,3 +507,17 @@ def test_a_misfit_of_the_mean_is_no_trend_in_time_and_a_small_drift_is_one(spec,
 
     rows = [r for r in identify(_chip(spec)).rows() if r["class"] == "time_drift" and r["p_adj"] < 0.01]
     assert bool(rows) == trend, [(r["layer"], r["test"], r["p_adj"]) for r in rows]
+
+
+def test_rule_g_reads_each_pair_s_correlation_sample_by_sample():
+    """_corr_z: per input and sample of r consecutive shots, Fisher's z of numpy's correlation
+    of each pair of neurons (upper triangle, row by row)."""
+    from gift_theory.lab._diagnose import _corr_z
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(5, 32, 6))
+    x[..., 1] += x[..., 0]
+    z = _corr_z(x, 8)
+    xs = x.reshape(5, 4, 8, 6)
+    ref = np.array([[np.corrcoef(xs[i, j].T)[np.triu_indices(6, 1)] for j in range(4)] for i in range(5)])
+    np.testing.assert_allclose(np.tanh(z), ref, atol=1e-12)

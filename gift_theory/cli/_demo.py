@@ -220,7 +220,7 @@ def _render_lab(lab) -> list:
                    + ("a physical effect is MISSING" if lab["missing_effect_detected"] else "nothing missing"), "  ", 4)
     lines.append("  most likely missing (fitted, scored on held-out inputs):")
     for i, r in enumerate(lab["ranking"], 1):
-        name = " + ".join(r.get("with", []) + [r["effect"]])
+        name = "awgn alone (baseline)" if r.get("baseline") else " + ".join(r.get("with", []) + [r["effect"]])
         ps = ", ".join(f"{k}={v:.3g}" for k, v in r["params"].items() if isinstance(v, (int, float)))
         lines.append(f"   {i}. {name:<24s} discrepancy {r['discrepancy_after']:8.4g}  p = {r['p_value_after']:.3g}  ({ps})")
     if lab.get("failing_layers") is not None:

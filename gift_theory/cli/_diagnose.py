@@ -83,7 +83,7 @@ def render(out) -> str:
         ps = ", ".join(f"{k}={v:.4g}" for k, v in r["params"].items() if isinstance(v, (int, float)))
         ps += "".join(f", {k}=[{', '.join(f'{x:.3g}' for x in v)}]" for k, v in r["params"].items()
                       if isinstance(v, list) and 0 < len(v) <= 8)
-        name = " + ".join(r.get("with", []) + [r["effect"]])
+        name = "awgn alone (the baseline)" if r.get("baseline") else " + ".join(r.get("with", []) + [r["effect"]])
         lines.append(f"  {i:2d}. {name:<28s} {r.get('status', ''):<8s} {r['discrepancy_after']:10.4g}  "
                      f"p = {r['p_value_after']:<9.3g} [{r.get('mechanism', '')}] {ps}")
     if out.get("not_fitted"):

@@ -423,10 +423,22 @@ class Diagnosis:
     evidence: tuple = ()
     not_fitted: tuple = ()
     output_explanations: tuple = ()
+    #: the verdict names the awgn model itself (it passes and the identification flags nothing):
+    #: the JSON ranking then starts with it (CONTRACTS §6: ranking[0] is what the verdict names)
+    names_baseline: bool = False
 
     @property
     def missing_effect_detected(self) -> bool:
         return bool(self.baseline_comparison.p_value < ALPHA)
+
+    def _baseline_entry(self) -> dict:
+        """The awgn model as a ranking entry (``"baseline": true``: nothing added to it)."""
+        c = self.baseline_comparison
+        return {"effect": self.baseline.effects[-1], "mechanism": "+".join(REGISTRY[e].mechanism
+                                                                           for e in self.baseline.effects),
+                "status": "passes", "baseline": True, "discrepancy_after": c.discrepancy, "p_value_after": c.p_value,
+                "params": self.baseline.params_json(), "se": c.se, "score": penalised_score(c, 0.0, c),
+                "n_free": 0.0, "nominal_params": 0}
 
     def as_json(self) -> dict:
         """The CONTRACTS §4 object of ``gift diagnose --json`` (plus a few extra keys)."""
@@ -436,7 +448,8 @@ class Diagnosis:
                              "se": c.se, "floor_se": c.floor_se, "channel_z": c.as_dict()["channel_z"]},
                 "missing_effect_detected": self.missing_effect_detected,
                 **as_json_fields(self.explained, self.reasons, self.verdict, self.failing_layers, self.mechanisms),
-                "ranking": [cand.as_json() for cand in self.ranking],
+                "ranking": ([self._baseline_entry()] if self.names_baseline else [])
+                           + [cand.as_json() for cand in self.ranking],
                 "not_fitted": [dict(r) for r in self.not_fitted],
                 **({"output_explanations": list(self.output_explanations)} if self.output_explanations else {}),
                 "evidence": list(self.evidence),
@@ -556,28 +569,24 @@ def _law_check(session: "Session", ident):
         return [_shots_law(own[ids.index(int(row["layer"]))], r) for row in rows]
 
     measured = [_shots_law(data[ids.index(int(row["layer"]))], r) for row in rows]
-    base = []  # the baseline's, made at the first candidate that needs them
 
-    def check(c) -> str | None:
-        name = " + ".join(c.effects)
-        if not base:
-            base.extend(laws(session.baseline, "awgn"))
-        worst = None
-        for row, ld, lb, lc in zip(rows, measured, base, laws(c.model, "+".join(c.effects))):
-            z = over_inputs((ld[1] - lc[1]).mean(1))
-            p = min(1.0, m * _two_sided(z))
-            toward = np.sign(float(np.mean(ld[1] - lb[1]))) * over_inputs((lc[1] - lb[1]).mean(1))
-            p_toward = min(1.0, m * float(stats.norm.sf(toward)))
-            if p < ALPHA and p_toward >= ALPHA and (worst is None or p < worst[0]):
-                worst = (p, z, int(row["layer"]), float(ld[0].mean()), float(lc[0].mean()), float(lb[0].mean()))
-        if worst is None:
-            return None
+    def compare(i, lb, lc):
+        ld = measured[i]
+        z = over_inputs((ld[1] - lc[1]).mean(1))
+        p = min(1.0, m * _two_sided(z))
+        toward = np.sign(float(np.mean(ld[1] - lb[1]))) * over_inputs((lc[1] - lb[1]).mean(1))
+        p_toward = min(1.0, m * float(stats.norm.sf(toward)))
+        if p < ALPHA and p_toward >= ALPHA:
+            return p, z, int(rows[i]["layer"]), float(ld[0].mean()), float(lc[0].mean()), float(lb[0].mean())
+        return None
+
+    def say(name, worst) -> str:
         p, z, l, kd, kc, kb = worst
         return (f"awgn + {name} does not move the shots' tails towards the measured ones at layer {l}, where the "
                 f"identification names noise_law: sample excess kurtosis {kd:+.2f} measured, {kc:+.2f} in its own "
                 f"shots, {kb:+.2f} in the baseline's (z = {z:.1f}, p = {p:.2g})")
 
-    return check
+    return _against_baseline(session, laws, compare, say)
 
 
 #: rule g refuses a candidate whose correlations differ at this level (Bonferroni over the
@@ -647,30 +656,43 @@ def _cov_check(session: "Session", ident):
     # a model's samples of r shots: 8 where the shots fit in ~1 GB (fewer samples leave its
     # own sampling in the statistic: one model under four keys gave z = 3.5 to 5.1)
     k = 8 if 8 * meas.r * meas.n * sum(int(np.prod(a.shape[2:])) for a in data) * 8 < 1e9 else 4
-    base = []  # the baseline's, made at the first candidate that needs them
+    def compare(i, base, cand):
+        (mb, vb), (mc, vc), zd = base, cand, measured[i]
+        dc, db = (zd - mc) ** 2, (zd - mb) ** 2
+        z = over_inputs((dc - (1 + 1 / k) * vc).mean(1))
+        p = min(1.0, m * float(stats.norm.sf(z)))
+        toward = over_inputs(((db - vb / k) - (dc - vc / k)).mean(1))
+        p_toward = min(1.0, m * float(stats.norm.sf(toward)))
+        if p < ALPHA and (p_toward >= ALPHA or p < STRICT):
+            return (p, z, layers[i], float(np.sqrt(max(np.mean(dc - (1 + 1 / k) * vc), 0.0))),
+                    float(np.sqrt(max(np.mean(db - (1 + 1 / k) * vb), 0.0))), p_toward < ALPHA)
+        return None
 
-    def check(c) -> str | None:
-        name = " + ".join(c.effects)
-        if not base:
-            base.extend(moments(session.baseline, "awgn"))
-        worst = None
-        for l, zd, (mb, vb), (mc, vc) in zip(layers, measured, base, moments(c.model, "+".join(c.effects))):
-            dc, db = (zd - mc) ** 2, (zd - mb) ** 2
-            z = over_inputs((dc - (1 + 1 / k) * vc).mean(1))
-            p = min(1.0, m * float(stats.norm.sf(z)))
-            toward = over_inputs(((db - vb / k) - (dc - vc / k)).mean(1))
-            p_toward = min(1.0, m * float(stats.norm.sf(toward)))
-            if p < ALPHA and (p_toward >= ALPHA or p < STRICT) and (worst is None or p < worst[0]):
-                worst = (p, z, l, float(np.sqrt(max(np.mean(dc - (1 + 1 / k) * vc), 0.0))),
-                         float(np.sqrt(max(np.mean(db - (1 + 1 / k) * vb), 0.0))), p_toward < ALPHA)
-        if worst is None:
-            return None
+    def say(name, worst) -> str:
         p, z, l, rc, rb, moved = worst
         return (f"awgn + {name} does not reproduce the correlations between the neurons of layer {l}, where the "
                 f"identification names {rows[l]['class']}" + (", though it moves them from the baseline's towards "
-                f"the measured ones" if moved else ", nor move them towards the measured ones") + ": rms "
+                "the measured ones" if moved else ", nor move them towards the measured ones") + ": rms "
                 f"difference of their Fisher z {rc:.3f} beyond sampling (the baseline's {rb:.3f}; z = {z:.1f}, "
                 f"p = {p:.2g})")
+
+    return _against_baseline(session, moments, compare, say)
+
+
+def _against_baseline(session: "Session", stats_of, compare, say):
+    """The skeleton of rules f and g: ``check(candidate)``, the sentence refusing it or None.
+    ``stats_of(model, name)``: per layer tested, a statistic of the model's own shots (the
+    baseline's made once, at the first candidate that needs them); ``compare(i, baseline's,
+    candidate's)`` at the i-th layer tested: None, or a tuple starting with the p-value that
+    refuses; the smallest p's tuple (the first on a tie) is what ``say(name, tuple)`` words."""
+    base = []
+
+    def check(c) -> str | None:
+        if not base:
+            base.extend(stats_of(session.baseline, "awgn"))
+        hits = [h for h in (compare(i, b, own) for i, (b, own) in
+                            enumerate(zip(base, stats_of(c.model, "+".join(c.effects))))) if h is not None]
+        return say(" + ".join(c.effects), min(hits, key=lambda h: h[0])) if hits else None
 
     return check
 
@@ -896,7 +918,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),
-                     tuple(evidence), tuple(not_fitted), tuple(summary(ident.output_candidates)))
+                     tuple(evidence), tuple(not_fitted), tuple(summary(ident.output_candidates)),
+                     names_baseline=bool(explained and base_cmp.p_value >= ALPHA and not flagged))
 
 
 @dataclasses.dataclass(frozen=True)

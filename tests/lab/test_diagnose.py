@@ -161,10 +161,17 @@ def test_null_reports_nothing_missing(tmp_path, capsys):
     assert out["baseline"]["effects"] == ["awgn"] and abs(out["baseline"]["params"]["s"] - 0.1) < 0.02
     for r in out["ranking"]:
         assert set(r) >= {"effect", "discrepancy_after", "p_value_after", "params"}
+    # the verdict names the awgn model, and so does ranking[0] (CONTRACTS §6): the baseline's own
+    # entry, nothing added, its numbers the baseline's
+    assert out["verdict"].startswith("explained: the awgn model")
+    top = out["ranking"][0]
+    assert top.get("baseline") is True and top["effect"] == "awgn" and top["status"] == "passes"
+    assert (top["p_value_after"], top["params"]) == (out["baseline"]["p_value"], out["baseline"]["params"])
+    assert not any(r.get("baseline") for r in out["ranking"][1:])
     # every built-in effect is ranked or said not fitted (drift too: the file has times), each
     # with its mechanism class
     assert all(r["mechanism"] == gt.effects.REGISTRY[r["effect"]].mechanism for r in out["ranking"])
-    tried = [r["effect"] for r in out["ranking"]] + [r["effect"] for r in out["not_fitted"]]
+    tried = [r["effect"] for r in out["ranking"][1:]] + [r["effect"] for r in out["not_fitted"]]
     assert sorted(tried) == sorted(e for e in gt.effects.BUILTIN if e != "awgn")
 
 

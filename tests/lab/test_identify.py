@@ -30,7 +30,8 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
     """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
     y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
     (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
-    ``common`` (layer, c): c xi added to every neuron of the layer's output, one xi per shot;
+    ``common`` (layer, c) or (layer, c, v): c xi added to every neuron of the layer's output
+    (times v_i, a fixed pattern over its neurons), one xi per shot;
     ``act`` the hidden layers' true activation (the programmed one is tanh); ``errors``
     {layer: e} a fixed weight error E ~ N(0, e^2 rms(W)^2) per entry (W_eff = W + E);
     ``interleaved``: shot k of every input is taken before shot k + 1 of any (else input by input);
@@ -93,7 +94,7 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
         if dead and dead[0] == l:
             a[:, :, dead[1]] = s * rng.normal(size=(n, r))
         if common and common[0] == l:
-            a = a + common[1] * rng.normal(size=(n, r, 1))
+            a = a + common[1] * rng.normal(size=(n, r, 1)) * (np.asarray(common[2]) if len(common) > 2 else 1.0)
         outs.append(a)
     if square_law:
         outs[-1] = outs[-1] ** 2
@@ -220,6 +221,17 @@ def test_correlated_additive_noise_is_found_at_its_layer():
     assert "common" in rows[0]["evidence"]
     assert "correlated_noise" in [m["mechanism"] for m in _first(ident)[:2]]
 
+
+
+def test_noise_shared_in_a_fixed_pattern_of_signs_is_found_at_its_layer():
+    # c xi v with v = +-1 over the neurons: nothing along all neurons alike (its "common" z is
+    # negative), found by the pattern beyond the signal's direction (z ~ 7 at c = 0.6 s)
+    v = np.where(np.random.default_rng(0).random(8) < 0.5, -1.0, 1.0)
+    rows = [r for r in identify(sim(500, n=80, r=16, common=(2, 0.03, v))).rows() if r["class"] == "correlated_noise"]
+    at = {r["layer"]: r for r in rows}
+    assert at[2]["p_adj"] < 0.01 and at[2]["z_pattern"] > 4 and at[2]["z_common"] < 0
+    assert "beyond the signal's direction" in at[2]["evidence"]
+    assert all(r["p_adj"] >= 0.01 for l, r in at.items() if l != 2)
 
 def test_without_taps_the_output_is_identified_and_says_what_folds_into_it():
     meas = sim(15, gains={2: 0.6}, taps=False, n=80, r=16)

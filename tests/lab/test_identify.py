@@ -307,6 +307,7 @@ def test_under_the_null_the_p_values_are_not_too_small(taps):
     assert np.mean(raw < 0.05) <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / len(raw)) * 3  # tests within a file correlate
 
 
+@pytest.mark.slow
 def test_the_correlation_pattern_statistic_is_centred_under_the_null():
     """correlated_noise's "any pattern" z (the off-diagonal covariance beyond the model's and a
     rank-one part along the signal) on random null networks without taps, narrow layers

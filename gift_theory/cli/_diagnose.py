@@ -8,7 +8,7 @@ from __future__ import annotations
 
 
 from ._common import Progress
-from ._fit import NO_TAPS_CAVEAT
+from ._fit import no_taps_caveat
 from ._labargs import add_common, figure_dir, key, load
 
 
@@ -92,7 +92,7 @@ def render(out) -> str:
     if any("net_discrepancy_after" in r for r in out["ranking"]):
         lines.append("  (fitted offsets: p against the refit null, i.e. net of the offsets' estimation error)")
         if not out.get("refit_null_calibrated", True):
-            lines.append(NO_TAPS_CAVEAT)
+            lines.append(no_taps_caveat(sorted({e for r in out["ranking"] for e in r.get("fitted_offsets", [])})))
     if out.get("where"):
         lines.append("one-step check per layer (layer fed the measured layer before, at its own noise level s):")
         for w in out["where"]:

@@ -7,9 +7,13 @@ from ._labargs import add_common, figure_dir, key, load
 
 # measured (docs/lab.md section 6): without taps the offsets of all but the smallest nets are
 # not identified, and the refit null then rejects a correct weight_error model too often
-NO_TAPS_CAVEAT = ("  caution: this file has no taps; without them the refit null rejects a correct weight_error "
-                  "model too often\n  (8 of 100 at p < 0.01 on 8-16-8-4, docs/lab.md section 6): a small p here "
-                  "does not rule weight_error out")
+def no_taps_caveat(names) -> str:
+    """The caution under a fitted-offset model's p on a file without taps, naming the effects
+    whose offsets were fitted (the rate is the one measured, for weight_error)."""
+    names = " or ".join(names) or "the fitted offsets"
+    return ("  caution: this file has no taps; without them the refit null rejects a correct fitted-offset "
+            "model too often\n  (weight_error: 8 of 100 at p < 0.01 on 8-16-8-4, docs/lab.md section 6): "
+            f"a small p here does not rule {names} out")
 
 
 def add_arguments(parser):
@@ -110,7 +114,7 @@ def render(out) -> str:
         lines.append(f"fitted offsets: p against the refit null ({out['refit_null_replicates']} replicates); "
                      f"discrepancy net of their estimation error {out['net_discrepancy_after']:.4g}")
         if not out.get("refit_null_calibrated", True):
-            lines.append(NO_TAPS_CAVEAT)
+            lines.append(no_taps_caveat(out.get("fitted_offsets", [])))
     for name, layers in out.get("per_neuron", {}).items():
         n = sum(len(v) for v in layers.values())
         found = [l for l in standouts({name: layers}, out.get("per_neuron_se", {}))]

@@ -171,6 +171,7 @@ class Candidate:
         if self.comparison.replicates:
             out["net_discrepancy_after"] = self.comparison.net_discrepancy
             out["refit_null_replicates"] = self.comparison.replicates
+            out["fitted_offsets"] = sorted(self.model.offsets)
         return out
 
 
@@ -945,7 +946,8 @@ class FitResult:
                             **({"net_discrepancy": c.net_discrepancy} if c.replicates else {})}
                            for lab, c in self.ladder],
                 **({"net_discrepancy_after": a.net_discrepancy, "refit_null_replicates": a.replicates,
-                    "refit_null_calibrated": self.has_taps} if a.replicates else {})}
+                    "refit_null_calibrated": self.has_taps, "fitted_offsets": sorted(self.after.offsets)}
+                   if a.replicates else {})}
 
 
 def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, verbose: bool = False) -> FitResult:

@@ -223,8 +223,10 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
                  "--replicates", "2"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["refit_null_replicates"] > 0 and out["refit_null_calibrated"] is taps
+    assert out["fitted_offsets"] == ["weight_error"]
     # the text the command prints without --json, from the same result
     assert ("no taps" in render(out)) is (not taps)
+    assert ("does not rule weight_error out" in render(out)) is (not taps)
 
 
 @pytest.mark.slow
@@ -236,10 +238,16 @@ def test_order_of_candidates_and_threads_change_no_number():
     cands = ["shot", "multiplicative", "weight_error", "bias_offset"]
 
     def run(order, workers):
+        from gift_theory.cli._diagnose import render
+
         d = diagnose(jax.random.PRNGKey(21), meas, candidates=order, workers=workers)
         assert sum(c.comparison.replicates > 0 for c in d.ranking) >= 2
         out = d.as_json()
         out.pop("seconds")
+        # each entry with a refit null names its fitted offsets; the no-taps caution names them all
+        named = {e for r in out["ranking"] for e in r.get("fitted_offsets", [])}
+        assert named == {"weight_error", "bias_offset"} and out["refit_null_calibrated"] is False
+        assert "does not rule bias_offset or weight_error out" in render(out)
         # without taps: the candidate mechanisms put into the model, the programmed one first
         assert out["output_explanations"][0]["candidate"] == "programmed"
         assert {"mechanism", "candidate", "layers", "parameters", "lack_of_fit_z", "p_value", "explains"} \

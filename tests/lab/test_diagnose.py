@@ -122,7 +122,7 @@ def test_weight_offsets_are_fitted_at_the_data_s_noise_level_not_the_default():
     from gift_theory.lab._compare import one_step_check
     from gift_theory.lab._fit import fit_model
 
-    meas = _chip({"weight_error": {"e": 0.06, "seed": 5}}, seed=6, s=0.03)
+    meas = _chip({"weight_error": {"e": 0.06, "seed": 5}}, seed=6, s=0.03, r=32)
     model = fit_model(jax.random.PRNGKey(1), meas, ["weight_error"])
     assert abs(float(model.physics.params()["s"]) - 0.03) < 0.003
     steps = one_step_check(jax.random.PRNGKey(2), model, meas, own_level=False)
@@ -214,7 +214,7 @@ def test_signatures_point_at_the_effect():
 def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, taps):
     """The refit null is calibrated with taps only (docs/lab.md section 6): a fitted-offset
     model on a file without taps says so, in the JSON and in the text."""
-    meas = _chip(HIDDEN["weight_error"], seed=5, n=60, r=24, taps=taps)
+    meas = _chip(HIDDEN["weight_error"], seed=5, n=60, r=16, taps=taps)
     path = tmp_path / "we.npz"
     save_measurement(path, meas)
     from gift_theory.cli._fit import render
@@ -234,7 +234,7 @@ def test_order_of_candidates_and_threads_change_no_number():
     """The session is pure: refit nulls keyed by the model's name and content, no memo keyed by
     id(), ties broken by name. Shuffling the candidates and changing the number of threads give
     the same JSON (two offset models with refit nulls, and a second stage)."""
-    meas = _chip({"shot": 0.05, "bias_offset": 0.05}, seed=3, n=60, r=24, taps=False)
+    meas = _chip({"shot": 0.05, "bias_offset": 0.05}, seed=3, n=80, r=24, taps=False)
     cands = ["shot", "multiplicative", "weight_error", "bias_offset"]
 
     def run(order, workers):
@@ -267,7 +267,7 @@ def test_candidates_the_identification_clears_are_not_fitted_and_change_nothing(
     a pure function of its own request), and the verdict is the same."""
     from gift_theory.lab import _diagnose
 
-    meas = _chip(HIDDEN["shot"], seed=4, n=60, r=24)
+    meas = _chip(HIDDEN["shot"], seed=4, n=80, r=24)
     cands = ["shot", "multiplicative", "crosstalk", "layer_gain", "bias_offset"]
     staged = diagnose(jax.random.PRNGKey(8), meas, candidates=cands)
     assert staged.ranking[0].effects == ("shot",) and staged.ranking[0].status == "passes"
@@ -347,7 +347,7 @@ def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
     """On a file with a hidden effect the catalogue lacks at this strength alone (two effects):
     every entry carries its mechanism class and a status that matches its p-value; the verdict
     line names ranking[0]; the text output shows the statuses."""
-    meas = _chip({"shot": 0.05, "crosstalk": 0.3}, seed=2, n=60, r=24)
+    meas = _chip({"shot": 0.05, "crosstalk": 0.3}, seed=2, n=80, r=24)
     path = tmp_path / "two.npz"
     save_measurement(path, meas)
     assert main(["diagnose", str(path), "--json", "--quiet", "--candidates", "shot,drift,crosstalk,layer_gain"]) == 0
@@ -399,7 +399,7 @@ GAINS = ((0.6,), (0.8,), (1.3,))
 def test_fit_recovers_each_layer_s_gain():
     """fit --add layer_gain on W_eff = g_l W_l: each g_l within 5 standard errors of the truth,
     and the fitted model passes."""
-    meas = _chip({"layer_gain": {"g": GAINS}}, seed=4)
+    meas = _chip({"layer_gain": {"g": GAINS}}, seed=4, n=120, r=32)
     fit = fit_effects(jax.random.PRNGKey(5), meas, ["layer_gain"])
     g = np.array(fit.after.params_json()["g"])
     assert fit.comparison_before.p_value < 0.01 <= fit.comparison_after.p_value
@@ -421,7 +421,7 @@ def test_fit_recovers_each_layer_s_gain():
 def test_diagnose_names_layer_gain_first_on_a_lossy_chip():
     """A chip whose every layer has W_eff = g_l W_l (uniform optical loss), with taps: layer_gain
     passes and is ranked first, its class gain_error."""
-    meas = _chip({"layer_gain": {"g": GAINS}}, seed=4)
+    meas = _chip({"layer_gain": {"g": GAINS}}, seed=4, n=120, r=32)
     d = diagnose(jax.random.PRNGKey(6), meas, candidates=["layer_gain", "drift", "activation_gain", "crosstalk",
                                                           "multiplicative"])
     top = d.ranking[0]
@@ -457,7 +457,7 @@ def test_a_law_change_the_held_out_test_misses_is_not_called_nothing_missing():
     any, has a noise_law effect (file from test_identify's plain-numpy simulator)."""
     from .test_identify import sim
 
-    out = diagnose(jax.random.PRNGKey(0), sim(13, widths=WIDTHS, n=60, r=24, heavy=(2, 4.5))).as_json()
+    out = diagnose(jax.random.PRNGKey(0), sim(13, n=80, r=16, heavy=(2, 4.5))).as_json()
     assert not out["missing_effect_detected"]  # CONTRACTS §4: the held-out test's alone
     assert out["mechanisms"][0]["mechanism"] == "noise_law" and out["mechanisms"][0]["layers"] == [2]
     assert "nothing is missing" not in " ".join(out["reasons"])

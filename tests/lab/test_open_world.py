@@ -239,7 +239,7 @@ def test_diagnose_json_says_explained_failing_layers_and_mechanisms(tmp_path, ca
     phys = gt.Physics.create(s=0.1, activation_gain=1.3)
     if True:  # one file, with or without taps
         path = tmp_path / f"m{taps}.npz"
-        save_measurement(path, simulate_measurement(jax.random.PRNGKey(7), params, x, phys, shots=24, taps=taps))
+        save_measurement(path, simulate_measurement(jax.random.PRNGKey(7), params, x, phys, shots=32, taps=taps))
         assert main(["diagnose", str(path), "--json", "--quiet", "--candidates",
                      "activation_gain,shot,bias_offset"]) == 0
         out = json.loads(capsys.readouterr().out)

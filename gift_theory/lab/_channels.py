@@ -45,7 +45,7 @@ from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._qtest import q_test
-from ._shots import Model, model_shots
+from ._shots import Model, model_shots, to32
 
 
 def _pair_dist(A, B):
@@ -320,7 +320,7 @@ def reference(key, meas: Measurement, splits: int = 2) -> Reference:
     channels = CHANNELS if moments else CHANNELS[:2]
     F = np.zeros((meas.n, len(layers), len(channels)))
     for li, Y in enumerate(layers):
-        Y32 = jnp.asarray(Y, jnp.float32)
+        Y32 = to32(Y)
         for s_ in range(splits):
             A, B = _halves(jax.random.fold_in(jax.random.fold_in(k_floor, li), s_), Y32)
             F[:, li, :2] += cell_statistic(A, B, scales=scales[li]) / splits
@@ -347,7 +347,7 @@ def channel_values(key, model: Model, meas: Measurement, ref: Reference, shots: 
     rng = np.random.default_rng(np.asarray(jax.random.key_data(named_subkey(key, "model_sets"))).ravel())
     C = np.zeros((meas.n, len(Ms), len(ref.channels)))
     for li, (M, Y, sc) in enumerate(zip(Ms, meas.layers(), ref.scales)):
-        C[:, li, :2] = cell_statistic(M, jnp.asarray(Y, jnp.float32), scales=sc)
+        C[:, li, :2] = cell_statistic(M, to32(Y), scales=sc)
         if len(ref.channels) > 2:
             C[:, li, 2:] = moment_channels(M, Y, ref.split, rng)
     return C

@@ -13,7 +13,6 @@ import dataclasses
 import functools
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from scipy import optimize
 
@@ -29,7 +28,7 @@ from ._channels import (
     reference,
 )
 from ._qtest import over_inputs, q_test, replicate_null
-from ._shots import Model, model_shots, one_step_shots
+from ._shots import Model, model_shots, one_step_shots, to32
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,7 +170,7 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
             level = layer_level(k_l, model, meas, l)
             m = Model(model.physics.replace(s=level), model.params, model.offsets)
         M = one_step_shots(k_l, m, meas, l)
-        C = cell_statistic(M, jnp.asarray(Y, jnp.float32), paired=True, scales=ref.scales[li])
+        C = cell_statistic(M, to32(Y), paired=True, scales=ref.scales[li])
         if len(ref.channels) > 2:
             C = np.concatenate([C, paired_moment_channels(np.asarray(M, np.float64), Y, ref.split)], axis=1)
         Q, p, null_mean, null_sd, _ = q_test(C)

@@ -27,8 +27,8 @@ import numpy as np
 from scipy import optimize
 
 from .._measurement import Measurement
-from .._model import forward, named_subkey
-from ._shots import draws, params32, tiled_times
+from .._model import named_subkey
+from ._shots import draws, layer_outputs, params32, strong32, tiled_times, to32
 
 
 def _moments(A, t):
@@ -78,14 +78,10 @@ def _loss_of_outputs(outs, dat, t, rK):
     return total
 
 
-@functools.partial(jax.jit, static_argnames=("arch", "rK", "free", "positive"))
-def _theta_loss(theta, params, x, noise, physics, t, dat, arch, rK, free, positive):
-    """The moment loss at ``theta`` in one program: the parameters set, every layer's output
-    (the core's forward, as :func:`layer_outputs`), the moments and the loss (the same numbers
-    as those steps one program each, without a dispatch between them)."""
-    vals = {p: (jnp.exp(theta[i]) if positive[i] else theta[i]) for i, p in enumerate(free)}
-    outs = forward(params, x[:, None, :], noise, with_values(physics, vals), arch, t=t, taps=True).taps
-    return _loss_of_outputs(outs, dat, t, rK)
+@jax.jit
+def _theta_values(theta, positive):
+    """The free parameters' values at ``theta`` (float32): exp where fitted on the log scale."""
+    return jnp.where(positive, jnp.exp(theta), theta)
 
 
 class MomentProblem:
@@ -95,10 +91,10 @@ class MomentProblem:
         self.meas = meas
         self.key = named_subkey(key, "moments")
         self.K = 2 * meas.r if K is None else int(K)
-        self.x = jnp.asarray(meas.x, jnp.float32)
+        self.x = to32(meas.x)
         self.t = tiled_times(meas, self.K)
-        t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
-        dat = tuple(_moments_jit(jnp.asarray(Y, jnp.float32), t) for Y in meas.layers())
+        t = None if meas.t is None else to32(meas.t)
+        dat = tuple(_moments_jit(to32(Y), t) for Y in meas.layers())
         ids = meas.layer_ids()
         # forward returns every layer; only measured ones enter the loss
         self.dat = tuple(dat[ids.index(l)] if l in ids else None for l in range(1, meas.arch.depth + 1))
@@ -109,11 +105,16 @@ class MomentProblem:
         noise = draws(self.key, physics, self.meas, self.K)
         p32 = params32(params)
         r, K, t, arch = self.meas.r, self.K, self.t, self.meas.arch
-        positive = tuple(_positive(physics, p) for p in free)
+        positive = np.array([_positive(physics, p) for p in free], bool)
 
         def f(theta):
-            return _theta_loss(np.asarray(theta, np.float32), p32, self.x, noise, physics, t, self.dat, arch, (r, K),
-                               tuple(free), positive)
+            vals = np.asarray(_theta_values(np.asarray(theta, np.float32), positive))
+            phys = strong32(with_values(physics, {p: vals[i] for i, p in enumerate(free)}))
+            # the comparison's program (model_shots: same physics structure, shapes and leaf
+            # types), so a candidate's forward compiles once for its fit and its shots; the
+            # moments and the loss are one program for every candidate
+            outs = layer_outputs(p32, self.x, noise, phys, arch, t)
+            return _loss_of_outputs(outs, self.dat, t, (r, K))
         return f
 
 
@@ -160,7 +161,11 @@ def with_values(physics, vals: dict):
         if l is not None:
             if name not in rows:
                 rows[name] = list(_owner(physics, name).param_dict()[name])
-            rows[name][l - 1] = jnp.reshape(v, (1,))
+            if isinstance(v, jax.core.Tracer):
+                rows[name][l - 1] = jnp.reshape(v, (1,))
+            else:  # on the host, as jnp.reshape would hold it (float32 unless x64), no dispatch
+                v = np.asarray(v)
+                rows[name][l - 1] = np.reshape(v.astype(jax.dtypes.canonicalize_dtype(v.dtype)), (1,))
     return physics.replace(**plain, **{k: tuple(v) for k, v in rows.items()}) if plain or rows else physics
 
 

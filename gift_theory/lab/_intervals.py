@@ -37,7 +37,6 @@ from __future__ import annotations
 import math
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from scipy import optimize, stats
 
@@ -48,7 +47,7 @@ from ._fit_moments import MomentProblem, _owner, _positive, _scalar, theta_of
 from ._offset_fit import _joint_setup, _layer_jvps, _layer_setup, offset_deltas
 from ._offset_kinds import base_model, fitted_as_offsets, kind_columns, kinds_of
 from ._offset_null import _mean_output, _output_jacobian, resimulate
-from ._shots import Model, params32
+from ._shots import Model, params32, to32
 
 #: the intervals' level
 LEVEL = 0.95
@@ -108,7 +107,7 @@ def _blocks_joint(key, meas: Measurement, model: Model, kinds, deltas, scales):
     arch, r = meas.arch, meas.r
     J, inv_v = _output_jacobian(key, meas, model, kinds)
     K, noise, t, targets, _ = _joint_setup(named_subkey(key, "jacobian"), meas, model.physics)
-    pred = _mean_output(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), noise, model.physics, t, arch)
+    pred = _mean_output(params32(model.weights(meas)), to32(meas.x), noise, model.physics, t, arch)
     res = np.asarray(targets[-1], np.float64).ravel() - np.asarray(pred, np.float64).ravel()
     v = inv_v / (1.0 + r / K)  # a measured mean's variance plus the model's K-draw mean's
     owner = np.concatenate([np.full(int(np.prod(k.shape(arch, l))), ki) for ki, k in enumerate(kinds) for l in k.layers])

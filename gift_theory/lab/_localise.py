@@ -23,7 +23,6 @@ import dataclasses
 import warnings
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
@@ -40,6 +39,7 @@ from ._shots import (
     one_step_pre,
     one_step_shots,
     params32,
+    to32,
 )
 
 
@@ -120,7 +120,7 @@ def _directions(model: Model, meas: Measurement, layer: int, pre):
     u = pre - b[None, :]
     if layer == meas.arch.depth:
         return u, np.ones_like(u)
-    slope = np.asarray(central_slope(jnp.asarray(pre, jnp.float32), meas.arch.sigma), np.float64)
+    slope = np.asarray(central_slope(to32(pre), meas.arch.sigma), np.float64)
     return slope * u, slope
 
 

@@ -28,7 +28,7 @@ from .._model import (
     named_subkey,
     noisy_input,
 )
-from ._shots import Model, params32, tiled_times
+from ._shots import Model, params32, tiled_times, to32
 from ._offset_kinds import _initial_scale, _split_by_kind, apply_all, apply_layer, kinds_of, reset, unflat_vector
 
 
@@ -72,18 +72,18 @@ def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: in
     if layer == 1:
         K = 256  # the model's mean response must be much sharper than the measured mean (r shots)
         noise = compiled_draws(key, physics, arch=arch, shape=(n, K), dtype=jnp.float32)
-        a = jnp.asarray(meas.x, jnp.float32)[:, None, :]
+        a = to32(np.asarray(meas.x)[:, None, :])
         t = tiled_times(meas, K)
         Y = meas.layers()[0]
-        target = jnp.asarray(np.mean(Y, axis=1), jnp.float32)  # (n, d1)
+        target = to32(np.mean(Y, axis=1))  # (n, d1)
         resid_var = float(np.mean(np.var(Y, axis=1))) / r
         axis = 1
     else:
         noise = compiled_draws(key, physics, arch=arch, shape=(n, r, draws_per_shot), dtype=jnp.float32)
-        a = jnp.asarray(meas.taps[layer - 2], jnp.float32)[:, :, None, :]
-        t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)[:, :, None] * jnp.ones((1, 1, draws_per_shot))
+        a = to32(np.asarray(meas.taps[layer - 2])[:, :, None, :])
+        t = None if meas.t is None else to32(np.broadcast_to(np.asarray(meas.t)[:, :, None], (n, r, draws_per_shot)))
         Y = meas.layers()[layer - 1]
-        target = jnp.asarray(Y, jnp.float32)  # (n, r, d_l)
+        target = to32(Y)  # (n, r, d_l)
         resid_var = float(np.mean(np.var(Y, axis=1)))
         axis = 2
     return noise, a, t, target, resid_var, axis
@@ -216,7 +216,7 @@ def _joint_offsets(key, meas: Measurement, physics, p32, kinds, scales, start=No
     arch = meas.arch
     _, noise, t, targets, inv_v = _joint_setup(key, meas, physics)
     inv_e2 = tuple(jnp.float32(1.0 / max(scales[k], 1e-6) ** 2) for k in kinds)
-    x = jnp.asarray(meas.x, jnp.float32)
+    x = to32(meas.x)
 
     def vg(ds):
         return _joint_vg(tuple(ds), p32, x, noise, physics, t, targets, inv_v, inv_e2, arch, tuple(meas.layer_ids()),

@@ -30,7 +30,7 @@ from .._model import (
     named_subkey,
     simulate,
 )
-from ._shots import Model, params32
+from ._shots import Model, params32, to32
 from ._offset_kinds import (
     _initial_scale,
     _split_by_kind,
@@ -98,7 +98,7 @@ def _output_jacobian(key, meas: Measurement, model: Model, kinds, chunk: int = 6
     measured mean (no taps)."""
     arch = meas.arch
     K, noise, t, _, _ = _joint_setup(named_subkey(key, "jacobian"), meas, model.physics)
-    x = jnp.asarray(meas.x, jnp.float32)
+    x = to32(meas.x)
     p32 = params32(model.weights(meas))
     shapes = tuple(k.shape(arch, l) for k in kinds for l in k.layers)
     P = sum(int(np.prod(s)) for s in shapes)
@@ -127,8 +127,8 @@ def _mean_output_jvp(p32, x, noise, physics, t, basis, arch, shapes, kinds):
 def resimulate(key, model: Model, meas: Measurement) -> Measurement:
     """``meas`` with its shots (and taps) replaced by shots of ``model`` taken as the truth:
     same inputs, shots per input, times and programmed weights."""
-    t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
-    out = simulate(key, params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), model.physics, meas.arch,
+    t = None if meas.t is None else to32(meas.t)
+    out = simulate(key, params32(model.weights(meas)), to32(meas.x), model.physics, meas.arch,
                    shots=meas.r, t=t, taps=True)
     taps = tuple(np.asarray(a, np.float64) for a in out.taps[:-1]) if meas.has_taps else None
     return dataclasses.replace(meas, y=np.asarray(out.y, np.float64), taps=taps)
@@ -168,7 +168,7 @@ def _posterior_spread(key, model: Model, base: Model, meas: Measurement, kinds, 
     _, noise, t, _, _ = _joint_setup(named_subkey(key, "jacobian"), meas, model.physics)
     Y = meas.layers()[-1]
     target = np.mean(Y, axis=1).ravel()
-    base_out = _mean_output(params32(base.weights(meas)), jnp.asarray(meas.x, jnp.float32), noise, base.physics, t, arch)
+    base_out = _mean_output(params32(base.weights(meas)), to32(meas.x), noise, base.physics, t, arch)
     r0 = target - np.asarray(base_out, np.float64).ravel()
     e_fit = np.concatenate([np.full(int(np.prod(k.shape(arch, l))), float(model.offsets.get(k.effect, 1e-3)))
                             for k in kinds for l in k.layers])

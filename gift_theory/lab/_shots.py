@@ -73,9 +73,18 @@ class Model:
         return self.params if self.params is not None else meas.params
 
 
+def to32(a):
+    """``a`` as a float32 device array, converted on the host (the same rounding): an eager
+    ``jnp.asarray(a, jnp.float32)`` of a float64 array compiles a conversion program per shape,
+    some thirty small programs of a cold diagnosis."""
+    if isinstance(a, jax.Array):
+        return a if a.dtype == jnp.float32 else a.astype(jnp.float32)
+    return jax.device_put(np.asarray(a, np.float32))
+
+
 def params32(params):
     """Weights as float32 :class:`Layer` s (what every jitted pass of the lab takes)."""
-    return tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+    return tuple(Layer(to32(W), to32(b)) for W, b in params)
 
 
 def default_model_shots(r: int) -> int:
@@ -89,7 +98,7 @@ def tiled_times(meas: Measurement, K: int):
     if meas.t is None:
         return None
     reps = -(-K // meas.r)
-    return jnp.asarray(np.tile(meas.t, (1, reps))[:, :K], jnp.float32)
+    return to32(np.tile(meas.t, (1, reps))[:, :K])
 
 
 #: bytes of standard draws kept between calls (least recently used first out)
@@ -156,9 +165,10 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     K = default_model_shots(meas.r) if shots is None else int(shots)
     params = params32(model.weights(meas))
     chunk = 2 * meas.r if K % (2 * meas.r) == 0 else K
-    x = jnp.asarray(meas.x, jnp.float32)
+    x = to32(meas.x)
     t = tiled_times(meas, chunk)
-    parts = [layer_outputs(params, x, draws(jax.random.fold_in(key, c), model.physics, meas, chunk), model.physics,
+    physics = strong32(model.physics)  # the fit's leaf types: its compiled forward serves here
+    parts = [layer_outputs(params, x, draws(jax.random.fold_in(key, c), model.physics, meas, chunk), physics,
                            meas.arch, t) for c in range(K // chunk)]
     outs = parts[0] if len(parts) == 1 else tuple(jnp.concatenate(p, axis=1) for p in zip(*parts))
     return tuple(outs[l - 1] for l in meas.layer_ids())
@@ -194,10 +204,10 @@ def one_step_shots(key, model: Model, meas: Measurement, layer: int, draws: int 
     q model draws per measured shot, draw j of shot k at j r + k."""
     W, b = params32(model.weights(meas))[layer - 1]
     if layer == 1:
-        a = jnp.broadcast_to(jnp.asarray(meas.x, jnp.float32)[:, None, :], (meas.n, meas.r, meas.x.shape[1]))
+        a = to32(np.broadcast_to(np.asarray(meas.x)[:, None, :], (meas.n, meas.r, meas.x.shape[1])))
     else:
-        a = jnp.asarray(meas.taps[layer - 2], jnp.float32)
-    t = None if meas.t is None else jnp.asarray(meas.t, jnp.float32)
+        a = to32(meas.taps[layer - 2])
+    t = None if meas.t is None else to32(meas.t)
     return _one_step(key, W, b, a, strong32(model.physics), t, meas.arch, layer, int(draws))
 
 
@@ -206,7 +216,7 @@ def one_step_pre(model: Model, meas: Measurement, layer: int) -> np.ndarray:
     measured layer before (x for layer 1)."""
     W, b = params32(model.weights(meas))[layer - 1]
     a = meas.x if layer == 1 else np.mean(meas.taps[layer - 2], axis=1)
-    return np.asarray(_one_step_pre(W, b, jnp.asarray(a, jnp.float32), strong32(model.physics), layer,
+    return np.asarray(_one_step_pre(W, b, to32(a), strong32(model.physics), layer,
                                     meas.arch.depth), np.float64)
 
 
@@ -229,7 +239,7 @@ def noiseless_taps(model: Model, meas: Measurement, physics=None):
 
 def _noiseless_of(model: Model, meas: Measurement, physics):
     """(pre-activations, outputs) of every layer, every draw zero, as float64 numpy lists."""
-    pre, taps = _noiseless(params32(model.weights(meas)), jnp.asarray(meas.x, jnp.float32), strong32(physics),
+    pre, taps = _noiseless(params32(model.weights(meas)), to32(meas.x), strong32(physics),
                            meas.arch)
     return [np.asarray(z, np.float64) for z in pre], [np.asarray(a, np.float64) for a in taps]
 
@@ -249,5 +259,5 @@ def central_slope(z, sigma, h: float = 1e-3):
     return (sigma(z + h) - sigma(z - h)) / (2 * h)
 
 
-__all__ = ["Model", "params32", "default_model_shots", "tiled_times", "draws", "layer_outputs", "model_shots",
+__all__ = ["Model", "to32", "params32", "default_model_shots", "tiled_times", "draws", "layer_outputs", "model_shots",
            "one_step_shots", "noiseless_pre", "noiseless_taps", "central_slope", "named_subkey"]

@@ -241,11 +241,12 @@ def test_empirical_bayes_scale_of_unidentified_offsets():
 
 
 @pytest.mark.parametrize("extra", [{}, {"shot": 0.01}, {"multiplicative": 0.05}])
-def test_the_one_program_moment_loss_equals_the_staged_one_bit_for_bit(setup, extra):
-    """The fit's loss in one compiled program (parameters set, forward, moments, loss) gives the
-    numbers of the staged computation (forward and moment loss, one program each)."""
+def test_the_fit_s_loss_runs_the_comparison_s_compiled_forward(setup, extra):
+    """The fit's loss at theta is the moment loss of the comparison's forward program
+    (``layer_outputs``) with the parameters set, bit for bit, and the fitted model's shots
+    compile no forward of their own: one program per candidate serves its fit and its shots."""
     from gift_theory.lab._fit_moments import MomentProblem, _loss_of_outputs, _positive, _scalar, theta_of
-    from gift_theory.lab._shots import draws, layer_outputs, params32
+    from gift_theory.lab._shots import draws, layer_outputs, model_shots, params32
 
     params0, x = setup
     meas = simulate_measurement(jax.random.PRNGKey(5), params0, x, gt.Physics.create(s=0.1, shot=0.02), shots=24,
@@ -264,6 +265,11 @@ def test_the_one_program_moment_loss_equals_the_staged_one_bit_for_bit(setup, ex
         outs = layer_outputs(p32, prob.x, noise, phys.replace(**vals), meas.arch, prob.t)
         staged = float(_loss_of_outputs(outs, prob.dat, prob.t, (meas.r, prob.K)))
         assert float(f(theta)) == staged
+    compiled = layer_outputs._cache_size()
+    for candidate in (phys, phys.replace(**{p: np.float64(v) * 1.1 for p, v in phys.params().items()})):
+        shots = model_shots(jax.random.PRNGKey(3), Model(candidate), meas)  # as made (Python floats), as fitted
+        assert layer_outputs._cache_size() == compiled
+    assert [a.shape for a in shots] == [(meas.n, 4 * meas.r, d) for d in ARCH.widths[1:]]
 
 
 @pytest.mark.parametrize("spec", [{}, {"shot": 0.05, "crosstalk": 0.2}, {"laplace": True, "shot": 0.05},

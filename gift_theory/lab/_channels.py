@@ -155,15 +155,19 @@ def _shot_permutations(key, n: int, r: int):
     return jax.vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n))
 
 
-@jax.jit
+#: the permutations in one program per (n, r), shared by every layer's data (dispatched op by
+#: op they were some eight programs; compiled with the data they were one per layer shape)
+_permutations = jax.jit(_shot_permutations, static_argnames=("n", "r"))
+
+
 def _halves(key, Y):
-    """Random halves (per cell) of the measured shots: two (n, r//2, d) arrays (one program:
-    the permutation, gather and slices dispatched one by one were eight of a diagnosis)."""
+    """Random halves (per cell) of the measured shots Y (n, r, d), float32: two (n, r//2, d)
+    arrays (the permutation compiled once per (n, r); the gather on the host, exact)."""
     n, r, _ = Y.shape
-    perm = _shot_permutations(key, n, r)
-    Yp = jnp.take_along_axis(Y, perm[:, :, None], axis=1)
+    perm = np.asarray(_permutations(key, n, r))
+    Yp = np.take_along_axis(np.asarray(Y, np.float32), perm[:, :, None], axis=1)
     h = r // 2
-    return Yp[:, :h], Yp[:, h:2 * h]
+    return to32(Yp[:, :h]), to32(Yp[:, h:2 * h])
 
 
 
@@ -315,14 +319,13 @@ def reference(key, meas: Measurement, splits: int = 2) -> Reference:
     layers = meas.layers()
     scales = tuple(layer_scales(Y) for Y in layers)
     k_split, k_floor = jax.random.split(key)
-    split = np.asarray(_shot_permutations(k_split, meas.n, meas.r))
+    split = np.asarray(_permutations(k_split, meas.n, meas.r))
     moments = meas.r >= MIN_SHOTS_MOMENTS
     channels = CHANNELS if moments else CHANNELS[:2]
     F = np.zeros((meas.n, len(layers), len(channels)))
     for li, Y in enumerate(layers):
-        Y32 = to32(Y)
         for s_ in range(splits):
-            A, B = _halves(jax.random.fold_in(jax.random.fold_in(k_floor, li), s_), Y32)
+            A, B = _halves(jax.random.fold_in(jax.random.fold_in(k_floor, li), s_), Y)
             F[:, li, :2] += cell_statistic(A, B, scales=scales[li]) / splits
         if moments:
             F[:, li, 2:] = floor_moment_channels(Y, split)

@@ -49,7 +49,7 @@ def _xla_flags():
 
     The suite is compile-bound: it builds thousands of small programs, one per physics structure
     and chip shape, and runs each a few times. Measured on 2 cores, fresh compilation cache:
-    the full suite 618 s at level 2, 458-513 s at level 1 (three runs); tests/lab/test_diagnose.py
+    the full suite 618 s at level 2, 439-513 s at level 1 (four runs); tests/lab/test_diagnose.py
     160 s at level 2, 134 s at level 1; one cold ``gift diagnose``
     23.0 -> 20.2 s, the same run warm 10.2 -> 11.0 s. The programs are the same; their float
     rounding may differ in the last bits (no fast-math at either level), which no test may depend

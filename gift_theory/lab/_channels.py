@@ -324,8 +324,9 @@ def reference(key, meas: Measurement, splits: int = 2) -> Reference:
     channels = CHANNELS if moments else CHANNELS[:2]
     F = np.zeros((meas.n, len(layers), len(channels)))
     for li, Y in enumerate(layers):
+        Y32 = np.asarray(Y, np.float32)  # once per layer, not per split
         for s_ in range(splits):
-            A, B = _halves(jax.random.fold_in(jax.random.fold_in(k_floor, li), s_), Y)
+            A, B = _halves(jax.random.fold_in(jax.random.fold_in(k_floor, li), s_), Y32)
             F[:, li, :2] += cell_statistic(A, B, scales=scales[li]) / splits
         if moments:
             F[:, li, 2:] = floor_moment_channels(Y, split)

@@ -55,6 +55,19 @@ def init_params(key: jax.Array, arch: Architecture, *, dtype=jnp.float32, gain: 
     return tuple(layers)
 
 
+def to32(a):
+    """``a`` as a float32 device array, converted on the host (the same rounding): an eager
+    ``jnp.asarray(a, jnp.float32)`` of a float64 array compiles a conversion program per shape."""
+    if isinstance(a, jax.Array):
+        return a if a.dtype == jnp.float32 else a.astype(jnp.float32)
+    return jax.device_put(np.asarray(a, np.float32))
+
+
+def params32(params):
+    """Weights as float32 :class:`Layer` s (what the simulated chip and every jitted pass of the lab take)."""
+    return tuple(Layer(to32(W), to32(b)) for W, b in params)
+
+
 def check_params(params: Sequence, arch: Architecture, where: str = "weights") -> Params:
     """Validate shapes against ``arch``; return ``params`` as a tuple of :class:`Layer`.
 

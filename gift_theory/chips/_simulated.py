@@ -13,7 +13,7 @@ import numpy as np
 from .._arch import Architecture
 from .._errors import require
 from .._model import forward, sample_noise
-from .._params import Layer, check_params
+from .._params import Layer, check_params, params32
 from ..effects import Physics
 from .._measurement import Measurement
 from ._base import Ledger
@@ -100,5 +100,5 @@ def simulate_measurement(key, params, x, physics: Physics, *, shots: int, activa
     """
     widths = (int(params[0][0].shape[1]),) + tuple(int(W.shape[0]) for W, _ in params)
     chip = SimulatedChip(Architecture(widths, activation), physics, key)
-    p32 = tuple(Layer(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in params)
+    p32 = params32(params)
     return chip.measure(p32, np.asarray(x, np.float64), int(shots), taps=taps, key=key, times=True if times else None)

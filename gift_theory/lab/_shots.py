@@ -31,7 +31,7 @@ from .._model import (
     site_laws,
     tagged_draws,
 )
-from .._params import Layer
+from .._params import Layer, params32, to32  # noqa: F401  (the lab's modules import them from here)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,20 +71,6 @@ class Model:
 
     def weights(self, meas: Measurement) -> tuple:
         return self.params if self.params is not None else meas.params
-
-
-def to32(a):
-    """``a`` as a float32 device array, converted on the host (the same rounding): an eager
-    ``jnp.asarray(a, jnp.float32)`` of a float64 array compiles a conversion program per shape,
-    some thirty small programs of a cold diagnosis."""
-    if isinstance(a, jax.Array):
-        return a if a.dtype == jnp.float32 else a.astype(jnp.float32)
-    return jax.device_put(np.asarray(a, np.float32))
-
-
-def params32(params):
-    """Weights as float32 :class:`Layer` s (what every jitted pass of the lab takes)."""
-    return tuple(Layer(to32(W), to32(b)) for W, b in params)
 
 
 def default_model_shots(r: int) -> int:

@@ -22,7 +22,8 @@ rounding, only slower. ``GIFT_XLA_DEFAULTS=1`` in the environment turns the opti
 Compiled programs are also kept on disk (JAX's persistent compilation cache), so a new
 process -- a Dask worker of a sweep, the next ``gift`` command -- loads the programs an
 earlier one compiled instead of compiling them again: :func:`use_compilation_cache`, called
-when gift is imported, points JAX at ``$GIFT_COMPILATION_CACHE`` or, by default, the ``xla``
+by the ``gift`` command and the sweeps' workers (importing gift_theory does not; a script
+calls ``gift_theory.use_compilation_cache()`` itself), points JAX at ``$GIFT_COMPILATION_CACHE`` or, by default, the ``xla``
 folder of gift's cache (``$GIFT_CACHE_DIR`` or ``~/.cache/gift``), and keeps every program
 (:data:`CACHE_MIN_COMPILE_SECONDS`). ``GIFT_COMPILATION_CACHE=off``
 turns it off; a folder the user already gave JAX (``jax_compilation_cache_dir``) is kept.

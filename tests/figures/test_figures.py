@@ -139,6 +139,9 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
     assert acc["regime"]["best_cell_mean_pct"] == pytest.approx(32.25, abs=1e-6)
     assert acc["regime"]["retrain_pct"] == pytest.approx(32.0, abs=1e-6)  # from rivals_regime (seed 0)
     assert "ceiling of the GIFT line 2.00" in acc["summary"]
+    hi = acc["ceiling_highest"]  # the stand-in's ceiling: 2 % everywhere, one seed: no interval, no verdict on 28 %
+    assert hi["mean_pct"] == pytest.approx(2.0, abs=1e-9) and hi["n"] == 1 and hi["reaches_28pct"] is None
+    assert "not every cell has an interval" in acc["summary"]
     # under-training: the GIFT line gains 3 % more from the short w0, but the gradient line 1 % more than it
     u = c["undertrained_w0"]
     assert u["ceiling_short_minus_long_pct"]["mean"] == pytest.approx(3.0, abs=1e-9)
@@ -149,6 +152,36 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("spread, reaches", [(1.0, False), (30.0, True)])
+def test_the_ceiling_over_the_grid_reaches_28pct_only_when_a_cell_s_interval_does(spread, reaches):
+    """The grid-wide ceiling of the 28 % claim: the highest cell, and a verdict on 28 % from the
+    cells' 95 % upper bounds (a cell at 10 % mean whose seeds spread widely can reach it)."""
+    import xarray as xr
+
+    from paper_figures.claims import _ceiling_highest
+
+    rng = np.random.default_rng(0)
+    seeds, s0, st = 4, [0.02, 0.1], [0.2, 0.4]
+    gain = np.zeros((2, 2, seeds))
+    gain[0, 1] = 10.0 + spread * rng.standard_normal(seeds)  # the best cell, (0.02, 0.4)
+    gain[1, 0] = 3.0 + 0.1 * rng.standard_normal(seeds)
+    before = np.full_like(gain, 0.5)
+    after = before * (1 + gain / 100)
+    dims, coords = ("s0", "st", "seed"), {"s0": s0, "st": st, "seed": np.arange(seeds)}
+    var = {k: (dims, v) for k, v in {
+        "loss_before": before + 1, "pathwise_loss": before + 1, "accuracy_before": before,
+        "pathwise_accuracy_best": after, "test_loss_before": before + 1, "pathwise_test_loss": before + 1,
+        "test_accuracy_before": before, "pathwise_test_accuracy_at_best": after}.items()}
+    hi = _ceiling_highest("unused", {"ceiling_deep": xr.Dataset(var, coords=coords)})
+    v = gain[0, 1]
+    m, h = v.mean(), 3.182446305284263 * v.std(ddof=1) / 2  # t(0.975, 3) s / sqrt(4)
+    assert hi["best_cell"] == {"s0": 0.02, "st": 0.4} and hi["cells"] == 4 and hi["n"] == seeds
+    assert hi["mean_pct"] == pytest.approx(m) and hi["ci95"] == pytest.approx(h)
+    assert hi["highest_upper95_pct"] == pytest.approx(m + h) and hi["reaches_28pct"] is reaches
+    assert bool(m + h >= 28) is reaches  # the instance does what its name says
+    assert hi["test_pct"] == pytest.approx(m) and hi["baseline_accuracy"] == pytest.approx(0.5)
+
+
 def test_figures_without_their_inputs_say_what_they_need(tmp_path, monkeypatch):
     monkeypatch.setattr(paper_figures._build, "unavailable", lambda job, fixed=None: "needs gift_theory.finetune.run_finetune")
     res = build("tiny", only="performance_gift", data_dir=str(tmp_path), figure_dir=str(tmp_path), progress=False)

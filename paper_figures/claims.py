@@ -17,7 +17,8 @@ Claims (paper Sections "Simulation study on GIFT" and abstract):
 ``accuracy_gain_up_to_28pct`` also carries, at its best cell, the ceiling of the GIFT line
 (``ceiling_pct``: the referee's best step along the pathwise direction, chosen on training
 data) and the retrain oracle (``retrain_pct``) with its control at s0, and the best cell of
-the extended st (``regime``) where the deeper net's baseline collapses, and the ceiling over
+the extended st (``regime``) where the deeper net's baseline collapses (with every in-situ
+method of ``rivals_regime`` there, ``regime["rivals"]``), and the ceiling over
 every cell of the ceiling sweep (``ceiling_highest``: its best cell, the highest 95 % upper bound
 of any cell, and whether one reaches 28 %: the most a search along GIFT's line could give there).
 
@@ -164,11 +165,11 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                 "best_cell_ci95": float(hr.stack(cell=("s0", "st")).isel(cell=j)),
                 "baseline_accuracy": float(regime["accuracy_before"].sel(s0=r0, st=r1).mean("seed")),
                 "grid": {"s0": [float(v) for v in regime["s0"].values], "st": [float(v) for v in regime["st"].values]},
-                **_beside(data_dir, loaded, r0, r1)}
+                **_beside(data_dir, loaded, r0, r1), "rivals": _rivals_at(data_dir, loaded, r0, r1)}
             acc_claim["summary"] += (f"; extended st: best {_fmt(float(rc), acc_claim['regime']['best_cell_ci95'])} % "
                                      f"at s0={r0:g}, st={r1:g} (baseline "
                                      f"{acc_claim['regime']['baseline_accuracy']:.2f})"
-                                     + _beside_text(acc_claim["regime"]))
+                                     + _beside_text(acc_claim["regime"]) + _rivals_text(acc_claim["regime"]["rivals"]))
 
     highest = _ceiling_highest(data_dir, loaded)
     if highest is not None:
@@ -333,6 +334,35 @@ def _beside(data_dir, loaded, s0: float, st: float) -> dict:
         out[k.replace("_pct", "_ci95")] = None if v is None else v[1]
         out[k.replace("_pct", "_n")] = 0 if v is None else v[2]
     return out
+
+
+def _rivals_at(data_dir, loaded, s0: float, st: float) -> dict:
+    """Every in-situ method of ``rivals_regime`` at one cell (the retrain oracle, which knows st and
+    measures nothing, is reported beside the claim already): its mean relative accuracy gain
+    (train) with the 95 % half-width, the seeds, and its mean chip evaluations; best first."""
+    riv = _load(data_dir, "rivals_regime", loaded)
+    out = {}
+    if riv is None:
+        return out
+    for m in [str(v) for v in riv["method"].values if str(v) != "retrain"]:
+        sub = riv.sel({"method": m}, drop=True)  # .sel(method=...) would be xarray's own keyword
+        g = _cell_gain(sub, s0, st)
+        if g is not None:
+            evals = sub["in_situ_evaluations"].sel(s0=s0, st=st) if "in_situ_evaluations" in sub else None
+            out[m] = {"pct": g[0], "ci95": g[1], "n": g[2],
+                      "chip_evaluations": None if evals is None else float(evals.mean())}
+    return dict(sorted(out.items(), key=lambda kv: -kv[1]["pct"]))
+
+
+def _rivals_text(rivals: dict, k: int = 3) -> str:
+    if not rivals:
+        return ""
+    parts = [f"{m} {_fmt(v['pct'], v['ci95'])} %" + ("" if v["chip_evaluations"] is None else
+                                                     f" ({v['chip_evaluations']:.0f} chip evaluations)")
+             for m, v in list(rivals.items())[:k]]
+    gift = rivals.get("gift")
+    tail = "" if gift is None or "gift" in list(rivals)[:k] else f", gift {_fmt(gift['pct'], gift['ci95'])} %"
+    return " [in situ there: " + ", ".join(parts) + tail + "]"
 
 
 def _ceiling_highest(data_dir, loaded) -> dict | None:

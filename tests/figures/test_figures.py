@@ -138,6 +138,12 @@ def test_every_sweep_figure_is_drawn_from_saved_data_and_claims_follow_the_data(
     assert acc["regime"]["best_cell"] == {"s0": 0.1, "st": 0.3}
     assert acc["regime"]["best_cell_mean_pct"] == pytest.approx(32.25, abs=1e-6)
     assert acc["regime"]["retrain_pct"] == pytest.approx(32.0, abs=1e-6)  # from rivals_regime (seed 0)
+    riv = acc["regime"]["rivals"]  # every in-situ method of rivals_regime there (the oracle is not one)
+    from paper_figures._scales import sweeps
+
+    assert set(riv) == set(sweeps("tiny")["rivals_regime"].dims["method"]) - {"retrain"} and "gift" in riv
+    assert all(v["pct"] == pytest.approx(32.0, abs=1e-6) and v["chip_evaluations"] == 5 for v in riv.values())
+    assert "in situ there: " in acc["summary"]
     assert "ceiling of the GIFT line 2.00" in acc["summary"]
     hi = acc["ceiling_highest"]  # the stand-in's ceiling: 2 % everywhere, one seed: no interval, no verdict on 28 %
     assert hi["mean_pct"] == pytest.approx(2.0, abs=1e-9) and hi["n"] == 1 and hi["reaches_28pct"] is None
@@ -180,6 +186,28 @@ def test_the_ceiling_over_the_grid_reaches_28pct_only_when_a_cell_s_interval_doe
     assert hi["highest_upper95_pct"] == pytest.approx(m + h) and hi["reaches_28pct"] is reaches
     assert bool(m + h >= 28) is reaches  # the instance does what its name says
     assert hi["test_pct"] == pytest.approx(m) and hi["baseline_accuracy"] == pytest.approx(0.5)
+
+
+def test_the_rivals_beside_the_regime_are_each_method_s_own_seeds():
+    """regime["rivals"]: each in-situ method's gain from its own points (a method whose name is an
+    xarray keyword must not select everything), best first, the oracle left out."""
+    import xarray as xr
+
+    from paper_figures.claims import _rivals_at
+
+    methods, seeds = ["gift", "pat", "retrain"], 3
+    gain = np.array([1.0, 60.0, 90.0])[:, None, None, None] + np.arange(seeds)  # (method, s0, st, seed)
+    before = np.full(gain.shape, 0.4)
+    dims = ("method", "s0", "st", "seed")
+    ds = xr.Dataset({"accuracy_before": (dims, before), "accuracy_after": (dims, before * (1 + gain / 100)),
+                     "loss_before": (dims, before), "loss_after": (dims, before),
+                     "in_situ_evaluations": (dims, np.broadcast_to(np.array([12.0, 20.0, 0.0])[:, None, None, None],
+                                                                   gain.shape))},
+                    coords={"method": methods, "s0": [0.02], "st": [0.3], "seed": np.arange(seeds)})
+    riv = _rivals_at("unused", {"rivals_regime": ds}, 0.02, 0.3)
+    assert list(riv) == ["pat", "gift"]
+    assert riv["pat"]["pct"] == pytest.approx(61.0) and riv["gift"]["pct"] == pytest.approx(2.0)
+    assert riv["pat"]["chip_evaluations"] == 20 and riv["gift"]["n"] == seeds
 
 
 def test_figures_without_their_inputs_say_what_they_need(tmp_path, monkeypatch):

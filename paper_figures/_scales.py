@@ -61,6 +61,7 @@ class Scale:
     regime_rival_methods: tuple = ()
     regime_rival_s0: tuple = ()
     regime_rival_seeds: tuple = ()
+    regime_rival_st: tuple = ()     # () : regime_st
     ceiling_kinds: tuple = ("pathwise", "score_paper")
     ceiling_s0: tuple = ()          # () : the GIFT grid's
     ceiling_st: tuple = ()
@@ -95,6 +96,7 @@ SCALES = {
         est_arch="784-500-250-250-100-50-10", est_K1=(64, 256, 1024, 4096), est_K2=(2, 8, 32), est_reps=5,
         regime_s0=(0.02, 0.05, 0.1, 0.2), regime_st=(0.25, 0.3, 0.4),
         regime_rival_methods=RIVALS, regime_rival_s0=(0.02,), regime_rival_seeds=(0, 1, 2),
+        regime_rival_st=(0.2, 0.25, 0.3, 0.4),  # 0.2: the 28 % claim's best cell on the paper's grid
         variants=VARIANT_NAMES, variant_s0=(0.02, 0.1), variant_st=(0.2, 0.3), variant_seeds=tuple(range(10)),
         under_epochs=(5, 30), under_s0=(0.02, 0.1), under_st=(0.1, 0.2), under_seeds=tuple(range(5)),
         key_cells=((0.02, 0.2), (0.02, 0.25), (0.02, 0.3), (0.02, 0.4))),
@@ -152,7 +154,7 @@ def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict
 
     Issue 25 (when the scale defines them): ``gift_regime`` (GIFT on the deeper net at the
     extended st where its baseline collapses, dims s0, st, seed); ``rivals_regime`` (the
-    rivals on the deeper net there); ``ceiling_deep`` / ``ceiling_shallow`` (the referee's best
+    rivals on the deeper net there, and at st = 0.2 where the paper's grid ends); ``ceiling_deep`` / ``ceiling_shallow`` (the referee's best
     along the GIFT line, pathwise and printed direction, at every point of the GIFT grid and
     the extended st); ``variants`` (gift without confirmation or with a 5x budget,
     gift-printed with and without w0 at eta in {0.05, 0.1, 0.3, 1} % of |w0|, the retrain
@@ -183,7 +185,8 @@ def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict
                                    job, dict(deep, method="gift"))
         out["rivals_regime"] = Sweep(
             "rivals_regime", {"method": scale.regime_rival_methods, "s0": scale.regime_rival_s0,
-                              "st": scale.regime_st, "seed": scale.regime_rival_seeds}, job, deep)
+                              "st": scale.regime_rival_st or scale.regime_st, "seed": scale.regime_rival_seeds},
+            job, deep)
     for net, arch in scale.nets.items():
         sts = tuple(scale.ceiling_st or scale.st) + (tuple(scale.regime_st) if net == "deep" else ())
         out[f"ceiling_{net}"] = Sweep(f"ceiling_{net}", {"s0": scale.ceiling_s0 or scale.s0, "st": sts,

@@ -18,7 +18,7 @@ Claims (paper Sections "Simulation study on GIFT" and abstract):
 (``ceiling_pct``: the referee's best step along the pathwise direction, chosen on training
 data) and the retrain oracle (``retrain_pct``) with its control at s0, and the best cell of
 the extended st (``regime``) where the deeper net's baseline collapses (with every in-situ
-method of ``rivals_regime`` there, ``regime["rivals"]``), and the ceiling over
+method of ``rivals_regime`` there, ``regime["rivals"]``; at the best cell, ``rivals``), and the ceiling over
 every cell of the ceiling sweep (``ceiling_highest``: its best cell, the highest 95 % upper bound
 of any cell, and whether one reaches 28 %: the most a search along GIFT's line could give there).
 
@@ -151,7 +151,8 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                    f"st={float(best['st']):g} (best single run {pmax:.2f} %); paper: up to 28 %"}
     acc_claim = out["accuracy_gain_up_to_28pct"]
     acc_claim.update(_beside(data_dir, loaded, float(best["s0"]), float(best["st"])))
-    acc_claim["summary"] += _beside_text(acc_claim)
+    acc_claim["rivals"] = _rivals_at(data_dir, loaded, float(best["s0"]), float(best["st"]))
+    acc_claim["summary"] += _beside_text(acc_claim) + _rivals_text(acc_claim["rivals"])
     regime = _load(data_dir, "gift_regime", loaded)
     if regime is not None:
         mr, hr = mean_ci(improvements(regime, "train")["acc_pct"])

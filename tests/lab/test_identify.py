@@ -495,3 +495,20 @@ def test_without_taps_uniform_noise_is_named_along_the_model_covariance_s_minor_
     ident = identify(sim(1025, widths=(5, 17, 3, 6), n=80, r=32, s=0.02, taps=False, uniform=True))
     row = next(r for r in ident.rows() if r["test"] == "kurtosis")
     assert row["p_adj"] < 0.01 and row["effect"] < 0, row
+
+
+def test_the_wide_layer_covariance_blocks_are_the_sandwich_per_neuron(monkeypatch):
+    """A wide layer's map covariance, per neuron i: B_i^-1 M_i B_i^-T with B_i = sum_n x x^T and
+    M_i = sum_n (obs / r) x x^T (computed by batched products; here against the definition)."""
+    from gift_theory.lab import _identify
+
+    monkeypatch.setattr(_identify, "FULL_COV_MAX", 0)  # the blocks, whatever the size
+    rng = np.random.default_rng(3)
+    n, d, k, r = 50, 6, 9, 4.0
+    X, obs = rng.standard_normal((n, d, k)), rng.random((n, d)) + 0.1
+    S, full = _identify._covariance(X, None, obs, r)
+    assert not full and S.shape == (d, k, k)
+    for i in range(d):
+        Binv = np.linalg.inv(X[:, i].T @ X[:, i] + 1e-12 * np.eye(k))
+        M = (X[:, i] * (obs[:, i] / r)[:, None]).T @ X[:, i]
+        np.testing.assert_allclose(S[i], Binv @ M @ Binv.T, rtol=1e-10, atol=1e-14)

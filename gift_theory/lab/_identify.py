@@ -746,7 +746,7 @@ def _expected_kurtosis(act: str | None, z, vz, s2: float, r: int):
 def _curve(lay: _Layer, act: str, s2: float):
     """(d, BINS): per neuron the binned mean residual against the programmed z (the
     nonparametric curve, for the evidence: a dead neuron's is -tanh(z))."""
-    z0 = np.einsum("nkp,ip->nki", lay.A, lay.W) + lay.b
+    z0 = lay.A @ lay.W.T + lay.b  # as _mean_model's z (a BLAS product; the einsum ran at half its pace)
     res0 = lay.Y - _mean_model(lay, act, lay.W, lay.b, s2, _unit_var(lay, lay.W))[1]
     e0 = np.quantile(z0, np.linspace(0, 1, BINS + 1))
     e0[0], e0[-1] = -np.inf, np.inf

@@ -379,12 +379,9 @@ def _ceiling_highest(data_dir, loaded) -> dict | None:
     if ceil is None or "pathwise_accuracy_best" not in ceil:
         return None
     ft = ceiling_as_finetune(ceil, "pathwise")
-    cells = []
-    for s0 in ft["s0"].values:
-        for st in ft["st"].values:
-            g = _cell_gain(ft, float(s0), float(st), "train")
-            if g is not None:
-                cells.append((float(s0), float(st)) + g)
+    gain = improvements(ft, "train")["acc_pct"]
+    cells = [(float(s0), float(st)) + g for s0 in ft["s0"].values for st in ft["st"].values
+             if (g := _ci(gain.sel(s0=s0, st=st).values))[2] > 0]
     if not cells:
         return None
     s0, st, m, h, n = max(cells, key=lambda c: c[2])

@@ -91,7 +91,7 @@ def series(data: dict) -> dict[str, list[tuple[xr.Dataset, str]]]:
 def draw(data: dict, ax=None):
     """Two panels (training, test data); ``ax``: two axes to draw into. Returns the Figure."""
     if ax is None:
-        fig, axes = plt.subplots(1, 2, figsize=(15, 5.5), sharey=True)
+        fig, axes = plt.subplots(1, 2, figsize=(17, 5.5), sharey=True)  # room for a two-column legend
     else:
         axes = list(ax)
         fig = axes[0].figure
@@ -114,8 +114,8 @@ def draw(data: dict, ax=None):
                 continue
             x = [r["baseline"] for r in pts]
             y = [r["gain_pct"] for r in pts]
-            ys += y
             e = [r["ci95"] if np.isfinite(r["ci95"]) else 0.0 for r in pts]
+            ys += [v + d for v, d in zip(y, e)] + [v - d for v, d in zip(y, e)]  # the limits hold the intervals
             ceiling = label.startswith("ceiling")
             a.errorbar(x, y, yerr=e, fmt=markers[k % len(markers)], ms=4 if not ceiling else 6, capsize=2,
                        color=cmap(k % 20), mfc="none" if ceiling else None, lw=0.8, label=label)
@@ -128,7 +128,8 @@ def draw(data: dict, ax=None):
         a.set_title(f"{'training' if split == 'train' else 'test'} data", fontsize=9)
     axes[0].set_ylim(max(min(ys) - 5, -100), max(max(ys) + 10, PAPER_PCT + 15))
     axes[0].set_ylabel("relative accuracy gain, % (mean over seeds, 95 % CI)")
-    axes[-1].legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    n_labels = len(axes[-1].get_legend_handles_labels()[1])
+    axes[-1].legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), ncol=1 if n_labels <= 24 else 2)
     fig.suptitle("relative accuracy gain against baseline accuracy, one point per (s0, st) cell and method; "
                  "28 % needs a baseline below 0.78", fontsize=9)
     fig.tight_layout()

@@ -1,5 +1,14 @@
 """``quantization``: the readout maps v to clip(round(v / step) step, -v_range, v_range),
-step = 2 v_range / 2^bits (last link of D)."""
+step = 2 v_range / 2^bits (last link of D).
+
+The rounding's derivative is zero almost everywhere, so a model with this effect had no
+gradient at all (D follows every layer): training, GIFT's directions and the offset fits
+under it returned their start unchanged. Its derivative is the straight-through one, 1 (the
+forward is unchanged, bit for bit): the derivative of the *expected* readout
+E[round((v + n) / step)] step under the noise n that precedes D, which tends to 1 as the step
+shrinks against the noise's spread (at step = the noise's standard deviation it is already
+within 1e-8 of 1 for Gaussian n, by the Poisson summation formula).
+"""
 
 from __future__ import annotations
 
@@ -8,6 +17,18 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._base import Effect, register
+
+
+@jax.custom_jvp
+def round_straight_through(x):
+    """``jnp.round(x)`` whose derivative is 1 (the straight-through estimator)."""
+    return jnp.round(x)
+
+
+@round_straight_through.defjvp
+def _round_jvp(primals, tangents):
+    (x,), (t,) = primals, tangents
+    return jnp.round(x), t
 
 
 @register
@@ -30,7 +51,7 @@ class Quantization(Effect):
 
     def readout(self, v, noise, layer):
         step = self.step
-        return jnp.clip(jnp.round(v / step) * step, -self.v_range, self.v_range)
+        return jnp.clip(round_straight_through(v / step) * step, -self.v_range, self.v_range)
 
     @classmethod
     def from_data(cls, layers):

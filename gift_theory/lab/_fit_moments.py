@@ -24,7 +24,7 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import optimize
+from scipy import optimize, special
 
 from .._measurement import Measurement
 from .._model import named_subkey
@@ -51,11 +51,24 @@ def _moments(A, t):
 _moments_jit = jax.jit(_moments)
 
 
+def log_variance_bias(dof) -> float:
+    """E[log v] - log sigma^2 for the unbiased sample variance v of ``dof`` degrees of freedom of
+    Gaussian shots: psi(dof / 2) - log(dof / 2) (about -1 / dof)."""
+    return float(special.digamma(dof / 2.0) - np.log(dof / 2.0))
+
+
 def _moment_loss(mod, dat, r, K):
-    """Mean standardised squared difference of the moments (one layer)."""
+    """Mean standardised squared difference of the moments (one layer).
+
+    The log variances are compared net of their own bias (:func:`log_variance_bias`): the data
+    have r - 1 degrees of freedom, the model's shots K - 1, so log v of the data sits lower by
+    about 1 / (r - 1) - 1 / (K - 1) -- matched uncorrected, the fitted noise variance came out
+    that much too small (s 1.6-2.2 % low at r = 16, K = 32, measured), which a wide layer's
+    test then rejects on the true model."""
     vfloor = 1e-6 * jnp.mean(dat["v"]) + 1e-20
-    lv = jnp.log(mod["v"] + vfloor) - jnp.log(dat["v"] + vfloor)
-    lsv = jnp.log(mod["sv"] + vfloor) - jnp.log(dat["sv"] + vfloor)
+    shift = log_variance_bias(r - 1) - log_variance_bias(K - 1)
+    lv = jnp.log(mod["v"] + vfloor) - jnp.log(dat["v"] + vfloor) + shift
+    lsv = jnp.log(mod["sv"] + vfloor) - jnp.log(dat["sv"] + vfloor) + shift
     var_lv = 2.0 / (r - 1) + 2.0 / (K - 1)
     terms = [jnp.mean((mod["m"] - dat["m"]) ** 2 / (dat["v"] / r + mod["v"] / K + vfloor)),
              jnp.mean(lv ** 2) / var_lv, jnp.mean(lsv ** 2) / var_lv]

@@ -116,7 +116,8 @@ def grid_note(ds: xr.Dataset) -> str:
 
 def cell_notes(ds: xr.Dataset, split: str = "train", oracle=()) -> dict:
     """(s0, st) -> "base A" (mean accuracy of w0 over seeds) and, where one of ``oracle`` (sweeps
-    of the retrain oracle with dims s0, st, seed) has the cell, "oracle B" (its mean accuracy)."""
+    of the retrain oracle with dims s0, st, seed) has the cell, a second line "oracle B" (its
+    mean accuracy)."""
     p = "" if split == "train" else "test_"
     base = ds[f"{p}accuracy_before"].mean("seed")
     notes = {}
@@ -130,7 +131,7 @@ def cell_notes(ds: xr.Dataset, split: str = "train", oracle=()) -> dict:
                 if s0 in orc["s0"].values and st in orc["st"].values:
                     o = float(orc[f"{p}accuracy_after"].sel(s0=s0, st=st).mean("seed"))
                     if np.isfinite(o):
-                        txt += f", oracle {o:.2f}"
+                        txt += f"\noracle {o:.2f}"  # its own line: "base A, oracle B" ran over the cell's edges
                         break
             notes[(round(float(s0), 12), round(float(st), 12))] = txt
     return notes

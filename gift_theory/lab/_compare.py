@@ -27,7 +27,7 @@ from ._channels import (
     paired_moment_channels,
     reference,
 )
-from ._qtest import over_inputs, q_test, replicate_null
+from ._qtest import log_variance_bias, over_inputs, q_test, replicate_null
 from ._shots import Model, model_shots, one_step_shots, to32
 
 
@@ -213,10 +213,12 @@ class Moments:
         return (self.mean[li] - self.model_mean[li]) / np.sqrt(np.maximum(se2, 1e-300))
 
     def log_var_ratio(self, li: int) -> tuple[np.ndarray, float]:
-        """(n, d) log(measured / model variance) and its standard deviation under the model
-        (sqrt(2/(r-1) + 2/(K-1)), Gaussian shots)."""
+        """(n, d) log(measured / model variance), net of its small-sample bias (r against K shots,
+        :func:`~._qtest.log_variance_bias`: mean 0 under the model), and its standard deviation
+        under the model (sqrt(2/(r-1) + 2/(K-1)), Gaussian shots)."""
         with np.errstate(divide="ignore", invalid="ignore"):
             lr = np.log(np.maximum(self.var[li], 1e-300) / np.maximum(self.model_var[li], 1e-300))
+        lr -= log_variance_bias(self.r - 1) - log_variance_bias(self.K - 1)
         return lr, float(np.sqrt(2.0 / (self.r - 1) + 2.0 / (self.K - 1)))
 
 

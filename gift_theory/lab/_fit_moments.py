@@ -24,10 +24,11 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import optimize, special
+from scipy import optimize
 
 from .._measurement import Measurement
 from .._model import named_subkey
+from ._qtest import log_variance_bias
 from ._shots import draws, layer_outputs, params32, strong32, tiled_times, to32
 
 
@@ -49,12 +50,6 @@ def _moments(A, t):
 #: the data's moments in one program per layer shape (dispatched op by op they were ~30
 #: programs of a diagnosis, each traced and lowered in a fresh process)
 _moments_jit = jax.jit(_moments)
-
-
-def log_variance_bias(dof) -> float:
-    """E[log v] - log sigma^2 for the unbiased sample variance v of ``dof`` degrees of freedom of
-    Gaussian shots: psi(dof / 2) - log(dof / 2) (about -1 / dof)."""
-    return float(special.digamma(dof / 2.0) - np.log(dof / 2.0))
 
 
 def _moment_loss(mod, dat, r, K):

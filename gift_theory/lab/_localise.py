@@ -29,7 +29,7 @@ from scipy import stats
 from .._measurement import Measurement
 from .._model import named_subkey
 from ..effects import REGISTRY
-from ._qtest import over_inputs
+from ._qtest import log_variance_bias, over_inputs
 from ._shots import (
     central_slope,
     Model,
@@ -357,6 +357,7 @@ def where_it_fails(key, model: Model, meas: Measurement, bins: int = 6, shots: i
         K2 = MB.shape[1]
         with np.errstate(divide="ignore", invalid="ignore"):
             lvr = np.log(np.maximum(Y.var(1, ddof=1), 1e-300) / np.maximum(res.vB[li], 1e-300))
+        lvr -= log_variance_bias(r - 1) - log_variance_bias(K2 - 1)  # r against K2 shots: mean 0 under the model
         cell = {"mean_z": res.mean_resid[li],
                 "log_var_ratio": lvr / np.sqrt(2 / (r - 1) + 2 / (K2 - 1)),
                 "excess_kurtosis": res.kurt_resid[li] / np.sqrt(24 / r + 24 / r)}

@@ -21,10 +21,17 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy import stats
+from scipy import special, stats
 
 #: Monte Carlo draws of the null distribution of Q (fixed seed: same data, same p-value)
 NULL_DRAWS = 20_000
+
+
+def log_variance_bias(dof) -> float:
+    """E[log v] - log sigma^2 for the unbiased sample variance v of ``dof`` degrees of freedom of
+    Gaussian shots: psi(dof / 2) - log(dof / 2) (about -1 / dof). Measured and model variances
+    from different shot counts differ in log by the difference of two of these."""
+    return float(special.digamma(dof / 2.0) - np.log(dof / 2.0))
 
 
 def _z_scores(T, shift=None, extra_var=None):

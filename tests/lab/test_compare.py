@@ -414,7 +414,7 @@ def test_the_moment_fit_compares_log_variances_net_of_their_bias(x64):
     model's K - 1 = 31. The log variances differ by ~1/15 - 1/31 in expectation; the moment
     loss's difference (the fitting target) is zero in expectation, within Z of its standard
     error, and the uncorrected one is not (the fitted s was 1.6-2.2 % low on 500-wide layers)."""
-    from gift_theory.lab._fit_moments import log_variance_bias
+    from gift_theory.lab._qtest import log_variance_bias
 
     rng = np.random.default_rng(5)
     cells, r, K, Z = 40_000, 16, 32, 4.5
@@ -449,3 +449,25 @@ def test_the_fitted_awgn_level_of_a_wide_layer_is_the_true_one():
     se = err.std(ddof=1) / np.sqrt(err.size)
     assert abs(err.mean()) <= 4.5 * se, (err.mean(), se)
     assert se < 0.006  # the test's power: a bias of 3 % is 5 se
+
+
+def test_the_log_variance_ratio_of_the_figures_has_mean_zero_under_the_true_model():
+    """predictive_moments' log(measured / model variance) compares r = 8 shots with K = 32: the
+    raw ratio sits ~0.12 low (0.2 of its sd per cell); net of the bias its mean over a 64-wide
+    layer's cells (per input, then over 200 inputs) is within 4.5 se of 0."""
+    from gift_theory.lab._compare import predictive_moments
+
+    arch = gt.Architecture((8, 64, 4))
+    params = gt.init_params(jax.random.PRNGKey(21), arch)
+    x = jax.random.uniform(jax.random.PRNGKey(22), (200, 8))
+    phys = gt.Physics.create(s=0.1)
+    meas = simulate_measurement(jax.random.PRNGKey(23), params, x, phys, shots=8, taps=True)
+    mom = predictive_moments(jax.random.PRNGKey(24), Model(phys), meas)
+    lr, sd = mom.log_var_ratio(0)
+    per_input = (lr / sd).mean(1)
+    se = per_input.std(ddof=1) / np.sqrt(per_input.size)
+    assert abs(per_input.mean()) <= 4.5 * se, (per_input.mean(), se)
+    from gift_theory.lab._qtest import log_variance_bias
+
+    raw_bias = log_variance_bias(mom.r - 1) - log_variance_bias(mom.K - 1)  # what the uncorrected ratio carries
+    assert abs(raw_bias) / sd > 2 * 4.5 * se

@@ -91,7 +91,7 @@ def finetune_part(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.05,
 
     Parameters
     ----------
-    dataset, arch, s0, st, true_effects : the setting (CONTRACTS §4 finetune)
+    dataset, arch, s0, st, true_effects : the setting (reference §4 finetune)
     methods : names of :data:`gift_theory.finetune.METHODS` (default all)
     seed, budget : the chip's seed and its budget in chip evaluations per method
     data_folder : the MNIST IDX folder for ``dataset="mnist"``
@@ -100,7 +100,7 @@ def finetune_part(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.05,
 
     Returns
     -------
-    dict ``rows`` (one per method, CONTRACTS §4 keys plus ``oracle_fraction``, ``why`` and a
+    dict ``rows`` (one per method, reference §4 keys plus ``oracle_fraction``, ``why`` and a
     JSON-ready ``info``) and ``curve`` (arrays, or None when no line-search method ran).
     """
     from .finetune import METHODS, finetune_on, true_physics
@@ -277,7 +277,7 @@ def lab_part(hidden, seed: int = 0, *, save_to: str | None = None, progress=None
     Parameters
     ----------
     hidden : an Effect (:func:`parse_hidden`); seed : names the chip and its shots
-    save_to : also write the measurement there (.npz, CONTRACTS §3)
+    save_to : also write the measurement there (.npz, reference §3)
     progress : ``progress(i, n, label)`` before each of the two steps (measure, diagnose)
 
     Returns

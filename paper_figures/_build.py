@@ -257,7 +257,7 @@ def add_arguments(parser) -> None:
 
 
 def check_arguments(args) -> None:
-    """Bad input -> one-line GiftInputError (CONTRACTS §4)."""
+    """Bad input -> one-line GiftInputError (reference §4)."""
     from gift_theory import GiftInputError
 
     if args.workers < 1:

@@ -3,7 +3,7 @@
 Each job is a module-level function (picklable, importable by Dask workers) that calls the
 library's public API; nothing here re-implements the science.
 
-* :func:`gift_job` -- one fine-tuning run, ``gift_theory.finetune.run_finetune`` (CONTRACTS §4
+* :func:`gift_job` -- one fine-tuning run, ``gift_theory.finetune.run_finetune`` (reference §4
   finetune keys), for GIFT or any rival method, with the true noise of the simulated chip
   given in the paper's parametrisation (:func:`true_noise`).
 * :func:`estimator_job` -- one estimate of d/ds grad J by ``gift_theory.estimators.d_ds_grad``
@@ -29,7 +29,7 @@ def needs(what: str, why: str) -> RuntimeError:
 
 
 def true_noise(noise_kind: str, st: float) -> tuple[float, tuple[str, ...]]:
-    """Map the paper's true-noise law with parameter ``st`` onto CONTRACTS §2 effects.
+    """Map the paper's true-noise law with parameter ``st`` onto reference §2 effects.
 
     The paper (Section "GIFT's performance when the noise is not AWGN") uses
     a) U(-st, st), b) multiplicative Gaussian with standard deviation st, c) Laplace(0, st).
@@ -110,14 +110,14 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     s0 : training noise level; st : true noise parameter in the paper's parametrisation
     seed : names the in-silico training run and the fine-tuning randomness
     noise_kind : see :func:`true_noise`
-    method : a CONTRACTS §4 finetune method
+    method : a reference §4 finetune method
     options : extra keyword arguments for ``run_finetune`` (K1, K2, eta, mnist folder, ...)
     train_epochs : train w0 for this many epochs instead of the default recipe's
     variant : a name of :data:`VARIANTS` (replaces ``method`` and adds its options)
 
     Returns
     -------
-    dict : the numeric CONTRACTS §4 keys (loss/accuracy before/after on train and test,
+    dict : the numeric reference §4 keys (loss/accuracy before/after on train and test,
     in_situ_evaluations, seconds), ``s_true`` (the chip's awgn level after the mapping), the
     referee's standard errors (``loss_before_se``, ..., ``loss_change_se``), whether the line
     search's confirmation ``accepted``, for line-search methods Theorem 1's prediction

@@ -1,5 +1,5 @@
 """Theorem 1 (thm:FT-is-needed) on any family J_s(w): the printed and the corrected
-condition, C1, and whether the conclusion holds at (s0, st) -- CONTRACTS §5b.
+condition, C1, and whether the conclusion holds at (s0, st) -- reference §5b.
 
 A family is either
 
@@ -41,7 +41,7 @@ import numpy as np
 from ._interval import float_up, jaxpr_enclosure, sup_bound, sympy_enclosure
 from ._record import decide, fmt
 
-#: what a family file must define (CONTRACTS §5b)
+#: what a family file must define (reference §5b)
 FAMILY_NAMES = ("s", "w", "J", "w0")
 
 
@@ -58,7 +58,7 @@ class Family(NamedTuple):
 
 
 class FamilyError(ValueError):
-    """A family that breaks the contract of CONTRACTS §5b (one line, names the rule)."""
+    """A family that breaks the contract of reference §5b (one line, names the rule)."""
 
     def __init__(self, message):
         super().__init__(" ".join(str(message).split()))      # one line, whatever the cause's text
@@ -128,7 +128,7 @@ def family(J, w0, *, s=None, w=None, wt=None, name: str = "family") -> Family:
 
 
 def load_family(path: str) -> Family:
-    """Load a family file (CONTRACTS §5b); a broken file raises :class:`FamilyError`."""
+    """Load a family file (reference §5b); a broken file raises :class:`FamilyError`."""
     if not os.path.isfile(path):
         raise FamilyError(f"{path}: no such file")
     try:
@@ -353,7 +353,7 @@ def theorem1(fam: Family, s0, st, *, confidence: float = 0.95, rtol: float = 0.0
     ``v_norm2`` / ``sup_abs_d2_dot_v`` as {"value", "lo", "hi"} (lo = hi for exact families),
     ``hypotheses`` (each with ``verified``), ``conclusion`` in {"holds", "fails",
     "inconclusive"}, ``descent`` (is there a small step along v that lowers J_st), and an
-    ``evidence`` sentence. :func:`contract_json` keeps the CONTRACTS §5b keys.
+    ``evidence`` sentence. :func:`contract_json` keeps the reference §5b keys.
     """
     if fam.kind == "sympy":
         return _theorem1_sympy(fam, s0, st, rtol=rtol, max_pieces=max_pieces)
@@ -368,7 +368,7 @@ def inside_hypotheses(res: dict):
 
 
 def contract_json(res: dict) -> dict:
-    """The CONTRACTS §5b object of a :func:`theorem1` result, plus ``inside_hypotheses``
+    """The reference §5b object of a :func:`theorem1` result, plus ``inside_hypotheses``
     (True / False / None, see :func:`inside_hypotheses`) and ``counterexample`` (True only when
     the conclusion fails on an instance inside every hypothesis: a counterexample to Theorem 1
     as printed)."""

@@ -18,7 +18,7 @@ from ._labargs import add_common, figure_dir, key, load
 def add_arguments(parser):
     add_common(parser)
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
-                        help="the model's physics (CONTRACTS §2), e.g. awgn=0.1 shot=0.01; default: fit awgn")
+                        help="the model's physics (reference §2), e.g. awgn=0.1 shot=0.01; default: fit awgn")
     parser.add_argument("--power-replicates", type=int, default=20, metavar="B",
                         help="simulated files behind the power figures next to the verdict (default 20; 0: none)")
 

@@ -1,7 +1,7 @@
 """``gift diagnose MEAS``: is a physical effect missing from the model, and which one?
 
 Fits the awgn baseline and every candidate effect on half the inputs, scores them on the
-other half (CONTRACTS §4 JSON with ``--json``; a text report and a figure folder without).
+other half (reference §4 JSON with ``--json``; a text report and a figure folder without).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def render(out) -> str:
         lines.append("failing layers (one-step check, 0.01 with Bonferroni over the layers): "
                      + (", ".join(map(str, fl)) if fl else "none"))
     if out.get("mechanisms"):
-        lines.append("mechanisms the localised evidence points to (CONTRACTS section 6; score in sd, p after "
+        lines.append("mechanisms the localised evidence points to (reference §6; score in sd, p after "
                      "multiplicity correction):")
         for m in out["mechanisms"]:
             where = f"layers {', '.join(map(str, m['layers']))}" if m["layers"] else "layers ?"

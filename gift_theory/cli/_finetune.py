@@ -1,4 +1,4 @@
-"""``gift finetune``: fine-tune in-silico trained weights against a simulated chip (CONTRACTS §4)."""
+"""``gift finetune``: fine-tune in-silico trained weights against a simulated chip (reference §4)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ def add_arguments(parser):
     parser.add_argument("--s0", type=positive_float, required=True, help="the noise level assumed in training")
     parser.add_argument("--st", type=nonneg_float, required=True, help="the chip's true noise level")
     parser.add_argument("--true-effect", action="append", default=[], metavar="NAME=VALUE",
-                        help="a CONTRACTS §2 effect the chip also has (repeatable), e.g. shot=0.01")
+                        help="a reference §2 effect the chip also has (repeatable), e.g. shot=0.01")
     parser.add_argument("--method", default="gift", help=f"one of: {', '.join(METHODS)}")
     parser.add_argument("--seed", type=nonneg_int, default=0,
                         help="names the trained weights, the chip's noise and the method's randomness (default 0)")

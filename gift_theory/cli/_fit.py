@@ -1,5 +1,5 @@
 """``gift fit MEAS --add NAME [--add NAME ...]``: add effects, fit them, report the error
-before and after (CONTRACTS §4 JSON with ``--json``; text and an error-ladder figure without)."""
+before and after (reference §4 JSON with ``--json``; text and an error-ladder figure without)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def no_taps_caveat(names) -> str:
 def add_arguments(parser):
     add_common(parser)
     parser.add_argument("--add", action="append", required=True, metavar="NAME",
-                        help="a registered effect (CONTRACTS §2 or a plugin) to add to the model (repeatable, in order)")
+                        help="a registered effect (reference §2 or a plugin) to add to the model (repeatable, in order)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
     parser.add_argument("--replicates", type=int, default=None, metavar="B",
                         help="parametric replicates behind the 95 %% intervals of the moment-fitted parameters "

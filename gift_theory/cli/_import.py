@@ -1,5 +1,5 @@
 """``gift import IN --out OUT`` (also ``gift export``): one measurement campaign from any format
-gift reads to any it writes (CONTRACTS §3).
+gift reads to any it writes (reference §3).
 
 IN: ``.npz``, long or wide CSV, netCDF / HDF5 (the format told by the content, then the
 extension); ``--weights W.npz`` where IN holds none. OUT by its extension: ``.npz``,

@@ -12,7 +12,7 @@ from ._plugins import add_plugin_argument, load_plugins
 
 def add_common(parser):
     add_plugin_argument(parser)
-    parser.add_argument("measurement", metavar="MEAS", help="measurement file (CONTRACTS §3): .npz, long or wide .csv, netCDF / HDF5 (.nc, .h5)")
+    parser.add_argument("measurement", metavar="MEAS", help="measurement file (reference §3): .npz, long or wide .csv, netCDF / HDF5 (.nc, .h5)")
     parser.add_argument("--weights", help="weights .npz (W1..WL, b1..bL) for a file that holds none (CSV, netCDF)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the held-out split, the model shots and the fit")
     parser.add_argument("--shots", type=int, default=None, help="model shots per input (default: the measured r)")

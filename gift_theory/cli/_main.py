@@ -96,7 +96,7 @@ class _Parser(argparse.ArgumentParser):
     def format_help(self):
         from ._common import REFERENCE
 
-        return super().format_help().replace("CONTRACTS §", "reference §").rstrip("\n") + (
+        return super().format_help().replace("reference §", "reference §").rstrip("\n") + (
             f"\n\nreference: {REFERENCE} (file formats, JSON outputs, effects, mechanism classes)\n")
 
 
@@ -188,7 +188,7 @@ def main(argv=None) -> int:
     except Exception as exc:  # the work failed: one line unless debugging
         from ._plugins import plugin_failure
 
-        line = plugin_failure(exc)  # a plugin's own code raised: a bad input (CONTRACTS §2b)
+        line = plugin_failure(exc)  # a plugin's own code raised: a bad input (reference §2b)
         if line is not None and not debug:
             sys.stderr.write(line + "\n")
             return 2

@@ -79,7 +79,7 @@ def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps
 
     ``evaluations`` units of chip budget buy ``shots`` repeated shots of as many fine-tuning
     inputs as they pay for (with the hidden layers where the chip has taps); the lab's
-    :func:`~gift_theory.lab.diagnose` fits awgn and every effect of CONTRACTS §2 (but
+    :func:`~gift_theory.lab.diagnose` fits awgn and every effect of reference §2 (but
     weight_error, whose fixed offsets retraining cannot use) on half the inputs and tests
     them on the other half. The physics is the top-ranked model when the awgn model fails
     its test (p < 0.01), else the awgn model with its fitted s.
@@ -105,7 +105,7 @@ def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps
 
 def identify_retrain(problem, **kw):
     """Spend the budget measuring the chip, identify its physics (s and any missing effect of
-    CONTRACTS §2, :func:`identify_physics`), retrain in silico at the estimate from w0."""
+    reference §2, :func:`identify_physics`), retrain in silico at the estimate from w0."""
     physics, info = identify_physics(problem, **kw)
     return retrain(problem, physics), info
 

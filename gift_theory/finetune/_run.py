@@ -1,4 +1,4 @@
-"""``run_finetune``: one method on one misspecified pair, scored by the referee (CONTRACTS §4)."""
+"""``run_finetune``: one method on one misspecified pair, scored by the referee (reference §4)."""
 
 from __future__ import annotations
 
@@ -125,7 +125,7 @@ def true_physics(st: float, true_effects=()) -> Physics:
 def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gift", seed: int = 0,
                 budget: float = 20, K1=None, K2: int = 1, referee_K2: int = 32, chip=None,
                 predict_s: float | None = None, prediction_K2: int = 8, **options) -> dict:
-    """Run ``method`` on a prepared setting; the CONTRACTS §4 finetune keys plus ``info``.
+    """Run ``method`` on a prepared setting; the reference §4 finetune keys plus ``info``.
 
     The referee scores w0 and the returned weights on the same draws, loss and accuracy from
     one pass (``info["referee"]``: standard errors of each number and of the paired changes).
@@ -188,7 +188,7 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
     ----------
     dataset, arch : the setting (weights trained once at s0, then cached)
     s0 : assumed noise level; st : the chip's true level
-    true_effects : CONTRACTS §2 effect specs the chip also has (``"shot=0.01"``, ...)
+    true_effects : reference §2 effect specs the chip also has (``"shot=0.01"``, ...)
     method : one of :data:`METHODS`
     seed : names the trained weights, the chip's noise and the method's randomness
     weights : optional weight file to fine-tune instead of training at s0
@@ -202,7 +202,7 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
 
     Returns
     -------
-    dict with the CONTRACTS §4 finetune keys, plus ``gift_info`` (why a line search or
+    dict with the reference §4 finetune keys, plus ``gift_info`` (why a line search or
     Algorithm 1 returned w0 or a step: ``kept_w0``, ``reason``, ``confirmation_z``,
     ``predicted_gain``, ``predicted_gain_pct``; None for the other methods) and ``info``
     (what the method did).

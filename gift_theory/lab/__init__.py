@@ -4,7 +4,7 @@ fit it, watch the error fall.
 
 The stages, one module each, in the order one :func:`diagnose` runs them::
 
-    _io          measurement files (CONTRACTS §3)
+    _io          measurement files (reference §3)
     _shots       a model of the device and its shots (the core's sampler and forward pass)
     _channels    the channels of a cell and the measurement's noise floor
     _qtest       the discrepancy test
@@ -16,7 +16,7 @@ The stages, one module each, in the order one :func:`diagnose` runs them::
 
 Public API (a notebook can do everything ``gift simulate/compare/diagnose/fit`` do)::
 
-    meas = load_measurement("chip.npz")                 # CONTRACTS §3, validated
+    meas = load_measurement("chip.npz")                 # reference §3, validated
     res = diagnose(key, meas)                           # baseline, p-value, ranking of effects
     fit = fit_effects(key, meas, ["shot"])              # before/after, fitted parameters
     cmp = compare(key, Model(physics), meas)            # discrepancy, floor, p-value

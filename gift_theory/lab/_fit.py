@@ -87,7 +87,7 @@ def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None,
 
 def fit_uncertainty(key, meas: Measurement, after: Model, *, shots: int | None = None, B: int | None = None,
                     progress=None) -> dict:
-    """The uncertainty of a :func:`~gift_theory.lab.fit_effects` result (CONTRACTS §2b, §4):
+    """The uncertainty of a :func:`~gift_theory.lab.fit_effects` result (reference §2b, §4):
     95 % intervals on every fitted scalar parameter and the per-neuron values with their
     standard errors, on the fitting half of ``meas`` that ``fit_effects(key, meas, ...)`` used
     (the same split and keys; methods: :mod:`._intervals`).

@@ -1,7 +1,7 @@
 """Layer-wise system identification: each layer's effective transfer and noise, read off the shots.
 
 With taps, layer l's measured output is regressed on the measured output of layer l-1 of the
-*same shot* (layer 1: on x). Under CONTRACTS §2 a tap is the value fed forward, so the
+*same shot* (layer 1: on x). Under reference §2 a tap is the value fed forward, so the
 regressor of a shot is exactly the input its layer saw: the conditional mean of a_l given
 a_{l-1} is the layer's mean map, with no error in the regressor (the noise of a_{l-1} is
 part of the input, not an error of measuring it). Layer 1's input a_0 = x + n_a0 is not
@@ -187,7 +187,7 @@ class _Layer:
 
 def _propagate(meas: Measurement, s: float):
     """Per input, the model's mean (n, d) and unit covariance per s^2 (n, d, d) of a_{L-1}, the
-    output layer's input, without taps: by Monte Carlo through the model (CONTRACTS §1, awgn at
+    output layer's input, without taps: by Monte Carlo through the model (reference §1, awgn at
     level s), the standard normal draws fixed (the same numbers at every s), inputs in chunks.
     Exact up to the draws' error -- a linearised propagation missed the activation's curvature,
     which looked like a gain fluctuating along the signal and like correlated noise (15 % of
@@ -1096,7 +1096,7 @@ def _shape_given_detector(rows: list, p_shape: float):
 def _detector_or_modulator(lay: _Layer, act: str, s2: float, obs, mf: float, alive, tt=None, iters: int = 8):
     """Where a hidden layer's per-neuron gains and offsets sit: on z, a modulator's
     ``sigma(g_i z + o_i)``, or on the layer's output, a detector's ``g_i sigma(z) + o_i`` (the
-    readout chain D of CONTRACTS §2; a tap measures what it gives). Near z = 0 the two agree;
+    readout chain D of reference §2; a tap measures what it gives). Near z = 0 the two agree;
     where the activation bends they do not (detectors on every layer of a tapped chip were named
     activation_mismatch, the modulator's class).
 
@@ -1173,7 +1173,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     transfer_cls = "activation_mismatch" if lay.hidden else "readout_nonlinearity"
     tt = None
     if t is not None:
-        # the map is identified at t = 0, the start of the acquisition (CONTRACTS §2's drift is
+        # the map is identified at t = 0, the start of the acquisition (reference §2's drift is
         # g = 1 + r t): a trend's time average is not a fixed error
         # the map's trends come from the inputs' mean times (a within-input trend would make the
         # model's mean move inside an input by a coefficient read off the means); they are fitted
@@ -1416,7 +1416,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
                              f"p = {pfit['rows']:.2g}{text})"))
         if choice == "general" and lay.hidden:
             # no restricted map of z fits: the neurons' own gains and offsets may act after the
-            # activation (a detector, D of CONTRACTS §2), which no map of z expresses
+            # activation (a detector, D of reference §2), which no map of z expresses
             q_det, q_mod, q_prog, p_sh, p_tdet = _detector_or_modulator(lay, act, s2, obs, mf, alive, tt)
             df_det = n * da - 2 * da
             if stats.chi2.sf(q_det, df_det) >= ALPHA:

@@ -1,5 +1,5 @@
 """Stage 5c of the lab: how well the fit knows each parameter -- per-neuron standard errors and
-95 % intervals on every fitted scalar parameter (CONTRACTS §2b, §4).
+95 % intervals on every fitted scalar parameter (reference §2b, §4).
 
 Three kinds of fitted values, three methods, each honest for the way its value is fitted:
 
@@ -210,7 +210,7 @@ def uncertainty_of(model: Model) -> dict | None:
 
 def per_neuron_json(model: Model, arch=None) -> dict:
     """``{"per_neuron": {name: {"<layer>": [value per neuron]}}, "per_neuron_se": {same shape}}``
-    (CONTRACTS §2b) of a fitted model: every per-neuron parameter by its name on the layers in
+    (reference §2b) of a fitted model: every per-neuron parameter by its name on the layers in
     its scope, and ``bias_offset``'s fitted offsets under ``"bias_offset"``. A standard error
     not known is null."""
     info = uncertainty_of(model) or {"se": {}}

@@ -1,11 +1,11 @@
 """Stage 8 of the lab: is the measurement explained, and if not, what remains and where to look.
 
-**The rule** (CONTRACTS §6 ``explained``). The data are explained when
+**The rule** (reference §6 ``explained``). The data are explained when
 
 1. the baseline (awgn, s fitted) passes its held-out test (p >= 0.01) and the layer-wise
    identification rejects none of its assumptions (no test names a class:
    :func:`~gift_theory.lab._mechanisms.named`, Holm-adjusted 0.01): nothing is
-   missing. ``missing_effect_detected`` is still the held-out test's alone (CONTRACTS §4): when
+   missing. ``missing_effect_detected`` is still the held-out test's alone (reference §4): when
    only the identification rejects, the data are not explained while no missing effect is
    "detected". The held-out test compares per-input laws on half the inputs and has little
    power against a law or a variance pattern that the identification's signed tests see on all

@@ -1,6 +1,6 @@
 """Trained weights saved once and reused: a cache keyed by everything that shapes them.
 
-A weight file is an ``.npz`` with ``W1..WL, b1..bL`` (the CONTRACTS §3 names) and the
+A weight file is an ``.npz`` with ``W1..WL, b1..bL`` (the reference §3 names) and the
 metadata ``arch, activation, s0, seed, dataset, method, steps, config`` plus the train
 and test metrics measured when it was made. Files are written to a temporary name and
 renamed, so a killed run never leaves half a file.

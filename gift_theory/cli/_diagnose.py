@@ -97,7 +97,8 @@ def render(out) -> str:
         lines.append("one-step check per layer (layer fed the measured layer before, at its own noise level s):")
         for w in out["where"]:
             lines.append(f"  layer {w['layer']}: discrepancy {w['discrepancy']:.4g} (z = {w['z']:.1f}, "
-                         f"p = {w['p_value']:.3g}, s = {w.get('s', float('nan')):.3g})")
+                         f"p = {w['p_value']:.3g}, s = {w.get('s', float('nan')):.3g}"
+                         + (" through its measured transfer" if w.get("s_through_transfer") else "") + ")")
     if out.get("signatures"):
         lines.append("signatures against the baseline (z > 3 stands out):")
         for name, s in out["signatures"].items():

@@ -225,11 +225,15 @@ def plot_finetune(rows, curve, *, s0: float, st: float, ax=None):
     before = rows[0]["loss_before"]
     after = [r["loss_after"] for r in rows]
     colours = ["C2" if v < before - 1e-9 else ("C3" if v > before + 1e-9 else "0.6") for v in after]
+    from matplotlib.patches import Patch
+
     ax2.barh(names, after, color=colours)
-    ax2.axvline(before, color="k", lw=1, label="w0 (no fine-tuning)")
+    line = ax2.axvline(before, color="k", lw=1, label="w0 (no fine-tuning)")
     ax2.set_xlabel("true loss after fine-tuning (train)")
     ax2.invert_yaxis()
-    ax2.legend(fontsize=7)
+    # what each bar's colour says (the bars carry no label of their own)
+    ax2.legend(handles=[line, Patch(color="C2", label="lower loss than w0"), Patch(color="C3", label="higher loss than w0"),
+                        Patch(color="0.6", label="w0 returned (the same loss)")], fontsize=7)
     lo, hi = min(after), max(after)
     ax2.set_xlim(max(0.0, lo - 0.1 * (hi - lo)), hi + 0.1 * (hi - lo) + 1e-12)
     if ax is None:

@@ -12,7 +12,7 @@ this file's size (inputs, shots, taps or not), from the power computed on the fi
 from __future__ import annotations
 
 from .._errors import require
-from ._labargs import add_common, figure_dir, key, load
+from ._labargs import add_common, figure_dir, key, load, write_manifest
 
 
 def add_arguments(parser):
@@ -27,9 +27,10 @@ def run(args):
     import gift_theory as gt
     from .._model import named_subkey
     from ..lab import compare_measurement, where_it_fails
-    from ..lab._compare import power_notes, power_of, predictive_moments
-    from ..lab._figures import moments_figure, save_figures, where_figure
+    from ..lab._compare import power_notes, power_of
+    from ..lab._figures import compare_figures
 
+    folder = figure_dir(args, "compare")  # a folder of another command's: refused before any work
     meas = load(args)  # plugins first: --effect may name one
     physics = None
     if args.effect:
@@ -54,13 +55,10 @@ def run(args):
     out["power"] = (power_of(named_subkey(key(args), "power"), model, res["scored"], replicates=args.power_replicates)
                     if args.power_replicates else [])
     out["power_notes"] = power_notes(out["power"], verdict_passes=c.p_value >= 0.01)
-    folder = figure_dir(args)
     if folder:
-        mom = predictive_moments(named_subkey(key(args), "figure_moments"), model, res["scored"],
-                                 label=" + ".join(model.effects) + (" (fitted)" if res["fitted"] else ""))
-        figs = {"where.png": where_figure(where, title=f"{' + '.join(model.effects)}: where it fails"),
-                **{f"moments_layer{l}.png": moments_figure(mom, l) for l in res["scored"].layer_ids()}}
-        out["figures"] = save_figures(figs, folder)
+        out["figures"] = compare_figures(key(args), model, res["scored"], where,
+                                         " + ".join(model.effects) + (" (fitted)" if res["fitted"] else ""), folder)
+        write_manifest(folder, "compare", args, out["figures"])
     return out
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from ._common import Progress
 from ._fit import no_taps_caveat
-from ._labargs import add_common, figure_dir, key, load
+from ._labargs import add_common, figure_dir, key, load, write_manifest
 
 
 def add_arguments(parser):
@@ -27,9 +27,10 @@ def run(args):
     from .._model import named_subkey
     from ..lab import diagnose
     from ..lab._compare import power_notes, power_of
-    from ..lab._figures import diagnosis_figures
+    from ..lab._figures import diagnosis_comparison, diagnosis_figures
 
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
+    folder = figure_dir(args, "diagnose")  # a folder of another command's: refused before any work
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
@@ -41,9 +42,10 @@ def run(args):
         out["power"] = (power_of(named_subkey(key(args), "power"), res.baseline, meas.subset(res.held_out),
                                  replicates=args.power_replicates) if args.power_replicates else [])
         out["power_notes"] = power_notes(out["power"], verdict_passes=True)
-    folder = figure_dir(args)
+    out["model_comparison"] = diagnosis_comparison(res)
     if folder:
         out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args))
+        write_manifest(folder, "diagnose", args, out["figures"])
     return out
 
 
@@ -86,6 +88,12 @@ def render(out) -> str:
         name = "awgn alone (the baseline)" if r.get("baseline") else " + ".join(r.get("with", []) + [r["effect"]])
         lines.append(f"  {i:2d}. {name:<28s} {r.get('status', ''):<8s} {r['discrepancy_after']:10.4g}  "
                      f"p = {r['p_value_after']:<9.3g} [{r.get('mechanism', '')}] {ps}")
+    if out.get("model_comparison") and len(out["model_comparison"]) > 1:
+        first = out["model_comparison"][0]["model"]
+        lines.append(f"model comparison on the held-out inputs (difference to {first}, +- its paired bootstrap "
+                     f"standard error over the inputs):")
+        for t in out["model_comparison"][1:6]:
+            lines.append(f"  {t['model']:<32s} {t['delta']:+10.4g} +- {t['delta_se']:.2g}")
     if out.get("not_fitted"):
         lines.append("not fitted: " + ", ".join(r["effect"] for r in out["not_fitted"]) + " -- "
                      + out["not_fitted"][0]["reason"])

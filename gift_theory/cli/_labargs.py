@@ -17,7 +17,9 @@ def add_common(parser):
     parser.add_argument("--seed", type=int, default=0, help="seed of the held-out split, the model shots and the fit")
     parser.add_argument("--shots", type=int, default=None, help="model shots per input (default: the measured r)")
     parser.add_argument("--figures", default=None, metavar="DIR",
-                        help="folder for the figures (default without --json: MEAS_gift/; with --json: none)")
+                        help="folder for this command's figures, each PNG with its numbers as netCDF beside it "
+                             "(default without --json: MEAS_gift/COMMAND/; with --json: none); a folder holding "
+                             "another command's figures is refused")
 
 
 def load(args):
@@ -33,10 +35,42 @@ def key(args):
     return jax.random.PRNGKey(args.seed)
 
 
-def figure_dir(args):
+#: the file in a figure folder that says which command's figures it holds
+MANIFEST = "figures.json"
+
+
+def figure_dir(args, command: str):
+    """The folder ``command``'s figures go to: ``--figures DIR``, else (without ``--json``)
+    ``MEAS_gift/COMMAND/``, else None. A folder whose manifest says it holds another command's
+    figures is a bad input (checked before any work: one command never overwrites another's)."""
     if args.figures:
-        return args.figures
-    if args.json:
+        folder = args.figures
+    elif args.json:
         return None
-    stem = os.path.splitext(args.measurement)[0]
-    return stem + "_gift"
+    else:
+        folder = os.path.join(os.path.splitext(args.measurement)[0] + "_gift", command)
+    path = os.path.join(folder, MANIFEST)
+    if os.path.exists(path):
+        import json
+
+        try:
+            with open(path, encoding="utf-8") as fh:
+                owner = json.load(fh).get("command")
+        except (OSError, ValueError, AttributeError):
+            owner = None
+        require(owner in (None, command), f"--figures {folder}: holds the figures of gift {owner}; give gift "
+                                          f"{command} a folder of its own")
+    return folder
+
+
+def write_manifest(folder: str, command: str, args, figures: list) -> None:
+    """Record in ``folder`` which command wrote its figures, from which file (:data:`MANIFEST`)."""
+    import json
+
+    from .._io import atomic_write_text
+
+    atomic_write_text(os.path.join(folder, MANIFEST), json.dumps(
+        {"command": command, "measurement": os.path.abspath(args.measurement),
+         "figures": [os.path.basename(f) for f in figures],
+         "data": [os.path.splitext(os.path.basename(f))[0] + ".nc" for f in figures
+                  if os.path.exists(os.path.splitext(f)[0] + ".nc")]}, indent=1) + "\n")

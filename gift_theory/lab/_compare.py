@@ -14,7 +14,7 @@ import functools
 
 import jax
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from .._measurement import Measurement
 from .._model import named_subkey
@@ -51,6 +51,9 @@ class Comparison:
         alone adds, the statistic of ``p_value``; ``discrepancy`` stays the raw held-out Q
         (what ranking by held-out error needs: estimation error is part of a model's cost)
     replicates : number of refit-null replicates behind ``p_value`` (0: none needed)
+    channel_values : (n, L' C) the per-input channel values behind ``discrepancy`` (the paired
+        standard error of a difference of two models' discrepancies on the same inputs,
+        :func:`discrepancy_difference`), or None
     """
 
     discrepancy: float
@@ -66,6 +69,7 @@ class Comparison:
     channels: tuple = ()
     net_discrepancy: float | None = None
     replicates: int = 0
+    channel_values: np.ndarray | None = dataclasses.field(default=None, repr=False, compare=False)
 
     def as_dict(self) -> dict:
         extra = {} if not self.replicates else {"net_discrepancy": self.net_discrepancy,
@@ -112,7 +116,42 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     T, cells = combine(C, ref.weights)
     return Comparison(discrepancy=Q, se=null_sd, noise_floor=ref.noise_floor, floor_se=ref.floor_se, p_value=p,
                       per_input=T, per_layer=np.sum(np.maximum(zl, 0.0) ** 2, axis=1), layer_ids=meas.layer_ids(),
-                      cells=cells, channel_z=zl, channels=ref.channels, net_discrepancy=net, replicates=B)
+                      cells=cells, channel_z=zl, channels=ref.channels, net_discrepancy=net, replicates=B,
+                      channel_values=C.reshape(meas.n, -1))
+
+
+#: bootstrap replicates of :func:`discrepancy_difference`
+DIFFERENCE_REPLICATES = 1000
+
+
+def _q_of(T):
+    """Q of :func:`~gift_theory.lab._qtest.q_test` for a stack of channel matrices (B, n, C)."""
+    n = T.shape[1]
+    mean, sd = T.mean(1), T.std(1, ddof=1)
+    ok = sd > 1e-12 * (np.abs(mean) + 1e-300)
+    t = np.where(ok, mean / np.where(ok, sd, 1.0) * np.sqrt(n), 0.0)
+    with np.errstate(over="ignore", under="ignore", divide="ignore"):
+        z = stats.norm.isf(stats.t.sf(t, df=n - 1))
+    z = np.where(np.isfinite(z), z, t)
+    return np.sum(np.maximum(z, 0.0) ** 2, axis=1)
+
+
+def discrepancy_difference(a: Comparison, b: Comparison, replicates: int = DIFFERENCE_REPLICATES,
+                           seed: int = 0) -> tuple[float, float]:
+    """``(delta, se)``: a's discrepancy minus b's on the same inputs and its standard error, by the
+    paired bootstrap over inputs (inputs are independent; both models' channel values of an input
+    are resampled together, so what the two share cancels, as in ArviZ's ``compare``). ``se`` is
+    NaN when either comparison carries no channel values or the inputs differ."""
+    delta = float(a.discrepancy - b.discrepancy)
+    Ta, Tb = getattr(a, "channel_values", None), getattr(b, "channel_values", None)
+    if Ta is None or Tb is None or Ta.shape[0] != Tb.shape[0]:
+        return delta, float("nan")
+    if Ta is Tb:
+        return delta, 0.0
+    n = Ta.shape[0]
+    idx = np.random.default_rng(seed).integers(0, n, size=(replicates, n))
+    d = _q_of(Ta[idx]) - _q_of(Tb[idx])
+    return delta, float(np.std(d, ddof=1))
 
 
 def layer_level(key, model: Model, meas: Measurement, layer: int, xtol: float = 1e-4) -> float:
@@ -309,6 +348,43 @@ class Moments:
         return lr, float(np.sqrt(2.0 / (self.r - 1) + 2.0 / (self.K - 1)))
 
 
+@dataclasses.dataclass(frozen=True)
+class PredictiveShots:
+    """The measured shots and a model's own shots at the same inputs, per measured layer (the
+    numbers of a posterior-predictive overlay, :func:`gift_theory.lab._figures.ppc_figure`).
+
+    layer_ids : the 1-based layer of each entry
+    measured : lists of (n, r, d_l); model : lists of (n, K, d_l)
+    label : the model's name
+    """
+
+    layer_ids: tuple
+    measured: list
+    model: list
+    label: str
+
+    @property
+    def r(self) -> int:
+        return int(self.measured[0].shape[1])
+
+    def moments(self) -> "Moments":
+        """The per-neuron means and variances of these shots (:class:`Moments`)."""
+        return Moments(layer_ids=self.layer_ids, mean=[Y.mean(1) for Y in self.measured],
+                       var=[Y.var(1, ddof=1) for Y in self.measured], model_mean=[M.mean(1) for M in self.model],
+                       model_var=[M.var(1, ddof=1) for M in self.model], r=self.r, K=int(self.model[0].shape[1]),
+                       label=self.label)
+
+
+def predictive_shots(key, model: Model, meas: Measurement, *, shots: int | None = None,
+                     label: str | None = None) -> PredictiveShots:
+    """The measured shots and K = ``shots`` (default 4 r, at least 16) of the model's at every
+    input of ``meas`` (the draws of :func:`predictive_moments` for the same key)."""
+    K = max(4 * meas.r, 16) if shots is None else int(shots)
+    ms = [np.asarray(M, np.float64) for M in model_shots(key, model, meas, K)]
+    return PredictiveShots(layer_ids=tuple(meas.layer_ids()), measured=list(meas.layers()),
+                           model=ms, label=label or " + ".join(model.effects))
+
+
 def predictive_moments(key, model: Model, meas: Measurement, *, shots: int | None = None,
                        label: str | None = None) -> Moments:
     """The measured and the model's per-neuron mean and variance at every input of ``meas``.
@@ -321,13 +397,7 @@ def predictive_moments(key, model: Model, meas: Measurement, *, shots: int | Non
     shots : model shots per input K (default 4 r, at least 16)
     label : the model's name in the figures (default: its effects joined by " + ")
     """
-    K = max(4 * meas.r, 16) if shots is None else int(shots)
-    outs = model_shots(key, model, meas, K)
-    ms = [np.asarray(M, np.float64) for M in outs]
-    Ys = meas.layers()
-    return Moments(layer_ids=tuple(meas.layer_ids()), mean=[Y.mean(1) for Y in Ys], var=[Y.var(1, ddof=1) for Y in Ys],
-                   model_mean=[M.mean(1) for M in ms], model_var=[M.var(1, ddof=1) for M in ms], r=meas.r,
-                   K=int(ms[0].shape[1]), label=label or " + ".join(model.effects))
+    return predictive_shots(key, model, meas, shots=shots, label=label).moments()
 
 
 # ---- power: what a "consistent" verdict can and cannot rule out on this file ---------------------

@@ -315,8 +315,11 @@ def moment_intervals(key, meas: Measurement, model: Model, K: int | None = None,
     Returns
     -------
     {"intervals": {param: (lo, hi)}, "se_theta": {param: float}, "bias_theta": {param: float},
-     "theta_scale": {param: "log"|"linear"},
-     "replicates": B}; a per-layer parameter's coordinates are named ``"p@l"`` (layer l, 1-based)
+     "theta_scale": {param: "log"|"linear"}, "replicates": B, "joint": {"params", "scale", "centre",
+     "estimate", "cov", "level", "dof"}}: a per-layer parameter's coordinates are named ``"p@l"``
+     (layer l, 1-based); ``joint`` is the sandwich's covariance of every free parameter on its
+     fit scale (log for a positive one), around the bias-corrected centre (the pair plot's
+     joint region)
     """
     physics = _per_layer_form(model.physics, meas.arch)
     free = free_scalars(physics, meas)
@@ -363,4 +366,7 @@ def moment_intervals(key, meas: Measurement, model: Model, K: int | None = None,
         out[p] = (max(lo, blo), min(hi, bhi))
         scale[p] = "log" if pos else "linear"
     return {"intervals": out, "se_theta": dict(zip(free, se.tolist())), "bias_theta": dict(zip(free, bias.tolist())),
-            "theta_scale": scale, "replicates": B}
+            "theta_scale": scale, "replicates": B,
+            "joint": {"params": list(free), "scale": [scale[p] for p in free], "centre": centre.tolist(),
+                      "estimate": [float(math.exp(t)) if scale[p] == "log" else float(t) for p, t in zip(free, theta)],
+                      "cov": cov.tolist(), "level": level, "dof": max(B - 1, 1)}}

@@ -426,7 +426,16 @@ def test_compare_command_states_power_next_to_the_verdict(deep_setup, tmp_path, 
     text = render(out).splitlines()
     verdict = next(i for i, l in enumerate(text) if "p = " in l and "->" in l)
     assert text[verdict + 1: verdict + 1 + len(weak)] == ["  " + n for n in out["power_notes"]]
-    assert sorted(os.listdir(tmp_path / "figs")) == ["moments_layer3.png", "where.png"]
+    pngs = ["correlation.png", "law.png", "moments_layer3.png", "pit.png", "ppc_layer3.png", "where.png"]
+    assert sorted(os.listdir(tmp_path / "figs")) == sorted(pngs + [p[:-4] + ".nc" for p in pngs] + ["figures.json"])
+    with open(tmp_path / "figs" / "figures.json") as fh:
+        assert json.load(fh)["command"] == "compare"
+    # one command's folder is not another's: refused before any work, one line, exit 2, nothing written
+    before = sorted(os.listdir(tmp_path / "figs"))
+    assert main(["fit", str(path), "--add", "shot", "--figures", str(tmp_path / "figs")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds the figures of gift compare" in err[0]
+    assert sorted(os.listdir(tmp_path / "figs")) == before
 
 
 def test_the_moment_fit_compares_log_variances_net_of_their_bias(x64):

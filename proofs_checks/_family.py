@@ -413,10 +413,19 @@ def _theorem1_sympy(fam: Family, s0, st, *, rtol, max_pieces) -> dict:
     gap = sp.Abs(ste - s0e)
     a, b = (s0e, ste) if s0e <= ste else (ste, s0e)
     critical0 = all(_sign(x) == 0 for x in g0)
+    hint = ""
+    big = max(abs(float(sp.N(x, 30))) for x in g0) if g0 else 0.0
+    if not critical0 and big < 1e-8:
+        # a decimal w0 (a float solution) is a critical point only to a float's precision: the exact
+        # check needs it exact, and says so rather than a bare "not critical"
+        hint = (f"; |grad J_s0(w0)| = {big:.2g}: zero to a float's precision, not exactly -- a decimal w0 is "
+                f"rounded; give it exactly (sp.Rational, sp.sqrt, or a root from sp.solve(sp.diff(J, w).subs(s, "
+                f"s0), w)) for the exact check, or write the family as a numeric J(w, s), which is checked with "
+                f"confidence intervals")
     hyps = [_hyp("s_positive", "s0, st in (0, inf)", bool(s0e > 0 and ste > 0), f"s0 = {s0e}, st = {ste}"),
             _hyp("st_ne_s0", "0 < |st - s0| (ass:Laplacian-properties)", _sign(gap) > 0, f"|st - s0| = {gap}"),
             _hyp("w0_critical", "w0 in {grad J_s0 = 0} (ass:Nonempty-minimizer-sets)", critical0,
-                 f"grad J_s0(w0) = {g0 if len(g0) > 1 else g0[0]} (exact, the whole gradient)")]
+                 f"grad J_s0(w0) = {g0 if len(g0) > 1 else g0[0]} (exact, the whole gradient){hint}")]
     # the sup over zeta
     sup = None
     if gap != 0:

@@ -13,7 +13,8 @@ from ._plugins import add_plugin_argument, load_plugins
 def add_common(parser):
     add_plugin_argument(parser)
     parser.add_argument("measurement", metavar="MEAS", help="measurement file (reference §3): .npz, long or wide .csv, netCDF / HDF5 (.nc, .h5)")
-    parser.add_argument("--weights", help="weights .npz (W1..WL, b1..bL) for a file that holds none (CSV, netCDF)")
+    parser.add_argument("--weights", help="weights .npz (W1..WL, b1..bL) for a file that holds none (CSV, netCDF); "
+                                          "default: MEAS-stem.weights.npz beside it, when it exists")
     parser.add_argument("--seed", type=int, default=0, help="seed of the held-out split, the model shots and the fit")
     parser.add_argument("--shots", type=int, default=None, help="model shots per input (default: the measured r)")
     parser.add_argument("--figures", default=None, metavar="DIR",
@@ -28,7 +29,25 @@ def load(args):
 
     load_plugins(args)
     require(args.shots is None or args.shots >= 2, f"--shots {args.shots}: needs at least 2")
-    return load_measurement(args.measurement, weights=args.weights)
+    return load_measurement(args.measurement, weights=weights_of(args))
+
+
+def weights_of(args, measurement: str | None = None):
+    """``--weights``, else the ``STEM.weights.npz`` that ``gift simulate --csv`` and ``gift import``
+    write beside a file without weights (a CSV), when it exists (said on stderr), else None.
+    ``measurement``: the file's path (default ``args.measurement``)."""
+    if args.weights:
+        return args.weights
+    measurement = args.measurement if measurement is None else measurement
+    stem, ext = os.path.splitext(measurement)
+    beside = stem + ".weights.npz"
+    if ext.lower() != ".npz" and os.path.exists(beside):
+        import sys
+
+        print(f"weights from {beside} (written beside {os.path.basename(measurement)}; --weights overrides)",
+              file=sys.stderr)
+        return beside
+    return None
 
 
 def key(args):

@@ -248,9 +248,11 @@ def test_cli_bad_input_is_one_line_and_exit_2(capsys, tmp_path):
     assert main(["figures", "--only", "no_such_figure"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no_such_figure" in err
-    assert main(["figures", "--mnist-folder", str(tmp_path / "nope"), "--draw-only"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--mnist-folder" in err
+    # the MNIST folder is --data-folder as for every command that trains (--mnist-folder: the same option)
+    for flag in ("--data-folder", "--mnist-folder"):
+        assert main(["figures", flag, str(tmp_path / "nope"), "--draw-only"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--data-folder" in err
 
 
 @pytest.mark.slow

@@ -109,4 +109,11 @@ def render(r: dict) -> str:
         z, pg = g.get("confirmation_z"), g.get("predicted_gain_pct")
         lines.append(("returned w0: " if g["kept_w0"] else "took a step: ") + g["reason"]
                      + (f"; predicted gain on the line {pg:.2f} %" if pg is not None else ""))
+    info = r.get("info") or {}
+    if "physics" in info and "ranking" in info:  # identify-retrain: what it identified, then retrained at
+        p = info.get("baseline_p")
+        lines.append(f"identified from {info['inputs']} inputs x {info['shots']} shots "
+                     f"({'with taps' if info.get('taps') else 'no taps'}): {info['physics']}"
+                     + (f"  (awgn alone: p = {p:.3g}" if p is not None else "  (")
+                     + (f"; ranked first: {', '.join(info['ranking'])})" if info["ranking"] else ")"))
     return "\n".join(lines)

@@ -669,13 +669,15 @@ def pairs_data(joint: dict):
 
 # ---- the figure sets of the commands -----------------------------------------------------------
 
-def where_figures(stats: dict, title: str) -> tuple[dict, dict]:
+def where_figures(stats: dict, model: str) -> tuple[dict, dict]:
     """The where-figure and the law of the shots (PIT, correlations, quantiles) of one
-    :func:`~gift_theory.lab.where_it_fails` result: ``(figures, data)``."""
-    figs = {"where.png": where_figure(stats, title=title)}
+    :func:`~gift_theory.lab.where_it_fails` result, ``model`` its model's name in the titles:
+    ``(figures, data)``."""
+    title = model
+    figs = {"where.png": where_figure(stats, title=f"{model}: where it fails")}
     data = {"where.png": where_data(stats)}
     if stats.get("pit"):
-        figs["pit.png"] = pit_figure(stats, title=f"{title}: PIT of the measured shots among the model's")
+        figs["pit.png"] = pit_figure(stats, title=f"{title}: PIT of the measured shots among the model's own")
         data["pit.png"] = pit_data(stats)
         figs["correlation.png"] = correlation_figure(stats, title=f"{title}: correlation between neurons")
         data["correlation.png"] = correlation_data(stats)
@@ -722,7 +724,7 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
                                                    title="model comparison on the held-out inputs")
         data["comparison.png"] = comparison_data(table, c.noise_floor, c.floor_se)
     if diagnosis.where is not None:
-        f, d = where_figures(diagnosis.where, "baseline: where it fails")
+        f, d = where_figures(diagnosis.where, "the baseline (awgn)")
         figs.update(f)
         data.update(d)
     if meas is not None:
@@ -774,7 +776,7 @@ def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | No
         figs["pairs.png"] = pairs_figure(uncertainty["joint"])
         data["pairs.png"] = pairs_data(uncertainty["joint"])
     if where is not None:
-        f, d = where_figures(where, "fitted model: where it fails")
+        f, d = where_figures(where, "the fitted model")
         figs.update(f)
         data.update(d)
     if meas is not None:
@@ -792,7 +794,7 @@ def compare_figures(key, model, scored, where: dict, label: str, folder: str) ->
     """The figures of ``gift compare``: where ``model`` fails on the scored inputs and its law of
     the shots, each measured layer's moments and posterior-predictive overlay, written to
     ``folder`` (each PNG with its numbers as netCDF beside it)."""
-    figs, data = where_figures(where, f"{' + '.join(model.effects)}: where it fails")
+    figs, data = where_figures(where, " + ".join(model.effects))
     f, d = predictive_figures(key, [(label, model)], scored)
     figs.update(f)
     data.update(d)

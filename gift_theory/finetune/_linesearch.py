@@ -188,26 +188,46 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     if not confirm:
         info["reason"] = "unconfirmed: the best measured step is taken"
         return w_best, info
+    accepted, conf = confirm(problem, w_best, z_accept=z_accept, rounds=confirm_rounds)
+    info.update(conf, accepted=accepted)
+    return (w_best if accepted else w0), info
+
+
+def confirm(problem, w, *, z_accept: float = 2.5, rounds: int | None = None, reference=None):
+    """Is ``w`` better than ``reference`` (default w0) on the chip? Fresh paired Evals until convinced.
+
+    Each round measures one Eval_w(K1, K2) of the reference and one of ``w`` on the same inputs
+    (fresh shots: 2 units of budget) and looks at the running mean of the paired per-input
+    differences; ``w`` is accepted as soon as its improvement exceeds ``z_look`` standard errors,
+    ``z_look`` the Bonferroni boundary that keeps the overall one-sided level at
+    P(Z > z_accept) over the looks the budget allows (module docstring).
+
+    Returns
+    -------
+    accepted : bool
+    info : dict with ``z_look``, ``confirm_mean``, ``confirm_se``, ``confirm_z``, ``confirm_rounds``
+        and ``reason`` (one line)
+    """
+    ref = problem.w0 if reference is None else reference
+    n = int(problem.evaluations_left() // 2)
+    if rounds is not None:
+        n = min(n, int(rounds))
+    z_look = max(z_accept, float(stats.norm.isf(stats.norm.sf(z_accept) / max(n, 1))))
+    info = {"z_look": z_look, "confirm_rounds": 0}
     diffs = []
-    rounds = int(problem.evaluations_left() // 2)
-    if confirm_rounds is not None:
-        rounds = min(rounds, int(confirm_rounds))
-    z_look = max(z_accept, float(stats.norm.isf(stats.norm.sf(z_accept) / max(rounds, 1))))
-    info["z_look"] = z_look
-    for _ in range(rounds):
+    for _ in range(n):
         if problem.evaluations_left() < 2 - 1e-9:
             break
-        diffs.append(problem.eval_chip(w0) - problem.eval_chip(w_best))
+        diffs.append(problem.eval_chip(ref) - problem.eval_chip(w))
         m, s = _mean_se(np.mean(diffs, axis=0))
-        info["confirm_mean"], info["confirm_se"] = m, s
-        info["confirm_z"] = m / s if s > 0 else math.copysign(math.inf, m)
+        info.update(confirm_mean=m, confirm_se=s, confirm_rounds=len(diffs),
+                    confirm_z=m / s if s > 0 else math.copysign(math.inf, m))
         if m > z_look * s:
-            info["accepted"] = True
             info["reason"] = f"accepted: confirmation z = {info['confirm_z']:.2f} > {z_look:.2f}"
-            return w_best, info
+            return True, info
     info["reason"] = (f"confirmation not significant: z = {info['confirm_z']:.2f} <= {z_look:.2f} after {len(diffs)} "
                       f"fresh pairs" if diffs else "no budget left for the confirmation")
-    return w0, info
+    return False, info
 
 
 def why(method: str, w0, params, info: dict) -> dict | None:

@@ -22,7 +22,7 @@ from ..estimators import paper_constant
 
 #: every method `gift finetune --method` accepts, plus "none" (no fine-tuning)
 METHODS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "spsa", "pat", "identify-retrain",
-           "retrain", "none")
+           "calibrate", "retrain", "none")
 
 
 def _line(kind):
@@ -47,6 +47,11 @@ def _printed(problem, eta=None, rel_step: float = 0.01, direction_K2: int = 16, 
     info["direction"] = dinfo
     info["rel_step"] = float(eta) * float(norm(D0)) / max(float(norm(problem.w0)), 1e-30)
     return w, info
+
+
+def _calibrate(problem, **kw):
+    from ..calibration import calibrate
+    return calibrate(problem, **kw)
 
 
 def _none(problem):
@@ -79,6 +84,7 @@ RUNNERS = {
     "spsa": spsa,
     "pat": pat,
     "identify-retrain": identify_retrain,
+    "calibrate": _calibrate,
     "retrain": _retrain,
     "none": _none,
 }

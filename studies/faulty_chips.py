@@ -17,7 +17,8 @@ with the device's fixed errors (drawn once per device from ``seed``, whatever is
 
 ``mesh``       each W_l realised by an SVD and two Clements meshes (:mod:`studies.mesh_sim`) whose
                beamsplitters and phase shifters carry fixed errors (``bs_error``, ``phase_error``
-               rad); the map from W to Weff is nonlinear (it goes through the decomposition).
+               rad): the errors of the first programming as fixed maps around the core
+               (:meth:`FaultyChip._mesh`); ``mesh_decomposed``: every W decomposed afresh.
 ``stuck``      a fraction of the weights of every layer stuck at 0 whatever is programmed.
 ``detector``   every output neuron read by a detector of its own gain (1 + N(0, sd_g^2)) and
                offset (N(0, sd_o^2)).
@@ -44,6 +45,7 @@ class Faults:
     """The strengths of a device's fixed errors (0 / None: off)."""
 
     mesh: tuple = ()                 # (bs_error, phase_error) in rad
+    mesh_decomposed: bool = False    # every W decomposed afresh (the realised error jumps with W)
     stuck: float = 0.0               # share of weights stuck at 0
     detector: tuple = ()             # (sd of the gains, sd of the offsets)
     loss: tuple = ()                 # (dB_lo, dB_hi) per layer
@@ -55,6 +57,7 @@ class Faults:
 #: the study's chips (name -> faults); the strengths put w0's accuracy 5-15 points below the ideal chip's
 CHIPS = {
     "mesh": Faults(mesh=(0.05, 0.05)),
+    "mesh_decomposed": Faults(mesh=(0.05, 0.05), mesh_decomposed=True),
     "stuck": Faults(stuck=0.15),
     "detector": Faults(detector=(0.4, 0.5)),
     "loss": Faults(loss=(2.0, 6.0)),
@@ -101,6 +104,7 @@ class FaultyChip:
             if f.dead else None
         self.dead_value = [dev.uniform(-0.8, 0.8, size=f.dead) for _ in range(L - 1)] if f.dead else None
         self._mesh_seed = int(dev.integers(2**31))
+        self._maps = None
 
     # ------------------------------------------------------------------ the device's physics
     def effective(self, params):
@@ -109,11 +113,7 @@ class FaultyChip:
         Ws = [np.asarray(W, np.float64) for W, _ in params]
         bs = [np.asarray(b, np.float64) for _, b in params]
         if f.mesh:
-            from .mesh_sim import Imperfections, build_device
-            # the same seed every time: the fixed errors belong to the mesh's places, not to W
-            dev = build_device(np.random.default_rng(self._mesh_seed), Ws,
-                               Imperfections(bs_error=f.mesh[0], phase_error=f.mesh[1]))
-            Ws = [d.matrix() for d in dev]
+            Ws = self._mesh(Ws)
         if f.crosstalk:
             k1, k2, k3 = f.crosstalk
             out = []
@@ -128,6 +128,41 @@ class FaultyChip:
         if self.delta is not None:
             bs = [b + d for b, d in zip(bs, self.delta)] + bs[len(self.delta):]
         return Ws, bs
+
+    def _mesh(self, Ws):
+        """Each W realised through meshes with fixed beamsplitter and phase errors.
+
+        ``mesh``: the errors of the meshes that realise the first weights the chip is given, as
+        fixed maps on either side, W_eff = Re(T_U W T_V) with T_U = M_U' M_U^H and T_V = M_V^H M_V'
+        (M ideal, M' with the errors): exact for those weights, smooth in W (errors in fixed
+        optics around a programmable core). ``mesh_decomposed``: every W decomposed afresh and
+        realised by the erring meshes; the phases a decomposition picks jump under tiny changes
+        of W (an entry of the real orthogonal U crossing 0 flips a phase by pi), so the realised
+        error jumps too -- no calibration through the weights can follow it.
+        """
+        from .mesh_sim import DeviceLayer, _device_errors, mesh_matrix, program_layer, propagate
+
+        bs, ph = self.faults.mesh
+        rng = np.random.default_rng(self._mesh_seed)  # the fixed errors belong to the mesh's places, not to W
+
+        def erring(W):
+            lay = program_layer(W)
+            dev = DeviceLayer(lay, _device_errors(rng, lay.V, bs, ph), _device_errors(rng, lay.U, bs, ph), 0.0, 0.0, 0.0)
+            return lay, dev
+
+        if self.faults.mesh_decomposed:
+            return [erring(W)[1].matrix() for W in Ws]
+        if self._maps is None:
+            self._maps = []
+            for W in Ws:
+                lay, dev = erring(W)
+                Ms = []
+                for mesh, err in ((lay.U, dev.errU), (lay.V, dev.errV)):
+                    th, phs, out = dev._phases(mesh, err)
+                    Ms.append((mesh_matrix(mesh), mesh_matrix(mesh, theta=th, phi=phs, out_phase=out, alpha=err.alpha)))
+                (MU, MUe), (MV, MVe) = Ms
+                self._maps.append((MUe @ MU.conj().T, MV.conj().T @ MVe))
+        return [np.real(TU @ W @ TV) for W, (TU, TV) in zip(Ws, self._maps)]
 
     def forward(self, params, x, shots: int, rng=None):
         """(y (n, shots, d_L), taps [a_1 .. a_{L-1}]) of fresh shots; charges nothing."""

@@ -44,6 +44,9 @@ class LayerMap:
     s : the layer's additive noise level read off the within-input spread
     tau_W, tau_b : the prior's scales (empirical Bayes)
     inputs, shots : the data it was read from
+    inputs_seen : (n, r', p) the layer's measured inputs (r' = 1: one per input); ``hidden``:
+        whether the activation follows (what a correction of the map acts on: a change along a
+        direction the inputs never take does nothing on the data)
     """
 
     layer: int
@@ -58,6 +61,8 @@ class LayerMap:
     tau_b: float
     inputs: int
     shots: int
+    inputs_seen: np.ndarray
+    hidden: bool
 
     def deviation_z(self):
         """(d, p), (d,): the realised map's deviation from the programmed one in standard errors."""
@@ -171,7 +176,9 @@ def _fit(data: _Data, act, W0, b0, s_guess: float, iters: int = 12):
     G, c0 = np.matmul(Xn.transpose(0, 2, 1), Xn), np.einsum("dnk,nd->dk", Xn, e0)
     res = optimize.minimize(_evidence, start, args=(G, c0, nu), method="Nelder-Mead",
                             options={"xatol": 1e-3, "fatol": 1e-3, "maxiter": 400})
-    log_t = np.clip(res.x, np.log(1e-12), np.log(1e4))
+    # the deviations a chip can have are at most of the programmed weights' size, a few times over
+    cap = np.log(9.0 * np.array([scale_W, max(scale_b, scale_W)]) + 1e-2)
+    log_t = np.clip(res.x, np.log(1e-12), cap)
     dinv = np.concatenate([np.full(W0.shape[1], np.exp(-log_t[0])), [np.exp(-log_t[1])]])
 
     def penalised(th):
@@ -262,7 +269,8 @@ def fit_layers(meas: Measurement, *, s: float | None = None) -> tuple[LayerMap, 
             else:
                 data = _Data(np.asarray(meas.taps[l - 2], np.float64), Y, None, l < L)
             th, se, s_l, tW, tb = _fit(data, act, W, b, s)
-            out.append(LayerMap(l, th[:, :-1], th[:, -1], se[:, :-1], se[:, -1], W, b, s_l, tW, tb, meas.n, meas.r))
+            out.append(LayerMap(l, th[:, :-1], th[:, -1], se[:, :-1], se[:, -1], W, b, s_l, tW, tb, meas.n, meas.r,
+                                data.A, data.hidden))
         return tuple(out)
     W, b = (np.asarray(v, np.float64) for v in meas.params[-1])
     Y = np.asarray(meas.y, np.float64)
@@ -273,4 +281,5 @@ def fit_layers(meas: Measurement, *, s: float | None = None) -> tuple[LayerMap, 
             s = s_new
             break
         s = s_new
-    return (LayerMap(L, th[:, :-1], th[:, -1], se[:, :-1], se[:, -1], W, b, s, tW, tb, meas.n, meas.r),)
+    return (LayerMap(L, th[:, :-1], th[:, -1], se[:, :-1], se[:, -1], W, b, s, tW, tb, meas.n, meas.r,
+                     mu[:, None, :], False),)

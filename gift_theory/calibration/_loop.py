@@ -38,6 +38,11 @@ from ..effects import awgn
 from ._fit import fit_layers
 
 
+#: each activation's derivative
+_SLOPES = {"tanh": lambda z: 1.0 - np.tanh(z) ** 2, "identity": lambda z: np.ones_like(z),
+           "sigmoid": lambda z: (lambda f: f * (1.0 - f))(1.0 / (1.0 + np.exp(-z))), "sin": np.cos}
+
+
 def _np(params):
     return [(np.array(W, np.float64), np.array(b, np.float64)) for W, b in params]
 
@@ -72,7 +77,7 @@ def _row_gain(W_eff, W):
 
 def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, reserve: float = 4.0,
               z_accept: float = 2.5, stuck_z: float = 5.0, stuck_ratio: float = 0.25, gain_clip=(0.4, 2.5),
-              noise_tolerance: float = 0.1, retrain: bool = True):
+              noise_tolerance: float = 0.1, retrain: bool = True, ridge: float = 0.01):
     """Calibrate the chip of ``problem`` to realise w0 (module docstring).
 
     Parameters
@@ -88,6 +93,8 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, re
     gain_clip : the range a row's gain estimate is held in (a step never more than 1/0.4 of the residual)
     noise_tolerance : retrain under the identified noise level when it differs from s0 by more than this share
     retrain : False never retrains (pre-compensation only)
+    ridge : a correction acts on the directions the layer's inputs span; ``ridge`` (relative to their
+        mean second moment) sets how weakly spanned a direction may be (:meth:`_LayerState.correct`)
 
     Returns
     -------
@@ -96,16 +103,14 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, re
     """
     w0 = _np(problem.w0)
     L = len(w0)
+    slope = _SLOPES[problem.arch.activation]
     n = int(min(inputs, problem.K1))
     order = np.asarray(jax.random.permutation(jax.random.fold_in(problem.key, 7000), problem.K1))
     x_cal = problem.x_ft[np.sort(order[:n])]
     cost = n * int(shots) / problem.unit_shots
     target = [(W.copy(), b.copy()) for W, b in w0]
     prog = [(W.copy(), b.copy()) for W, b in w0]
-    fixed = [(np.zeros(W.shape, bool), np.zeros(b.shape, bool)) for W, b in w0]
-    values = [(np.zeros(W.shape), np.zeros(b.shape)) for W, b in w0]
-    gain_W = [np.ones(W.shape[0]) for W, _ in w0]
-    gain_b = [np.ones(W.shape[0]) for W, _ in w0]
+    lays = [_LayerState(W, b) for W, b in w0]
     prev, s_hat, taps, retrained, history, first = None, None, None, 0, [], {}
     for k in range(int(rounds)):
         if problem.evaluations_left() < cost + reserve - 1e-9:
@@ -115,61 +120,35 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, re
         with phase("calibration fit"):
             fits = fit_layers(meas, s=s_hat)
         taps = meas.has_taps
-        s_hat = float(np.exp(np.mean([np.log(f.s) for f in fits])))
+        s_hat = float(np.median([f.s for f in fits]))
         new_pins = 0
         for f in fits:
-            i = f.layer - 1
             if prev is None:
-                gain_W[i] = np.clip(_row_gain(f.W, f.W_prog), *gain_clip)
+                lays[f.layer - 1].first(f, gain_clip)
                 first[f.layer] = f
-                continue
-            old = prev[f.layer]
-            dpW, dpb = f.W_prog - old.W_prog, f.b_prog - old.b_prog
-            deW, deb = f.W - old.W, f.b - old.b
-            seW = np.sqrt(f.W_se ** 2 + old.W_se ** 2)
-            seb = np.sqrt(f.b_se ** 2 + old.b_se ** 2)
-            movedW, movedb = np.abs(dpW) > stuck_z * seW, np.abs(dpb) > stuck_z * seb
-            stW = movedW & (np.abs(deW) < stuck_ratio * gain_W[i][:, None] * np.abs(dpW)) & ~fixed[i][0]
-            stb = movedb & (np.abs(deb) < stuck_ratio * gain_b[i] * np.abs(dpb)) & ~fixed[i][1]
-            fixed[i][0][stW], fixed[i][1][stb] = True, True
-            values[i][0][stW], values[i][1][stb] = f.W[stW], f.b[stb]
-            new_pins += int(stW.sum() + stb.sum())
-            # the rows' gains: realised over programmed change, where the programmed change is seen
-            use = movedW & ~fixed[i][0]
-            num, den = np.sum(np.where(use, deW * dpW, 0.0), 1), np.sum(np.where(use, dpW * dpW, 0.0), 1)
-            ok = np.sum(use, 1) >= 3
-            gain_W[i] = np.where(ok, np.clip(num / np.maximum(den, 1e-300), *gain_clip), gain_W[i])
-            okb = movedb & ~fixed[i][1]
-            gain_b[i] = np.where(okb, np.clip(deb / np.where(okb, dpb, 1.0), *gain_clip), gain_b[i])
+            else:
+                new_pins += lays[f.layer - 1].secant(f, prev[f.layer], stuck_z, stuck_ratio, gain_clip)
         mismatch = abs(s_hat / problem.s0 - 1.0) > noise_tolerance
         if retrain and (new_pins or (prev is None and mismatch)):
             with phase("calibration retrain"):
-                start = [(np.where(fW, vW, W), np.where(fb, vb, b))
-                         for (W, b), (fW, fb), (vW, vb) in zip(target, fixed, values)]
-                target = _retrain_target(problem, start, fixed, values, s_hat if mismatch else problem.s0, k)
+                start = [st.pinned_start(W, b) for (W, b), st in zip(target, lays)]
+                target = _retrain_target(problem, start, [st.fixed for st in lays], [st.values for st in lays],
+                                         s_hat if mismatch else problem.s0, k)
             retrained += 1
+            for st in lays:
+                st.best = None  # a new target: the residuals before it do not compare
         row = {"round": k, "inputs": n, "shots": int(shots), "noise_level": s_hat, "pinned_new": new_pins,
                "layers": {}}
         for f in fits:
-            i = f.layer - 1
-            tW, tb = target[i]
-            free = ~fixed[i][0]
-            zW = (tW - f.W) / f.W_se
-            row["layers"][str(f.layer)] = {
-                "rms_residual": float(np.sqrt(np.mean(np.where(free, tW - f.W, 0.0) ** 2))),
-                "chi2_per_entry": float(np.mean(np.where(free, zW, 0.0) ** 2)),
-                "pinned": int(fixed[i][0].sum() + fixed[i][1].sum())}
-            pW = f.W_prog + np.where(free, (tW - f.W) / gain_W[i][:, None], 0.0)
-            pW = np.where(fixed[i][0], w0[i][0], pW)
-            pb = f.b_prog + np.where(~fixed[i][1], (tb - f.b) / gain_b[i], 0.0)
-            pb = np.where(fixed[i][1], w0[i][1], pb)
-            prog[i] = (pW, pb)
+            st = lays[f.layer - 1]
+            prog[f.layer - 1], row["layers"][str(f.layer)] = st.correct(f, target[f.layer - 1], w0[f.layer - 1], ridge,
+                                                                         slope)
         if not taps:  # the hidden layers are not read: programmed as the target
             prog[:L - 1] = [(W.copy(), b.copy()) for W, b in target[:L - 1]]
         history.append(row)
         prev = {f.layer: f for f in fits}
     info = {"rounds": history, "taps": taps, "retrained": retrained, "noise_level": s_hat,
-            "identified": _identified(first, fixed, gain_W, gain_b, taps, L),
+            "identified": _identified(first, lays, L),
             "not_identified": [] if taps else
             ["the hidden layers' maps, stuck weights and dead neurons (no taps: only the output map is read)"]}
     if not history:
@@ -183,17 +162,119 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, re
     return (final if accepted else problem.w0), info
 
 
-def _identified(first, fixed, gain_W, gain_b, taps, L):
+class _LayerState:
+    """One layer's calibration state across rounds: pinned entries, the rows' gains, the trust region.
+
+    ``fixed``/``values``: (W, b) masks of pinned entries and their realised values; ``flagged``:
+    entries that did not follow their programmed change in the last round (pinned when they fail
+    twice running: a mesh mixes entries, so one round's non-response can be another entry's
+    change cancelling it); ``gain_W``/``gain_b``: per row, realised over programmed change;
+    ``step``: the share of the residual the next correction takes (halved when a round's residual
+    came out worse than the best so far, the correction then restarting from the best);
+    ``best``: (chi2, programmed, residual / gain) of the best round under the current target.
+    """
+
+    def __init__(self, W, b):
+        d = W.shape[0]
+        self.fixed = (np.zeros(W.shape, bool), np.zeros(b.shape, bool))
+        self.values = (np.zeros(W.shape), np.zeros(b.shape))
+        self.flagged = (np.zeros(W.shape, bool), np.zeros(b.shape, bool))
+        self.gain_W, self.gain_b = np.ones(d), np.ones(d)
+        self.step, self.best = 1.0, None
+
+    def pinned_start(self, W, b):
+        return np.where(self.fixed[0], self.values[0], W), np.where(self.fixed[1], self.values[1], b)
+
+    def first(self, f, gain_clip):
+        self.gain_W = np.clip(_row_gain(f.W, f.W_prog), *gain_clip)
+
+    def secant(self, f, old, stuck_z, stuck_ratio, gain_clip) -> int:
+        """Compare this round's fit ``f`` with the last one ``old``: pin what is stuck, update the gains."""
+        pins = 0
+        new_flags = []
+        for j, (dp, de, se, gain) in enumerate((
+                (f.W_prog - old.W_prog, f.W - old.W, np.sqrt(f.W_se ** 2 + old.W_se ** 2), self.gain_W[:, None]),
+                (f.b_prog - old.b_prog, f.b - old.b, np.sqrt(f.b_se ** 2 + old.b_se ** 2), self.gain_b))):
+            moved = np.abs(dp) > stuck_z * se
+            flag = moved & (np.abs(de) < stuck_ratio * np.abs(gain) * np.abs(dp)) & ~self.fixed[j]
+            pin = flag & self.flagged[j]
+            self.fixed[j][pin] = True
+            self.values[j][pin] = (f.W, f.b)[j][pin]
+            pins += int(pin.sum())
+            new_flags.append(flag & ~pin)
+            use = moved & ~self.fixed[j] & ~flag
+            if j == 0:  # the rows' gains: realised over programmed change where the change is seen
+                num, den = np.sum(np.where(use, de * dp, 0.0), 1), np.sum(np.where(use, dp * dp, 0.0), 1)
+                ok = np.sum(use, 1) >= 3
+                self.gain_W = np.where(ok, np.clip(num / np.maximum(den, 1e-300), *gain_clip), self.gain_W)
+            else:
+                self.gain_b = np.where(use, np.clip(de / np.where(use, dp, 1.0), *gain_clip), self.gain_b)
+        self.flagged = tuple(new_flags)
+        return pins
+
+    def correct(self, f, target, w0, ridge: float, act):
+        """The next programmed (W, b) of this layer and the round's report row.
+
+        Per neuron i, the residual map R_i = target_i - realised_i divided by the row's gains is
+        projected on what the data see: (G_i + lambda I)^-1 G_i, with G_i the mean over the
+        layer's measured inputs of sigma'(z_i)^2 [a, 1] [a, 1]^T at the target (1 at the output
+        layer) and lambda ``ridge`` times G_i's mean eigenvalue. A direction the inputs (nearly)
+        never take, or along which the neuron is saturated, does not change the layer's output
+        on the data: its residual is the fit's noise, and programming it would move the map where
+        the data do not show it (a mesh then mixes it into directions they do). The round's
+        residual is the output deficit on the data, sqrt(mean_i R_i G_i R_i^T)."""
+        tW, tb = target
+        R = np.concatenate([np.where(~self.fixed[0], tW - f.W, 0.0), np.where(~self.fixed[1], tb - f.b, 0.0)[:, None]],
+                           axis=1)
+        G = _slope_gram(f.inputs_seen, tW, tb, f.hidden, act)
+        deficit = float(np.sqrt(np.mean(np.einsum("ip,ipq,iq->i", R, G, R))))
+        k = G.shape[1]
+        lam = ridge * np.trace(G, axis1=1, axis2=2) / k
+        P = np.linalg.solve(G + lam[:, None, None] * np.eye(k), G)          # (d, k, k)
+        raw = np.concatenate([R[:, :-1] / self.gain_W[:, None], R[:, -1:] / self.gain_b[:, None]], axis=1)
+        step = np.einsum("ipq,iq->ip", P, raw)
+        if self.best is None or deficit <= self.best[0]:
+            self.best = (deficit, (f.W_prog, f.b_prog), step)
+            self.step = min(1.0, 1.5 * self.step)
+            base, d = (f.W_prog, f.b_prog), step
+        else:  # worse than the best round: back to it, half the step
+            self.step *= 0.5
+            _, base, d = self.best
+        pW = np.where(self.fixed[0], w0[0], base[0] + self.step * d[:, :-1])
+        pb = np.where(self.fixed[1], w0[1], base[1] + self.step * d[:, -1])
+        row = {"output_deficit": deficit, "step": self.step,
+               "pinned": int(self.fixed[0].sum() + self.fixed[1].sum())}
+        return (pW, pb), row
+
+
+def _slope_gram(A, W, b, hidden: bool, act, chunk: int = 64):
+    """Per neuron the mean of sigma'(z)^2 [a, 1][a, 1]^T over the inputs ``A`` (n, r', p) at the map
+    (W, b) (d, k, k), k = p + 1; sigma' = 1 without an activation."""
+    n, r, p = A.shape
+    A1 = np.concatenate([A, np.ones((n, r, 1))], axis=2).reshape(n * r, p + 1)
+    if not hidden:
+        G = A1.T @ A1 / (n * r)
+        return np.broadcast_to(G, (W.shape[0],) + G.shape)
+    z = A1 @ np.concatenate([W, b[:, None]], axis=1).T          # (n r, d)
+    g2 = act(z) ** 2
+    out = np.empty((W.shape[0], p + 1, p + 1))
+    for i0 in range(0, W.shape[0], chunk):
+        sl = slice(i0, i0 + chunk)
+        out[sl] = np.einsum("ni,np,nq->ipq", g2[:, sl], A1, A1, optimize=True) / (n * r)
+    return out
+
+
+def _identified(first, lays, L):
     """What the first round showed per layer, and what the loop pinned (for the report)."""
     out = {}
     for l, f in sorted(first.items()):
-        i = l - 1
-        dead = [int(j) for j in np.where(fixed[i][0].all(axis=1))[0]]
-        out[str(l)] = {"rows_gain_median": float(np.median(gain_W[i])),
-                       "rows_gain_range": [float(np.min(gain_W[i])), float(np.max(gain_W[i]))],
-                       "bias_gain_median": float(np.median(gain_b[i])),
+        st = lays[l - 1]
+        dead = [int(j) for j in np.where(st.fixed[0].all(axis=1))[0]]
+        out[str(l)] = {"rows_gain_median": float(np.median(st.gain_W)),
+                       "rows_gain_range": [float(np.min(st.gain_W)), float(np.max(st.gain_W))],
+                       "bias_gain_median": float(np.median(st.gain_b)),
                        "weight_deviation_rms": float(np.sqrt(np.mean((f.W - f.W_prog) ** 2))),
                        "bias_deviation_rms": float(np.sqrt(np.mean((f.b - f.b_prog) ** 2))),
-                       "stuck_weights": int(fixed[i][0].sum()), "stuck_biases": int(fixed[i][1].sum()),
+                       "stuck_weights": int(st.fixed[0].sum()), "stuck_biases": int(st.fixed[1].sum()),
                        "dead_neurons": dead if l < L else [], "noise_level": f.s}
     return out

@@ -105,10 +105,20 @@ class FaultyChip:
         self.dead_value = [dev.uniform(-0.8, 0.8, size=f.dead) for _ in range(L - 1)] if f.dead else None
         self._mesh_seed = int(dev.integers(2**31))
         self._maps = None
+        self._last = None
 
     # ------------------------------------------------------------------ the device's physics
     def effective(self, params):
         """The realised (Weff_l, beff_l) of the programmed ``params`` (without the output detectors)."""
+        import hashlib
+        key = hashlib.sha1(b"".join(np.asarray(a, np.float64).tobytes() for W, b in params for a in (W, b))).digest()
+        if self._last is not None and self._last[0] == key:  # the same programming: the same realisation
+            return [W.copy() for W in self._last[1]], [b.copy() for b in self._last[2]]
+        Ws, bs = self._effective(params)
+        self._last = (key, Ws, bs)
+        return [W.copy() for W in Ws], [b.copy() for b in bs]
+
+    def _effective(self, params):
         f = self.faults
         Ws = [np.asarray(W, np.float64) for W, _ in params]
         bs = [np.asarray(b, np.float64) for _, b in params]

@@ -158,6 +158,24 @@ def _evidence(log_t, G, c0, nu):
     return float(np.sum(logdetD + logdetM - np.einsum("dk,dk->d", y, y)))
 
 
+def _mean_noise(data: _Data, act, th, s2):
+    """Per neuron, the noise variance of a per-input mean: the pooled within-input variance over the
+    shots of the residual at ``th`` (each shot against the model at its own regressor: with taps
+    the regressor's own spread is part of the design, not of the noise), divided by r."""
+    n, r, d = data.Y.shape
+    if r < 2:
+        return np.full(d, s2)
+    if data.A.shape[1] == r:
+        z = data.A @ th[:, :-1].T + th[:, -1]
+        if data.hidden:
+            vz = s2 * _unit_var(data, th[:, :-1])[:, None, :]
+            z = act(z, np.broadcast_to(vz, z.shape))[0]
+        E = data.Y - z
+    else:
+        E = data.Y
+    return np.maximum(np.mean(np.var(E, axis=1, ddof=1), axis=0), 1e-12) / r
+
+
 def _fit(data: _Data, act, W0, b0, s_guess: float, iters: int = 12):
     n, r, d = data.Y.shape
     th0 = np.concatenate([W0, b0[:, None]], axis=1)
@@ -165,9 +183,7 @@ def _fit(data: _Data, act, W0, b0, s_guess: float, iters: int = 12):
     s2 = _noise_level(data, act, th0, s2)
     Ybar = data.Y.mean(1)
     m, X, _ = _mean_model(data, act, th0, s2)
-    # each per-input mean's noise: its neuron's pooled within-input variance over r shots
-    nu = np.maximum(np.mean(np.var(data.Y, axis=1, ddof=1), axis=0), 1e-12) / r if r > 1 else \
-        np.full(d, s2)
+    nu = _mean_noise(data, act, th0, s2)
     e0 = Ybar - m
     scale_W = max(float(np.mean(W0 ** 2)), 1e-8)
     scale_b = max(float(np.mean(b0 ** 2)), 1e-2 * scale_W, 1e-8)
@@ -207,6 +223,7 @@ def _fit(data: _Data, act, W0, b0, s_guess: float, iters: int = 12):
         if np.max(np.abs(step)) < 1e-8 * (1 + np.max(np.abs(th))):
             break
     s2 = _noise_level(data, act, th, s2)
+    nu = _mean_noise(data, act, th, s2)
     Xn = X.transpose(1, 0, 2)
     M = np.matmul(Xn.transpose(0, 2, 1), Xn) / nu[:, None, None] + np.diag(dinv)
     cov = np.linalg.inv(M)

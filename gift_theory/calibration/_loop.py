@@ -75,7 +75,7 @@ def _row_gain(W_eff, W):
     return np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
 
 
-def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, reserve: float = 4.0,
+def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None = None, reserve: float = 4.0,
               z_accept: float = 2.5, stuck_z: float = 5.0, stuck_ratio: float = 0.25, gain_clip=(0.4, 2.5),
               noise_tolerance: float = 0.1, retrain: bool = True, ridge: float = 0.01):
     """Calibrate the chip of ``problem`` to realise w0 (module docstring).
@@ -83,8 +83,9 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, re
     Parameters
     ----------
     problem : :class:`~gift_theory.finetune.Problem` (its chip: any Chip; taps used where it has them)
-    inputs, shots : each round measures ``inputs`` fine-tuning inputs ``shots`` times
-    rounds : at most this many measure-and-correct rounds
+    inputs, shots : each round measures at most ``inputs`` fine-tuning inputs ``shots`` times (fewer
+        inputs, down to 32, when the budget would otherwise pay for fewer than four rounds)
+    rounds : at most this many measure-and-correct rounds (default: as many as the budget pays for)
     reserve : chip evaluations kept for the confirmation (two per paired round)
     z_accept : the confirmation's overall one-sided level P(Z > z_accept)
     stuck_z, stuck_ratio : an entry is stuck when its programmed value moved by more than
@@ -104,7 +105,8 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, re
     w0 = _np(problem.w0)
     L = len(w0)
     slope = _SLOPES[problem.arch.activation]
-    n = int(min(inputs, problem.K1))
+    spend = (problem.evaluations_left() - reserve) * problem.unit_shots
+    n = int(min(inputs, problem.K1, max(32, spend // (4 * int(shots)))))
     order = np.asarray(jax.random.permutation(jax.random.fold_in(problem.key, 7000), problem.K1))
     x_cal = problem.x_ft[np.sort(order[:n])]
     cost = n * int(shots) / problem.unit_shots
@@ -112,7 +114,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int = 6, re
     prog = [(W.copy(), b.copy()) for W, b in w0]
     lays = [_LayerState(W, b) for W, b in w0]
     prev, s_hat, taps, retrained, history, first = None, None, None, 0, [], {}
-    for k in range(int(rounds)):
+    for k in range(10 ** 6 if rounds is None else int(rounds)):
         if problem.evaluations_left() < cost + reserve - 1e-9:
             break
         with phase("chip"):

@@ -9,3 +9,8 @@ measure again, and confirm on the chip.
 from ._fit import LayerMap as LayerMap
 from ._fit import fit_layers as fit_layers
 from ._loop import calibrate as calibrate
+from ._file import FileCalibration as FileCalibration
+from ._file import calibrate_measurement as calibrate_measurement
+from ._model import ChipModel as ChipModel
+from ._model import LayerResponse as LayerResponse
+from ._model import load_chip_model as load_chip_model

@@ -126,7 +126,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
         new_pins = 0
         for f in fits:
             if prev is None:
-                lays[f.layer - 1].first(f, gain_clip)
+                lays[f.layer - 1].first(f, gain_clip, f.layer == L)
                 first[f.layer] = f
             else:
                 new_pins += lays[f.layer - 1].secant(f, prev[f.layer], stuck_z, stuck_ratio, gain_clip)
@@ -187,8 +187,10 @@ class _LayerState:
     def pinned_start(self, W, b):
         return np.where(self.fixed[0], self.values[0], W), np.where(self.fixed[1], self.values[1], b)
 
-    def first(self, f, gain_clip):
+    def first(self, f, gain_clip, output: bool):
         self.gain_W = np.clip(_row_gain(f.W, f.W_prog), *gain_clip)
+        if output:  # a detector reads z_L, bias included (the secants correct this where it is wrong)
+            self.gain_b = self.gain_W.copy()
 
     def secant(self, f, old, stuck_z, stuck_ratio, gain_clip) -> int:
         """Compare this round's fit ``f`` with the last one ``old``: pin what is stuck, update the gains."""

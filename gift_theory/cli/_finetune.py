@@ -130,7 +130,11 @@ def render(r: dict) -> str:
         lines += _calibrate_lines(info)
     elif r["method"] == "identify-retrain" and "physics" in info:
         lines.append(f"identified: {info['physics']} from {info['inputs']} inputs x {info['shots']} shots "
-                     f"({'with' if info.get('taps') else 'without'} taps; per-device offsets are not used by retraining)")
+                     f"({'with' if info.get('taps') else 'without'} taps; {info.get('used', '')}; per-device offsets "
+                     "are not used by retraining)")
+        if "accepted" in info:
+            lines.append(("returned the retrained weights: " if info["accepted"] else "returned w0: ")
+                         + str(info.get("reason", "")))
     g = r.get("gift_info")
     if g and r["method"] != "calibrate":
         z, pg = g.get("confirmation_z"), g.get("predicted_gain_pct")

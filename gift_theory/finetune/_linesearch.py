@@ -250,7 +250,7 @@ def why(method: str, w0, params, info: dict) -> dict | None:
                   f"step {c} x eta has the lowest Eval" + ("" if info.get("keep_w0") else " (w0 not a candidate)"))
         return {"kept_w0": kept, "reason": reason, "confirmation_z": math.nan, "predicted_gain": math.nan,
                 "predicted_gain_pct": math.nan}
-    if "accepted" not in info:
+    if "accepted" not in info or "probe" not in info:  # not a line search (calibrate, identify-retrain)
         return None
     pg = info.get("predicted_gain", math.nan)
     l0 = info.get("loss_w0", math.nan)

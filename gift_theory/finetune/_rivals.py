@@ -96,18 +96,37 @@ def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps
     # per-device offsets are a property of this chip's fixed draws, not of its noise: retraining cannot use them
     d = diagnose(named_subkey(problem.key, f"identify{seed}"), meas,
                  candidates=[c for c in default_candidates(meas) if not fitted_as_offsets(c)])
-    physics = d.ranking[0].model.physics if d.missing_effect_detected else d.baseline.physics
+    top = d.ranking[0] if d.ranking else None
+    passes = top is not None and top.status == "passes"
+    # a model the data reject is no chip to retrain under: then the awgn model at its fitted level
+    physics = top.model.physics if d.missing_effect_detected and passes else d.baseline.physics
     return physics, {"physics": physics.describe(), "inputs": n, "shots": shots, "taps": meas.has_taps,
                      "baseline_p": d.baseline_comparison.p_value,
                      "missing_effect_detected": d.missing_effect_detected,
-                     "ranking": [c.as_json()["effect"] for c in d.ranking[:3]]}
+                     "ranking": [c.as_json()["effect"] for c in d.ranking[:3]],
+                     "top_status": None if top is None else top.status,
+                     "used": "the top-ranked model" if d.missing_effect_detected and passes else
+                     ("the awgn model (the top-ranked model fails its test)" if d.missing_effect_detected else
+                      "the awgn model (it fits)")}
 
 
-def identify_retrain(problem, **kw):
-    """Spend the budget measuring the chip, identify its physics (s and any missing effect of
-    CONTRACTS §2, :func:`identify_physics`), retrain in silico at the estimate from w0."""
+def identify_retrain(problem, *, confirm: bool = True, z_accept: float = 2.5, **kw):
+    """Spend part of the budget measuring the chip, identify its physics (s and any missing effect
+    of docs/reference.md §2 the data do not reject, :func:`identify_physics`), retrain in silico at
+    the estimate from w0; then confirm the retrained weights against w0 on the chip (paired
+    evaluations on fresh shots, the line search's rule) and return w0 unless the chip finds them
+    significantly better. A chip with fixed per-device errors (detector gains, offsets, fixed maps)
+    can be read as noise effects that retraining under makes worse on the chip; the confirmation
+    is what keeps that from being returned. ``confirm=False``: the retrained weights as they are."""
+    from ._linesearch import confirm as _confirm
+
     physics, info = identify_physics(problem, **kw)
-    return retrain(problem, physics), info
+    w = retrain(problem, physics)
+    if not confirm:
+        return w, info
+    accepted, conf = _confirm(problem, w, z_accept=z_accept)
+    info.update(conf, accepted=accepted)
+    return (w if accepted else problem.w0), info
 
 
 # ------------------------------------------------------------------------------- SPSA

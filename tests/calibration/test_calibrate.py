@@ -161,6 +161,19 @@ def test_calibrate_never_returns_weights_the_chip_finds_worse(setting):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
+@pytest.mark.slow
+def test_identify_retrain_confirms_on_the_chip_before_returning(setting):
+    """Detector gains and offsets are no noise; whatever identify-retrain reads them as, the weights
+    it returns are not worse on the chip than w0 (the paired confirmation), and it says what it used."""
+    ds, w0 = setting
+    chip = FixedErrorChip(det_gain=np.array([1.6, 0.5]), det_offset=np.array([0.6, -0.5]))
+    from gift_theory.finetune import identify_retrain
+    params, info = identify_retrain(_problem(setting, chip, budget=20))
+    assert "accepted" in info and info["used"]
+    before, after = _true_loss(chip, w0, ds), _true_loss(chip, params, ds)
+    assert after <= before + 3 * 0.01 * before
+
+
 def test_uncharged_shots_are_not_held_against_the_budget():
     ledger = Ledger(100)
     ledger.charge(60)

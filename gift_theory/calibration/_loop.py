@@ -183,6 +183,7 @@ class _LayerState:
         self.flagged = (np.zeros(W.shape, bool), np.zeros(b.shape, bool))
         self.gain_W, self.gain_b = np.ones(d), np.ones(d)
         self.step, self.best = 1.0, None
+        self.dead_flag = np.zeros(d, bool)
 
     def pinned_start(self, W, b):
         return np.where(self.fixed[0], self.values[0], W), np.where(self.fixed[1], self.values[1], b)
@@ -213,6 +214,18 @@ class _LayerState:
                 self.gain_W = np.where(ok, np.clip(num / np.maximum(den, 1e-300), *gain_clip), self.gain_W)
             else:
                 self.gain_b = np.where(use, np.clip(de / np.where(use, dp, 1.0), *gain_clip), self.gain_b)
+        # a row whose moved entries (nearly) all failed to follow, twice running, is a dead neuron:
+        # its whole row (the entries the data do not see too) is pinned at 0, its bias at its value
+        dpW, deW = f.W_prog - old.W_prog, f.W - old.W
+        movedW = np.abs(dpW) > stuck_z * np.sqrt(f.W_se ** 2 + old.W_se ** 2)
+        failed = movedW & (new_flags[0] | self.fixed[0])
+        dead_now = (movedW.sum(1) >= 3) & (failed.sum(1) >= 0.8 * movedW.sum(1))
+        dead = dead_now & self.dead_flag & ~self.fixed[0].all(1)
+        self.dead_flag = dead_now & ~dead
+        if np.any(dead):
+            self.fixed[0][dead], self.values[0][dead] = True, 0.0
+            self.fixed[1][dead], self.values[1][dead] = True, f.b[dead]
+            pins += int(dead.sum())
         self.flagged = tuple(new_flags)
         return pins
 

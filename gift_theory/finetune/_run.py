@@ -23,8 +23,8 @@ from ._tree import norm
 from ..estimators import paper_constant
 
 #: every method `gift finetune --method` accepts, plus "none" (no fine-tuning)
-METHODS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "spsa", "pat", "identify-retrain",
-           "calibrate", "retrain", "none")
+METHODS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "spsa", "pat", "pat-identified",
+           "identify-retrain", "calibrate", "retrain", "none")
 
 
 def _line(kind):
@@ -49,6 +49,10 @@ def _printed(problem, eta=None, rel_step: float = 0.01, direction_K2: int = 16, 
     info["direction"] = dinfo
     info["rel_step"] = float(eta) * float(norm(D0)) / max(float(norm(problem.w0)), 1e-30)
     return w, info
+
+
+def _pat_identified(problem, **kw):
+    return pat(problem, noise="identified", **kw)
 
 
 def _calibrate(problem, **kw):
@@ -88,6 +92,7 @@ RUNNERS = {
     "random": _line("random"),
     "spsa": spsa,
     "pat": pat,
+    "pat-identified": _pat_identified,
     "identify-retrain": identify_retrain,
     "calibrate": _calibrate,
     "retrain": _retrain,

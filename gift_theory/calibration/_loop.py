@@ -156,10 +156,10 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     if not history:
         info.update(accepted=False, reason="budget below one round and the confirmation: nothing measured")
         return problem.w0, info
-    from ..finetune._linesearch import confirm
+    from ..finetune._linesearch import confirm_on_chip
     final = _layers32(prog)
     with phase("chip"):
-        accepted, conf = confirm(problem, final, z_accept=z_accept)
+        accepted, conf = confirm_on_chip(problem, final, z_accept=z_accept)
     info.update(conf, accepted=accepted)
     return (final if accepted else problem.w0), info
 

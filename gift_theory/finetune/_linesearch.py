@@ -188,12 +188,12 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     if not confirm:
         info["reason"] = "unconfirmed: the best measured step is taken"
         return w_best, info
-    accepted, conf = confirm(problem, w_best, z_accept=z_accept, rounds=confirm_rounds)
+    accepted, conf = confirm_on_chip(problem, w_best, z_accept=z_accept, rounds=confirm_rounds)
     info.update(conf, accepted=accepted)
     return (w_best if accepted else w0), info
 
 
-def confirm(problem, w, *, z_accept: float = 2.5, rounds: int | None = None, reference=None):
+def confirm_on_chip(problem, w, *, z_accept: float = 2.5, rounds: int | None = None, reference=None):
     """Is ``w`` better than ``reference`` (default w0) on the chip? Fresh paired Evals until convinced.
 
     Each round measures one Eval_w(K1, K2) of the reference and one of ``w`` on the same inputs

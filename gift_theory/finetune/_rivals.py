@@ -119,13 +119,13 @@ def identify_retrain(problem, *, confirm: bool = True, z_accept: float = 2.5, **
     significantly better. A chip with fixed per-device errors (detector gains, offsets, fixed maps)
     can be read as noise effects that retraining under makes worse on the chip; the confirmation
     is what keeps that from being returned. ``confirm=False``: the retrained weights as they are."""
-    from ._linesearch import confirm as _confirm
+    from ._linesearch import confirm_on_chip
 
     physics, info = identify_physics(problem, **kw)
     w = retrain(problem, physics)
     if not confirm:
         return w, info
-    accepted, conf = _confirm(problem, w, z_accept=z_accept)
+    accepted, conf = confirm_on_chip(problem, w, z_accept=z_accept)
     info.update(conf, accepted=accepted)
     return (w if accepted else problem.w0), info
 

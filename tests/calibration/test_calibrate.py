@@ -274,3 +274,56 @@ def test_finetune_chip_arguments_bad_input(capsys, argv, what):
     rc, so, err = _cli(capsys, "finetune", "--s0", "0.05", *argv, "--json")
     assert rc == 2 and so == ""
     assert what in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_gift_calibrate_from_a_file_predicts_what_the_chip_then_realises(capsys, tmp_path, setting):
+    """A lab with files and no driver: the corrected weights from one measurement, the predicted
+    accuracy with its interval; programmed on the chip they realise that accuracy; a second
+    measurement is scored against the saved chip model."""
+    ds_small, w0 = setting
+    ds = load_dataset("teacher")
+    chip = FixedErrorChip(gains=(0.7, 1.0), det_gain=np.array([1.3, 0.8]), det_offset=np.array([0.3, -0.2]))
+    from gift_theory.lab import save_measurement
+    meas_path, out = str(tmp_path / "meas.npz"), str(tmp_path / "w.npz")
+    save_measurement(meas_path, chip.measure(w0, ds.x_train[:400], 16, taps=True))
+    rc, so, err = _cli(capsys, "calibrate", meas_path, "--dataset", "teacher", "--out", out, "--draws", "10", "--json")
+    assert rc == 0, err
+    r = json.loads(so)
+    assert {"effects", "params", "predicted_accuracy", "predicted_accuracy_interval", "accuracy_before", "out"} <= set(r)
+    lo, hi = r["predicted_accuracy_interval"]
+    assert lo <= r["predicted_accuracy"] <= hi and r["predicted_accuracy"] > r["accuracy_before"] + 0.05
+    with np.load(out) as f:
+        corrected = [(f["W1"], f["b1"]), (f["W2"], f["b2"])]
+    y, _ = chip.forward(corrected, ds.x_test, 32, np.random.default_rng(5))
+    realised = float(np.mean(np.argmax(y, -1) == ds.labels_test[:, None]))
+    assert abs(realised - r["predicted_accuracy"]) < 0.03, (realised, r["predicted_accuracy"])
+    y0, _ = chip.forward(w0, ds.x_test, 32, np.random.default_rng(5))
+    assert abs(float(np.mean(np.argmax(y0, -1) == ds.labels_test[:, None])) - r["accuracy_before"]) < 0.03
+    new = str(tmp_path / "new.npz")
+    save_measurement(new, chip.measure(corrected, ds.x_train[400:800], 16, taps=True))
+    rc, so, err = _cli(capsys, "compare", new, "--chip-model", r["chip_model"], "--power-replicates", "0", "--json")
+    assert rc == 0, err
+    c = json.loads(so)
+    assert c["model"]["chip_model"] == r["chip_model"] and not c["model"]["fitted"]
+    assert c["per_layer"]["layer1"] < 5 * c["noise_floor"]  # layer 1's prediction (a loss) holds
+
+
+def test_a_chip_model_round_trips_and_refuses_a_file_that_is_not_one(tmp_path, setting):
+    from gift_theory.calibration import ChipModel, LayerResponse, load_chip_model
+    ds, w0 = setting
+    W, b = (np.asarray(a, np.float64) for a in w0[1])
+    r = LayerResponse(2, 1.1 * W, b + 0.2, W, b, np.full(2, 1.1), np.ones(2), 0.01 * np.ones_like(W), 0.01 * np.ones(2),
+                      np.zeros(W.shape, bool), np.array([True, False]))
+    m = ChipModel((4, 8, 2), "tanh", (r,), ({"name": "awgn", "params": {"s": 0.05}},), "test")
+    path = m.save(str(tmp_path / "m.chip.npz"))
+    back = load_chip_model(path)
+    got = back.realise(w0)
+    np.testing.assert_allclose(np.asarray(got[1].W), 1.1 * W)
+    np.testing.assert_allclose(np.asarray(got[1].b), [b[0] + 0.2, b[1] + 0.2])
+    np.testing.assert_array_equal(np.asarray(got[0].W), np.asarray(w0[0].W))
+    assert back.physics.s == pytest.approx(0.05)
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, x=np.zeros(3))
+    with pytest.raises(gt.GiftInputError, match="not a gift chip model"):
+        load_chip_model(str(bad))

@@ -327,3 +327,14 @@ def test_a_chip_model_round_trips_and_refuses_a_file_that_is_not_one(tmp_path, s
     np.savez(bad, x=np.zeros(3))
     with pytest.raises(gt.GiftInputError, match="not a gift chip model"):
         load_chip_model(str(bad))
+
+
+@pytest.mark.slow
+def test_the_demos_calibration_part_recovers_the_lost_accuracy():
+    """gift demo's measurement section ends with a chip calibrated: a chip with a layer gain, bias
+    offsets and weight errors (the catalogue's per-device effects), read with taps."""
+    from gift_theory._demo import calibrate_part
+    c = calibrate_part("teacher", "4-8-2", 0.05, budget=20)
+    assert c["accepted"] and c["accuracy_ideal"] - c["accuracy_before"] > 0.02, c
+    assert c["recovered"] > 0.8, c
+    assert c["evaluations"] <= 20 and "layer_gain" in c["chip"]

@@ -21,7 +21,10 @@ The loop (docs/hardware.md, "Calibrating a chip"; docs/reference.md §7)::
 
 Without taps only the output layer is read (its regressor the model's hidden layers as
 programmed) and corrected; the hidden layers' maps, stuck weights and dead neurons are not
-identified, and the report says so.
+identified, and the report says so. The first round's measurement then also goes to the lab's
+diagnosis (every effect but per-device offsets); when it names a model the data do not reject,
+w0 retrained under it is a second candidate, and the confirmation measures both against w0 and
+returns the better one if the chip finds it significantly better than w0.
 """
 
 from __future__ import annotations
@@ -122,6 +125,8 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
         with phase("calibration fit"):
             fits = fit_layers(meas, s=s_hat)
         taps = meas.has_taps
+        if k == 0:
+            first_meas = meas
         s_hat = float(np.median([f.s for f in fits]))
         new_pins = 0
         for f in fits:
@@ -156,12 +161,23 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     if not history:
         info.update(accepted=False, reason="budget below one round and the confirmation: nothing measured")
         return problem.w0, info
-    from ..finetune._linesearch import confirm_on_chip
-    final = _layers32(prog)
+    from ..finetune._linesearch import confirm_best
+    candidates = [_layers32(prog)]
+    if not taps and retrain:
+        # the output alone cannot show the hidden layers' maps: the lab's diagnosis of the first round
+        # (every effect but per-device offsets, as identify-retrain) may name a global one -- a layer's
+        # gain, an activation's slope -- that retraining under can absorb; the chip chooses between them
+        from ..finetune._rivals import physics_of, retrain as _retrain
+        with phase("calibration diagnosis"):
+            physics, pinfo = physics_of(jax.random.fold_in(problem.key, 7200), first_meas)
+        info["diagnosis"] = pinfo
+        if pinfo["used"] == "the top-ranked model":
+            candidates.append(_retrain(problem, physics))
     with phase("chip"):
-        accepted, conf = confirm_on_chip(problem, final, z_accept=z_accept)
-    info.update(conf, accepted=accepted)
-    return (final if accepted else problem.w0), info
+        chosen, conf = confirm_best(problem, candidates, z_accept=z_accept)
+    names = ["the calibrated weights", "the weights retrained under the diagnosis' model"]
+    info.update(conf, accepted=chosen is not None, returned="w0" if chosen is None else names[chosen])
+    return (problem.w0 if chosen is None else candidates[chosen]), info
 
 
 class _LayerState:

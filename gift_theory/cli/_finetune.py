@@ -164,6 +164,8 @@ def _calibrate_lines(info: dict) -> list:
             for l in last))
     for what in info.get("not_identified") or []:
         out.append(f"  not identified: {what}")
-    out.append(("returned the calibrated weights: " if info.get("accepted") else "returned w0: ")
-               + str(info.get("reason", "")))
+    if info.get("diagnosis"):
+        d = info["diagnosis"]
+        out.append(f"  without taps, the lab's diagnosis of the first round: {d['physics']} ({d['used']})")
+    out.append(f"returned {info.get('returned', 'w0')}: " + str(info.get("reason", "")))
     return out

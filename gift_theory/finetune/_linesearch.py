@@ -230,6 +230,48 @@ def confirm_on_chip(problem, w, *, z_accept: float = 2.5, rounds: int | None = N
     return False, info
 
 
+def confirm_best(problem, candidates, *, z_accept: float = 2.5):
+    """The best of several candidate weight sets, if the chip confirms it better than w0.
+
+    Each round measures one Eval_w(K1, K2) of w0 and of every candidate on the same inputs (fresh
+    shots); after each round the candidate of the largest mean paired improvement is accepted
+    when it exceeds ``z_look`` standard errors, the Bonferroni boundary over the looks the budget
+    allows times the candidates (overall one-sided level P(Z > z_accept)).
+
+    Returns
+    -------
+    index of the accepted candidate or None, info (as :func:`confirm_on_chip`, plus ``chosen``
+    and each candidate's last ``confirm_means``)
+    """
+    k = len(candidates)
+    if k == 1:
+        ok, info = confirm_on_chip(problem, candidates[0], z_accept=z_accept)
+        return (0 if ok else None), dict(info, chosen=0 if ok else None)
+    n = int(problem.evaluations_left() // (k + 1))
+    z_look = max(z_accept, float(stats.norm.isf(stats.norm.sf(z_accept) / max(n * k, 1))))
+    info = {"z_look": z_look, "confirm_rounds": 0, "chosen": None}
+    diffs = [[] for _ in candidates]
+    for _ in range(n):
+        if problem.evaluations_left() < k + 1 - 1e-9:
+            break
+        l0 = problem.eval_chip(problem.w0)
+        for d, w in zip(diffs, candidates):
+            d.append(l0 - problem.eval_chip(w))
+        stats_ = [_mean_se(np.mean(d, axis=0)) for d in diffs]
+        best = int(np.argmax([m for m, _ in stats_]))
+        m, s_ = stats_[best]
+        info.update(confirm_mean=m, confirm_se=s_, confirm_rounds=len(diffs[0]), confirm_means=[a for a, _ in stats_],
+                    confirm_z=m / s_ if s_ > 0 else math.copysign(math.inf, m))
+        if m > z_look * s_:
+            info["chosen"] = best
+            info["reason"] = f"accepted candidate {best}: confirmation z = {info['confirm_z']:.2f} > {z_look:.2f}"
+            return best, info
+    info["reason"] = (f"confirmation not significant: z = {info['confirm_z']:.2f} <= {z_look:.2f} after "
+                      f"{info['confirm_rounds']} fresh rounds" if info["confirm_rounds"] else
+                      "no budget left for the confirmation")
+    return None, info
+
+
 def why(method: str, w0, params, info: dict) -> dict | None:
     """Why a line-search method returned what it did, for a report row (``gift_info``).
 

@@ -94,14 +94,29 @@ def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps
 
     n = int(min(problem.K1, max(8, math.floor(evaluations * problem.unit_shots / shots))))
     meas = problem.chip.measure(problem.w0, problem.x_ft[:n], shots, taps=taps)
-    # per-device offsets are a property of this chip's fixed draws, not of its noise: retraining cannot use them
-    d = diagnose(named_subkey(problem.key, f"identify{seed}"), meas,
-                 candidates=[c for c in default_candidates(meas) if not fitted_as_offsets(c)])
+    physics, info = physics_of(named_subkey(problem.key, f"identify{seed}"), meas)
+    return physics, {**info, "inputs": n, "shots": shots}
+
+
+def physics_of(key, meas):
+    """The physics a measurement of w0 shows, for retraining: the lab's diagnosis over every effect
+    but the per-device offsets (retraining draws no device, so it cannot use them); the
+    top-ranked model when the awgn model fails its test and that model passes, else the awgn
+    model at its fitted level (a model the data reject is no chip to retrain under).
+
+    Returns
+    -------
+    physics, info (``physics``, ``taps``, ``baseline_p``, ``missing_effect_detected``, ``ranking``
+    (the top three), ``top_status``, ``used``)
+    """
+    from ..lab import default_candidates, diagnose
+    from ..lab._offset_kinds import fitted_as_offsets
+
+    d = diagnose(key, meas, candidates=[c for c in default_candidates(meas) if not fitted_as_offsets(c)])
     top = d.ranking[0] if d.ranking else None
     passes = top is not None and top.status == "passes"
-    # a model the data reject is no chip to retrain under: then the awgn model at its fitted level
     physics = top.model.physics if d.missing_effect_detected and passes else d.baseline.physics
-    return physics, {"physics": physics.describe(), "inputs": n, "shots": shots, "taps": meas.has_taps,
+    return physics, {"physics": physics.describe(), "taps": meas.has_taps,
                      "baseline_p": d.baseline_comparison.p_value,
                      "missing_effect_detected": d.missing_effect_detected,
                      "ranking": [c.as_json()["effect"] for c in d.ranking[:3]],

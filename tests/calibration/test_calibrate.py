@@ -174,6 +174,19 @@ def test_identify_retrain_confirms_on_the_chip_before_returning(setting):
     assert after <= before + 3 * 0.01 * before
 
 
+@pytest.mark.slow
+def test_calibrate_without_taps_corrects_the_output_and_never_does_harm(setting):
+    """Without taps: the output's detector gains and offsets are read and corrected; a hidden
+    layer's loss is not read, and the diagnosis' alternative competes; the chip decides, and the
+    result is never worse than w0."""
+    ds, w0 = setting
+    chip = FixedErrorChip(gains=(0.6, 1.0), det_gain=np.array([1.3, 0.8]), det_offset=np.array([0.3, -0.2]), taps=False)
+    params, info = calibrate(_problem(setting, chip, budget=40))
+    assert info["taps"] is False and info["not_identified"]
+    before, after = _true_loss(chip, w0, ds), _true_loss(chip, params, ds)
+    assert after < 0.5 * before, (before, after, info["returned"])
+
+
 def test_uncharged_shots_are_not_held_against_the_budget():
     ledger = Ledger(100)
     ledger.charge(60)

@@ -34,7 +34,7 @@ import numpy as np
 from .._measurement import Measurement
 from .._params import Layer, params32
 from ._fit import fit_layers
-from ._loop import _SLOPES, _row_gain, _slope_gram
+from ._loop import _SLOPES, _row_gain, correction
 from ._model import ChipModel, LayerResponse
 
 #: the mechanism classes (docs/reference.md §6) the noise is read in: what is not a fixed map
@@ -151,16 +151,10 @@ def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), retrain: bo
     responses = []
     for f in fits:
         i = f.layer - 1
-        tW, tb = target[i]
         pW, pb = pinned[i]
         gW = np.clip(_row_gain(f.W, f.W_prog), 0.4, 2.5)
         gb = gW if f.layer == L else np.ones_like(f.b)  # a detector reads z_L, bias included
-        R = np.concatenate([np.where(pW, 0.0, tW - f.W), np.where(pb, 0.0, tb - f.b)[:, None]], axis=1)
-        G = _slope_gram(f.inputs_seen, tW, tb, f.hidden, slope)
-        k = G.shape[1]
-        lam = ridge * np.trace(G, axis1=1, axis2=2) / k
-        P = np.linalg.solve(G + lam[:, None, None] * np.eye(k), G)
-        step = np.einsum("ipq,iq->ip", P, np.concatenate([R[:, :-1] / gW[:, None], R[:, -1:] / gb[:, None]], axis=1))
+        step, _ = correction(f, target[i], (pW, pb), gW, gb, ridge, slope)
         corrected[i] = (np.where(pW, f.W_prog, f.W_prog + step[:, :-1]), np.where(pb, f.b_prog, f.b_prog + step[:, -1]))
         responses.append(LayerResponse(f.layer, f.W, f.b, f.W_prog, f.b_prog, gW, gb, f.W_se, f.b_se, pW, pb))
     effects_json = tuple({"name": e.name, "params": e.param_json()} for e in physics.effects)

@@ -69,6 +69,12 @@ class LayerMap:
         return (self.W - self.W_prog) / self.W_se, (self.b - self.b_prog) / self.b_se
 
 
+def _unit_var(data, W):
+    """(n, d): the pre-activation noise variance per s^2 (the lab's, on this fit's data)."""
+    from ..lab._identify import _unit_var as unit_var
+    return unit_var(data, W)
+
+
 def _activation(name: str):
     from ..lab._identify import smoothed  # the lab's smoothed activation (Gauss-Hermite)
     return lambda z, v: smoothed(name, z, v, var=True)
@@ -80,16 +86,6 @@ class _Data:
     Y: np.ndarray          # (n, r, d)
     Cin: np.ndarray | None  # None, (p, p) or (n, p, p): unit covariance of the unmeasured input noise
     hidden: bool
-
-
-def _unit_var(data: _Data, W):
-    """(n, d): the pre-activation noise variance per s^2 (the weighted sum's own 1 plus the input's)."""
-    n, d = data.Y.shape[0], W.shape[0]
-    if data.Cin is None:
-        return np.ones((n, d))
-    if data.Cin.ndim == 2:
-        return np.broadcast_to(np.sum((W @ data.Cin) * W, axis=-1) + 1.0, (n, d))
-    return np.sum(np.matmul(W, data.Cin) * W, axis=-1) + 1.0
 
 
 def _mean_model(data: _Data, act, th, s2):

@@ -256,16 +256,7 @@ class _LayerState:
         on the data: its residual is the fit's noise, and programming it would move the map where
         the data do not show it (a mesh then mixes it into directions they do). The round's
         residual is the output deficit on the data, sqrt(mean_i R_i G_i R_i^T)."""
-        tW, tb = target
-        R = np.concatenate([np.where(~self.fixed[0], tW - f.W, 0.0), np.where(~self.fixed[1], tb - f.b, 0.0)[:, None]],
-                           axis=1)
-        G = _slope_gram(f.inputs_seen, tW, tb, f.hidden, act)
-        deficit = float(np.sqrt(np.mean(np.einsum("ip,ipq,iq->i", R, G, R))))
-        k = G.shape[1]
-        lam = ridge * np.trace(G, axis1=1, axis2=2) / k
-        P = np.linalg.solve(G + lam[:, None, None] * np.eye(k), G)          # (d, k, k)
-        raw = np.concatenate([R[:, :-1] / self.gain_W[:, None], R[:, -1:] / self.gain_b[:, None]], axis=1)
-        step = np.einsum("ipq,iq->ip", P, raw)
+        step, deficit = correction(f, target, self.fixed, self.gain_W, self.gain_b, ridge, act)
         if self.best is None or deficit <= self.best[0]:
             self.best = (deficit, (f.W_prog, f.b_prog), step)
             self.step = min(1.0, 1.5 * self.step)
@@ -278,6 +269,21 @@ class _LayerState:
         row = {"output_deficit": deficit, "step": self.step,
                "pinned": int(self.fixed[0].sum() + self.fixed[1].sum())}
         return (pW, pb), row
+
+
+def correction(f, target, fixed, gain_W, gain_b, ridge: float, act):
+    """One layer's correction of the programmed (W, b) towards ``target`` from its fit ``f``, as a
+    (d, p+1) step, and the output deficit sqrt(mean_i R_i G_i R_i^T) (:meth:`_LayerState.correct`).
+    ``fixed``: the pinned (W, b) masks (no step there); ``gain_W``, ``gain_b``: the rows' gains."""
+    tW, tb = target
+    R = np.concatenate([np.where(~fixed[0], tW - f.W, 0.0), np.where(~fixed[1], tb - f.b, 0.0)[:, None]], axis=1)
+    G = _slope_gram(f.inputs_seen, tW, tb, f.hidden, act)
+    deficit = float(np.sqrt(np.mean(np.einsum("ip,ipq,iq->i", R, G, R))))
+    k = G.shape[1]
+    lam = ridge * np.trace(G, axis1=1, axis2=2) / k
+    P = np.linalg.solve(G + lam[:, None, None] * np.eye(k), G)          # (d, k, k)
+    raw = np.concatenate([R[:, :-1] / gain_W[:, None], R[:, -1:] / gain_b[:, None]], axis=1)
+    return np.einsum("ipq,iq->ip", P, raw), deficit
 
 
 def _slope_gram(A, W, b, hidden: bool, act, chunk: int = 64):

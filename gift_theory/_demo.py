@@ -9,7 +9,9 @@ arguments, calls them and prints):
   line (predicted against true) and :func:`plot_finetune` draws it with every method's loss;
 * the theory part -- some of the paper's claims as computed verdicts -- belongs to the
   checks (``proofs_checks._cli.demo_part``, found through the ``check`` command's registration);
-* :func:`lab_part` -- a chip with a hidden physical effect, measured with taps, diagnosed.
+* :func:`lab_part` -- a chip with a hidden physical effect, measured with taps, diagnosed;
+* :func:`calibrate_part` -- the trained network on a chip with fixed per-device errors, calibrated
+  (``calibrate``), its test accuracy on the chip before and after, and on an ideal chip.
 
 Progress: every function takes ``progress(i, n, label)``, called before item ``i`` (0-based)
 of ``n`` starts; None is silent.
@@ -308,3 +310,38 @@ def lab_part(hidden, seed: int = 0, *, save_to: str | None = None, progress=None
             "missing_effect_detected": out["missing_effect_detected"], "ranking": out["ranking"][:3],
             "explained": out["explained"], "verdict": out["verdict"], "failing_layers": out["failing_layers"],
             "mechanisms": out["mechanisms"][:2], "seconds": time.perf_counter() - t0}
+
+
+#: the calibration part's chip: fixed per-device errors (docs/reference.md §2) on top of the noise
+CALIBRATION_CHIP = ("layer_gain=0.7", "bias_offset=0.3", "weight_error=0.03")
+
+
+def calibrate_part(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.05, *, faults=CALIBRATION_CHIP,
+                   seed: int = 0, budget: float = 20, data_folder: str | None = None) -> dict:
+    """The network trained at ``s0`` on a simulated chip with noise s0 and the fixed per-device
+    errors ``faults`` (with taps), calibrated with ``budget`` chip evaluations.
+
+    Returns
+    -------
+    dict: ``chip`` (its physics), ``accuracy_before`` / ``accuracy_after`` (test set, the referee:
+    the simulator's truth), ``accuracy_ideal`` (w0 on a chip with the noise alone), their standard
+    errors, ``recovered`` (the share of the lost accuracy won back), ``evaluations``, ``accepted``,
+    ``identified`` (per layer, what calibrate read), ``seconds``.
+    """
+    from .effects import Physics, awgn
+    from .finetune import finetune_on, referee
+
+    t0 = time.perf_counter()
+    physics = Physics.parse(list(faults), s=s0, where="calibration chip")
+    ds, arch_, w0 = load_demo_setting(dataset, arch, s0, seed, data_folder)
+    r = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method="calibrate", seed=seed, budget=budget)
+    ideal = referee(w0, ds.x_test, ds.y_test, ds.labels_test, awgn(s0), arch_)
+    before, after = r["test_accuracy_before"], r["test_accuracy_after"]
+    lost = ideal["accuracy"] - before
+    info = r["info"]
+    return {"chip": physics.describe(), "accuracy_before": before, "accuracy_after": after,
+            "accuracy_ideal": ideal["accuracy"], "accuracy_se": info["referee"]["test_accuracy_change_se"],
+            "recovered": (after - before) / lost if lost > 0 else float("nan"),
+            "evaluations": r["in_situ_evaluations"], "accepted": bool(info.get("accepted")),
+            "reason": info.get("reason", ""), "identified": _plain(info.get("identified", {})),
+            "seconds": time.perf_counter() - t0}

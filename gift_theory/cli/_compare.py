@@ -19,6 +19,9 @@ def add_arguments(parser):
     add_common(parser)
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
                         help="the model's physics (reference §2), e.g. awgn=0.1 shot=0.01; default: fit awgn")
+    parser.add_argument("--chip-model", default=None, metavar="M.chip.npz",
+                        help="score a fitted chip model (gift calibrate writes one): the weights the file programmed, "
+                             "as the model predicts the chip realises them, under its noise (not with --effect)")
     parser.add_argument("--power-replicates", type=int, default=20, metavar="B",
                         help="simulated files behind the power figures next to the verdict (default 20; 0: none)")
 
@@ -33,7 +36,20 @@ def run(args):
     folder = figure_dir(args, "compare")  # a folder of another command's: refused before any work
     meas = load(args)  # plugins first: --effect may name one
     physics = None
-    if args.effect:
+    if args.chip_model is not None:
+        import dataclasses
+
+        from ..calibration import load_chip_model
+
+        if args.effect:
+            raise gt.GiftInputError("--chip-model: the model's noise is its own; not with --effect")
+        cm = load_chip_model(args.chip_model)
+        if tuple(cm.widths) != tuple(meas.arch.widths):
+            raise gt.GiftInputError(f"--chip-model {args.chip_model}: a model of a {'-'.join(map(str, cm.widths))} "
+                                    f"network, the file measured {'-'.join(map(str, meas.arch.widths))}")
+        meas = dataclasses.replace(meas, params=cm.realise(meas.params))
+        physics = cm.physics
+    elif args.effect:
         specs = list(args.effect)
         if not any(s.strip().split("=")[0].strip() == "awgn" for s in specs):
             raise gt.GiftInputError("--effect: the model needs awgn=S among its effects (the baseline noise level)")
@@ -44,7 +60,8 @@ def run(args):
                                     f"use gift fit --add {offsets[0]} (fitted offsets)")
     res = compare_measurement(key(args), meas, physics, shots=args.shots)
     model, c = res["model"], res["comparison"]
-    out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": res["fitted"]},
+    out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": res["fitted"],
+                     **({"chip_model": args.chip_model} if args.chip_model else {})},
            "discrepancy": c.discrepancy, "se": c.se, "noise_floor": c.noise_floor, "floor_se": c.floor_se,
            "p_value": c.p_value, "inputs_scored": res["scored"].n,
            "per_layer": {f"layer{l}": float(v) for l, v in zip(c.layer_ids, c.per_layer)},
@@ -65,7 +82,9 @@ def run(args):
 def render(out) -> str:
     m = out["model"]
     ps = ", ".join(f"{k}={v:.4g}" for k, v in m["params"].items())
-    lines = [f"model {' + '.join(m['effects'])} ({ps}){' fitted on half the inputs' if m['fitted'] else ''}",
+    lines = [f"model {' + '.join(m['effects'])} ({ps}){' fitted on half the inputs' if m['fitted'] else ''}"
+             + (f", the weights as the chip model {m['chip_model']} predicts the chip realises them"
+                if m.get("chip_model") else ""),
              f"discrepancy {out['discrepancy']:.4g} +- {out['se']:.2g} on {out['inputs_scored']} inputs; "
              f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}; p = {out['p_value']:.3g}"
              + ("  -> the model FAILS (p < 0.01)" if out["p_value"] < 0.01 else "  -> consistent with the data"),

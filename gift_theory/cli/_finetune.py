@@ -114,9 +114,9 @@ def _plain(obj):
 
 
 def render(r: dict) -> str:
-    chip = "your chip" if r["st"] is None else f"st={r['st']:g}"
+    chip = "your chip" if r.get("st") is None else f"st={r['st']:g}"
     lines = [f"gift finetune  {r['dataset']} {'-'.join(map(str, r['arch']))}  s0={r['s0']:g} -> {chip}  "
-             f"method={r['method']}  (scored by {'the chip, fresh shots not charged' if r['scored_by'] == 'chip' else 'the referee'})",
+             f"method={r['method']}  (scored by {'the chip, fresh shots not charged' if r.get('scored_by') == 'chip' else 'the referee'})",
              f"{'':14}{'before':>10}{'after':>10}",
              f"{'train loss':14}{r['loss_before']:10.4f}{r['loss_after']:10.4f}",
              f"{'train acc':14}{r['accuracy_before']:10.4f}{r['accuracy_after']:10.4f}",

@@ -110,7 +110,7 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     s0 : training noise level; st : true noise parameter in the paper's parametrisation
     seed : names the in-silico training run and the fine-tuning randomness
     noise_kind : see :func:`true_noise`
-    method : a CONTRACTS §4 finetune method
+    method : a CONTRACTS §4 finetune method, or a name of :data:`VARIANTS` (as ``variant``)
     options : extra keyword arguments for ``run_finetune`` (K1, K2, eta, mnist folder, ...)
     train_epochs : train w0 for this many epochs instead of the default recipe's
     variant : a name of :data:`VARIANTS` (replaces ``method`` and adds its options)
@@ -130,6 +130,8 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     s_true, effects = true_noise(noise_kind, st)
     run_finetune = _run_finetune()
     opts = dict(options or {})
+    if variant is None and method in VARIANTS:  # e.g. gift-noconfirm in a sweep's method dim
+        variant = method
     if variant is not None:
         if variant not in VARIANTS:
             raise ValueError(f"variant {variant!r} unknown; known: {', '.join(VARIANTS)}")

@@ -133,7 +133,7 @@ SCALES = {
         variant_s0=(0.1,), variant_st=(0.2,), variant_seeds=(0, 1),
         under_epochs=(2, 30), under_s0=(0.1,), under_st=(0.2,), under_seeds=(0, 1),
         key_cells=((0.1, 0.2),),
-        ext_methods=("gift", "gift-noconfirm"), ext_s0=(0.1,), ext_st=(0.4,), ext_seeds=(0,)),
+        ext_methods=("gift", "gift-noconfirm"), ext_s0=(0.1,), ext_st=(0.35,), ext_seeds=(0,)),
 }
 
 

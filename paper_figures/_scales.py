@@ -148,7 +148,7 @@ def _gift_fixed(scale: Scale, mnist_folder: str | None, options: dict | None) ->
     dataset = scale.dataset
     if mnist_folder:
         dataset = "mnist"
-        opts["folder"] = mnist_folder
+        opts["data_folder"] = mnist_folder  # run_finetune's name for the IDX folder
     return {"dataset": dataset, "options": opts}
 
 
@@ -165,7 +165,7 @@ def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict
 
     Issue 25 (when the scale defines them): ``gift_regime`` (GIFT on the deeper net at the
     extended st where its baseline collapses, dims s0, st, seed); ``rivals_regime`` (the
-    rivals on the deeper net there, and at st = 0.2 where the paper's grid ends); ``ceiling_deep`` / ``ceiling_shallow`` (the referee's best
+    rivals on the deeper net there, and at st = 0.2 where our grid ends); ``ceiling_deep`` / ``ceiling_shallow`` (the referee's best
     along the GIFT line, pathwise and printed direction, at every point of the GIFT grid and
     the extended st); ``variants`` (gift without confirmation or with a 5x budget,
     gift-printed with and without w0 at eta in {0.05, 0.1, 0.3, 1} % of |w0|, the retrain

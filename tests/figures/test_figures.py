@@ -293,6 +293,22 @@ def test_paper_noise_laws_map_exactly_onto_the_effects(kind, x64):
         assert abs(n.std() - st) < 4.5 * st / math.sqrt(2 * m)
 
 
+def test_an_mnist_folder_reaches_the_jobs_under_run_finetune_s_name():
+    """``--mnist-folder DIR``: the GIFT sweeps pass it as run_finetune's ``data_folder`` (a wrong key
+    would fail every point); a job whose library function takes no folder says so once."""
+    import inspect
+
+    from gift_theory.finetune import run_ceiling, run_finetune
+
+    S = paper_figures.sweeps("tiny", mnist_folder="/some/idx")
+    for name in ("gift_awgn_deep", "extended", "variants"):
+        assert S[name].fixed["dataset"] == "mnist" and S[name].fixed["options"]["data_folder"] == "/some/idx"
+        assert _jobs.unavailable(S[name].job, S[name].fixed) is None
+    assert "data_folder" in inspect.signature(run_finetune).parameters
+    ceil = _jobs.unavailable(S["ceiling_deep"].job, S["ceiling_deep"].fixed)
+    assert (ceil is None) == ("data_folder" in inspect.signature(run_ceiling).parameters)
+
+
 def test_cli_bad_input_is_one_line_and_exit_2(capsys, tmp_path):
     from gift_theory.cli import main
 

@@ -642,6 +642,11 @@ def main(argv=None) -> int:
             results[d] = {"error": str(exc)}
     if args.table:
         sys.stdout.write(table(results) + "\n")
+        for d, r in results.items():  # the 28 % claim's readings, one table per folder
+            acc = r.get("accuracy_gain_up_to_28pct")
+            if acc is not None and "readings" in acc:
+                sys.stdout.write(f"\n28 % claim, {d}: verdict {acc['verdict']} (holds under: "
+                                 f"{', '.join(acc['holds_under']) or 'none'})\n\n" + readings_table(acc) + "\n")
     else:
         out = results[args.data_dirs[0]] if len(results) == 1 else results
         sys.stdout.write(json.dumps(out, indent=2, default=float) + "\n")

@@ -42,6 +42,7 @@ FIGURES = (
     "gain_vs_baseline",
     "ceiling",
     "undertrained",
+    "extended",
 )
 
 

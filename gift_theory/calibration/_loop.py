@@ -254,7 +254,12 @@ class _LayerState:
         dpW, deW = f.W_prog - old.W_prog, f.W - old.W
         movedW = np.abs(dpW) > stuck_z * np.sqrt(f.W_se ** 2 + old.W_se ** 2)
         failed = movedW & (new_flags[0] | self.fixed[0])
-        dead_now = (movedW.sum(1) >= 3) & (failed.sum(1) >= 0.8 * movedW.sum(1))
+        # ... and whose realised row is (near) 0 where the data see it: a row with some stuck weights
+        # has its moved entries fail too (the correction moves mostly those), but the rest of it is there
+        seen = np.abs(f.W_prog) > 3 * f.W_se
+        ratio = np.sqrt(np.sum(np.where(seen, f.W, 0.0) ** 2, 1) / np.maximum(np.sum(np.where(seen, f.W_prog, 0.0) ** 2, 1),
+                                                                              1e-300))
+        dead_now = (movedW.sum(1) >= 3) & (failed.sum(1) >= 0.8 * movedW.sum(1)) & (seen.sum(1) >= 3) & (ratio < 0.25)
         dead = dead_now & self.dead_flag & ~self.fixed[0].all(1)
         self.dead_flag = dead_now & ~dead
         if np.any(dead):

@@ -23,8 +23,11 @@ Without taps only the output layer is read (its regressor the model's hidden lay
 programmed) and corrected; the hidden layers' maps, stuck weights and dead neurons are not
 identified, and the report says so. The first round's measurement then also goes to the lab's
 diagnosis (every effect but per-device offsets); when it names a model the data do not reject,
-w0 retrained under it is a second candidate, and the confirmation measures both against w0 and
-returns the better one if the chip finds it significantly better than w0.
+w0 retrained under it is a second candidate; after a few rounds of the output's closed loop,
+the rest of the budget trains its result further on the chip's own outputs (``pat-identified``
+from it, the model at the noise level read off the shots) for a third. The confirmation measures
+every candidate against w0 on the same inputs and returns the best if the chip finds it
+significantly better than w0.
 """
 
 from __future__ import annotations
@@ -80,7 +83,7 @@ def _row_gain(W_eff, W):
 
 def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None = None, reserve: float = 4.0,
               z_accept: float = 2.5, stuck_z: float = 5.0, stuck_ratio: float = 0.25, gain_clip=(0.4, 2.5),
-              noise_tolerance: float = 0.1, retrain: bool = True, ridge: float = 0.01):
+              noise_tolerance: float = 0.1, retrain: bool = True, ridge: float = 0.01, no_taps_rounds: int = 3):
     """Calibrate the chip of ``problem`` to realise w0 (module docstring).
 
     Parameters
@@ -99,6 +102,8 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     retrain : False never retrains (pre-compensation only)
     ridge : a correction acts on the directions the layer's inputs span; ``ridge`` (relative to their
         mean second moment) sets how weakly spanned a direction may be (:meth:`_LayerState.correct`)
+    no_taps_rounds : without taps, the rounds of the output's closed loop (the rest of the budget
+        goes to physics-aware training from its result)
 
     Returns
     -------
@@ -110,6 +115,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     slope = _SLOPES[problem.arch.activation]
     spend = (problem.evaluations_left() - reserve) * problem.unit_shots
     n = int(min(inputs, problem.K1, max(32, spend // (4 * int(shots)))))
+    max_rounds = None if rounds is None else int(rounds)
     order = np.asarray(jax.random.permutation(jax.random.fold_in(problem.key, 7000), problem.K1))
     x_cal = problem.x_ft[np.sort(order[:n])]
     cost = n * int(shots) / problem.unit_shots
@@ -117,8 +123,10 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     prog = [(W.copy(), b.copy()) for W, b in w0]
     lays = [_LayerState(W, b) for W, b in w0]
     prev, s_hat, taps, retrained, history, first = None, None, None, 0, [], {}
-    for k in range(10 ** 6 if rounds is None else int(rounds)):
+    for k in range(10 ** 6 if max_rounds is None else max_rounds):
         if problem.evaluations_left() < cost + reserve - 1e-9:
+            break
+        if taps is False and k >= no_taps_rounds:  # the output's map converges in a few rounds
             break
         with phase("chip"):
             meas = problem.chip.measure(_layers32(prog), x_cal, int(shots), taps=True)
@@ -163,6 +171,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
         return problem.w0, info
     from ..finetune._linesearch import confirm_best
     candidates = [_layers32(prog)]
+    names = ["the calibrated weights"]
     if not taps and retrain:
         # the output alone cannot show the hidden layers' maps: the lab's diagnosis of the first round
         # (every effect but per-device offsets, as identify-retrain) may name a global one -- a layer's
@@ -173,9 +182,19 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
         info["diagnosis"] = pinfo
         if pinfo["used"] == "the top-ranked model":
             candidates.append(_retrain(problem, physics))
+            names.append("the weights retrained under the diagnosis' model")
+        # what the output cannot show, the chip's own outputs can still steer: physics-aware
+        # training from the calibrated weights with the rest of the budget (the model at the noise
+        # level read off the shots), the confirmation's share kept
+        from ..finetune._rivals import pat
+        keep = 2.0 * (len(candidates) + 2)
+        if problem.evaluations_left() > keep + 1:
+            with phase("calibration pat"):
+                w_pat, _ = pat(problem, noise="identified", level=s_hat, start=candidates[0], reserve=keep)
+            candidates.append(w_pat)
+            names.append("the calibrated weights trained further on the chip's outputs (pat-identified)")
     with phase("chip"):
         chosen, conf = confirm_best(problem, candidates, z_accept=z_accept)
-    names = ["the calibrated weights", "the weights retrained under the diagnosis' model"]
     info.update(conf, accepted=chosen is not None, returned="w0" if chosen is None else names[chosen])
     return (problem.w0 if chosen is None else candidates[chosen]), info
 
@@ -235,7 +254,12 @@ class _LayerState:
         dpW, deW = f.W_prog - old.W_prog, f.W - old.W
         movedW = np.abs(dpW) > stuck_z * np.sqrt(f.W_se ** 2 + old.W_se ** 2)
         failed = movedW & (new_flags[0] | self.fixed[0])
-        dead_now = (movedW.sum(1) >= 3) & (failed.sum(1) >= 0.8 * movedW.sum(1))
+        # ... and whose realised row is (near) 0 where the data see it: a row with some stuck weights
+        # has its moved entries fail too (the correction moves mostly those), but the rest of it is there
+        seen = np.abs(f.W_prog) > 3 * f.W_se
+        ratio = np.sqrt(np.sum(np.where(seen, f.W, 0.0) ** 2, 1) / np.maximum(np.sum(np.where(seen, f.W_prog, 0.0) ** 2, 1),
+                                                                              1e-300))
+        dead_now = (movedW.sum(1) >= 3) & (failed.sum(1) >= 0.8 * movedW.sum(1)) & (seen.sum(1) >= 3) & (ratio < 0.25)
         dead = dead_now & self.dead_flag & ~self.fixed[0].all(1)
         self.dead_flag = dead_now & ~dead
         if np.any(dead):

@@ -206,7 +206,8 @@ def _pat_step(params, opt_state, key, x, y, y_chip, physics, arch, tx, draws=1):
     return optax.apply_updates(params, updates), opt_state
 
 
-def pat(problem, *, batch: int = 32, lr: float = 0.01, momentum: float = 0.9, noise: str = "s0", draws: int = 8):
+def pat(problem, *, batch: int = 32, lr: float = 0.01, momentum: float = 0.9, noise: str = "s0", draws: int = 8,
+        start=None, level: float | None = None, reserve: float = 0.0):
     """Hybrid physics-aware training: forward passes on the chip, gradients through the model.
 
     Mini-batch SGD on the fine-tuning set until the chip budget is spent.
@@ -224,17 +225,23 @@ def pat(problem, *, batch: int = 32, lr: float = 0.01, momentum: float = 0.9, no
     the step's output is the model's own draws shifted by the chip's mean error (y_chip's mean
     minus the model's), so the gradient is the chip's mean error times the model's derivative plus
     the derivative of the model's noise variance at the chip's level: the whole loss.
+
+    ``start``: the weights to start from (default w0); ``level``: the chip's noise level when it
+    is already known (no evaluation spent on it); ``reserve``: chip evaluations left unspent.
     """
     require(noise in ("s0", "identified"), f"pat: noise={noise!r}; known: s0, identified")
     tx = optax.sgd(lr, momentum=momentum)
-    params = problem.w0
+    params = problem.w0 if start is None else start
     opt_state = tx.init(params)
     physics, info = problem.model, {}
     if noise == "identified":
-        s_hat, info = identify_noise_level(problem, evaluations=1.0)
+        if level is None:
+            s_hat, info = identify_noise_level(problem, evaluations=1.0)
+        else:
+            s_hat, info = level, {}
         physics = problem.model.replace(s=float(s_hat))
     per_step = batch * problem.K2
-    remaining = problem.chip.ledger.remaining()
+    remaining = problem.chip.ledger.remaining() - reserve * problem.unit_shots
     n_steps = int(remaining // per_step) if math.isfinite(remaining) else 100
     rng = np.random.default_rng(int(jax.random.randint(jax.random.fold_in(problem.key, 3), (), 0, 2**31 - 1)))
     key = jax.random.fold_in(problem.key, 901)

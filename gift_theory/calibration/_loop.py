@@ -81,9 +81,10 @@ NOISE_CLASSES = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluc
                  "readout_nonlinearity", "time_drift", "memory")
 
 
-def noise_physics(key, meas, effects=()):
+def noise_physics(key, meas, effects=(), *, s: float | None = None, alpha: float = 0.01):
     """The noise of the chip ``meas`` measured, read by the measurement lab with the realised maps as
-    the weights (so a fixed map is not read as noise): the ``effects`` named, fitted, or the
+    the weights (so a fixed map is not read as noise): the ``effects`` named, fitted; else awgn at
+    the level ``s`` read off the shots when it passes the lab's test (p >= ``alpha``); else the
     diagnosis' model over the noise-like classes and the loaded plugins of those classes (its
     best passing model when the awgn model fails, else awgn at its fitted level).
 
@@ -98,6 +99,13 @@ def noise_physics(key, meas, effects=()):
     if effects:
         ph = fit_effects(key, meas, list(effects)).after.physics
         return ph, {"physics": ph.describe(), "used": "the effects named"}
+    if s is not None:  # the diagnosis only where awgn at the shots' level does not fit
+        from ..lab import Model, compare
+
+        c = compare(jax.random.fold_in(key, 1), Model(awgn(s)), meas)
+        if c.p_value >= alpha:
+            ph = awgn(s)
+            return ph, {"physics": ph.describe(), "baseline_p": c.p_value, "used": "awgn (it fits)"}
     cands = [c for c in default_candidates(meas)
              if REGISTRY[c].mechanism in NOISE_CLASSES and not fitted_as_offsets(c)]
     d = diagnose(key, meas, candidates=cands)
@@ -195,7 +203,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
         if prev is None and taps and retrain and noise_model:
             with phase("calibration noise"):  # the noise beyond its level: law, signal-dependent parts
                 realised = dataclasses.replace(meas, params=tuple(Layer(f.W, f.b) for f in fits))
-                noise, info_noise = noise_physics(jax.random.fold_in(problem.key, 7300), realised, effects)
+                noise, info_noise = noise_physics(jax.random.fold_in(problem.key, 7300), realised, effects, s=s_hat)
         if noise is None or noise.names == ("awgn",):
             mismatch = abs(s_hat / problem.s0 - 1.0) > noise_tolerance
             physics = awgn(s_hat if mismatch else problem.s0)

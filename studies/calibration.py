@@ -103,8 +103,14 @@ def markdown(table, methods=("calibrate", "identify-retrain", "pat", "gift")) ->
         cells = []
         for m in methods:
             c = row["methods"].get(m)
-            cells.append("-" if c is None else f"{c['after']:.3f} ({c['recovered']:+.2f}; min {c['recovered_min']:+.2f}; "
-                                                f"{c['evaluations']:.0f} ev)")
+            if c is None:
+                cells.append("-")
+            elif c["recovered"] is None:  # the chip lost less than half a point: nothing to recover
+                cells.append(f"{c['after']:.3f} (no loss; {c['evaluations']:.0f} ev)")
+            else:
+                worse = f"; {c['worse_than_w0']} below w0" if c["worse_than_w0"] else ""
+                cells.append(f"{c['after']:.3f} ({c['recovered']:+.2f}; min {c['recovered_min']:+.2f}; "
+                             f"{c['evaluations']:.0f} ev{worse})")
         lines.append(f"| {LABELS.get(row['chip'], row['chip'])} ({row['before']:.3f}; {row['ideal']:.3f}) | "
                      f"{'yes' if row['taps'] else 'no'} | " + " | ".join(cells) + " |")
     for taps in (True, False):

@@ -42,6 +42,7 @@ import numpy as np
 
 from .. import _xla
 from .._errors import GiftInputError
+from .._finite import check_finite
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._qtest import q_test
@@ -330,6 +331,9 @@ def reference(key, meas: Measurement, splits: int = 2) -> Reference:
             F[:, li, :2] += cell_statistic(A, B, scales=scales[li]) / splits
         if moments:
             F[:, li, 2:] = floor_moment_channels(Y, split)
+        check_finite(F[:, li], lambda: f"the noise floor's channels of layer {meas.layer_ids()[li]} (the measured "
+                                       f"shots' distances and moments in float32; values up to "
+                                       f"{float(np.max(np.abs(Y))):.3g})")
     sd = F.std(axis=0, ddof=1)
     weights = 1.0 / np.maximum(sd, 1e-12 * max(float(sd.max()), 1e-300))
     Q, _, _, null_sd, _ = q_test(F.reshape(meas.n, -1))

@@ -16,6 +16,7 @@ import jax
 import numpy as np
 from scipy import optimize
 
+from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
 from ..chips import simulate_measurement
@@ -96,6 +97,10 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     -------
     Comparison
     """
+    need = model.physics.needs_times()
+    if need and meas.t is None:
+        raise GiftInputError(f"model {model.describe()}: {need[0]} acts through the acquisition times t, and the "
+                             f"measurement has none")
     k_model, k_floor = jax.random.split(key)
     if ref is None:
         ref = reference(k_floor, meas, floor_splits)

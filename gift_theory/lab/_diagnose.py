@@ -63,6 +63,7 @@ from scipy import stats
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from ..effects import BUILTIN, REGISTRY
+from ..effects._physics import scope_error
 from .._model import named_subkey
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, failing_layers, one_step_check
@@ -106,7 +107,8 @@ def default_candidates(meas: Measurement) -> list[str]:
     """Every registered effect a diagnosis of ``meas`` tries: all but awgn, and those silent
     without acquisition times only when the file has them."""
     names = list(BUILTIN) + [n for n in REGISTRY if n not in BUILTIN]  # catalogue order, then plugins
-    return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)]
+    return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)
+            and scope_error(REGISTRY[n], meas.arch.depth) is None]
 
 
 #: a candidate's status (CONTRACTS §6), in ranking order
@@ -513,6 +515,8 @@ def _check_candidates(names, meas: Measurement) -> list:
                                      f"{', '.join(n for n in REGISTRY if n != 'awgn')}")
             if REGISTRY[e].needs_times and meas.t is None:
                 raise GiftInputError(f"--candidates {e}: needs acquisition times t in the measurement")
+            if scope_error(REGISTRY[e], meas.arch.depth):
+                raise GiftInputError(f"--candidates {e}: {scope_error(REGISTRY[e], meas.arch.depth)}")
     return list(names)
 
 
@@ -968,6 +972,8 @@ def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, ve
             raise GiftInputError(f"--add: unknown effect {e!r}; known: {', '.join(REGISTRY)}")
         if REGISTRY[e].needs_times and meas.t is None:
             raise GiftInputError(f"--add {e}: the measurement has no acquisition times t; {e} is silent without them")
+        if scope_error(REGISTRY[e], meas.arch.depth):
+            raise GiftInputError(f"--add {e}: {scope_error(REGISTRY[e], meas.arch.depth)}")
     session = Session(key, meas, shots)
     base, base_cmp = session.baseline, session.baseline_comparison
     ladder = [("awgn", base_cmp)]

@@ -125,16 +125,22 @@ def layer_level(key, model: Model, meas: Measurement, layer: int, xtol: float = 
     measured ones (mean log variance over the layer's cells, both from r shots, so their
     small-sample bias is the same): the root in log s over [s / 20, 20 s] (Brent's method to
     ``xtol`` in log s, 0.01 % of s; the gap grows with s), or the end the gap does not change
-    sign beyond."""
+    sign beyond. The search starts from the model's s, or -- a model without additive noise --
+    from the layer's own spread: no fixed floor (at s = 1e-6 a floor of 1e-4 set every layer's
+    level 5e-6 and failed each one at z = 89-328)."""
     li = meas.layer_ids().index(layer)
-    target = float(np.mean(np.log(np.var(meas.layers()[li], axis=1, ddof=1) + 1e-30)))
-    s0 = max(float(model.physics.s), 1e-4)
+    v = np.var(meas.layers()[li], axis=1, ddof=1)
+    tiny = 1e-12 * max(float(np.mean(v)), np.finfo(np.float64).tiny)  # log of a cell with no spread: bounded
+    target = float(np.mean(np.log(v + tiny)))
+    s0 = float(model.physics.s)
+    if not s0 > 0:
+        s0 = float(np.sqrt(np.mean(v) / 2.0)) or 1.0
 
     @functools.lru_cache(maxsize=None)  # brentq evaluates the ends again
     def gap(log_s):
         m = Model(model.physics.replace(s=float(np.exp(log_s))), model.params, model.offsets)
         M = np.asarray(one_step_shots(key, m, meas, layer), np.float64)
-        return float(np.mean(np.log(np.var(M, axis=1, ddof=1) + 1e-30))) - target
+        return float(np.mean(np.log(np.var(M, axis=1, ddof=1) + tiny))) - target
 
     lo, hi = float(np.log(s0 / 20.0)), float(np.log(s0 * 20.0))
     if gap(lo) >= 0:
@@ -170,7 +176,9 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
             # how far the layer's variability is from the joint level's (log variances of r shots
             # on both sides: the same small-sample bias), then the layer at its own level
             M0 = np.asarray(one_step_shots(k_l, model, meas, l), np.float64)
-            gap = np.mean(np.log(np.var(Y, axis=1, ddof=1) + 1e-30) - np.log(np.var(M0, axis=1, ddof=1) + 1e-30), 1)
+            vy = np.var(Y, axis=1, ddof=1)
+            tiny = 1e-12 * max(float(np.mean(vy)), np.finfo(np.float64).tiny)
+            gap = np.mean(np.log(vy + tiny) - np.log(np.var(M0, axis=1, ddof=1) + tiny), 1)
             level_z = over_inputs(gap)
             level = layer_level(k_l, model, meas, l)
             m = Model(model.physics.replace(s=level), model.params, model.offsets)

@@ -30,7 +30,7 @@ from .._finite import NotFinite, check_finite
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._qtest import log_variance_bias
-from ._shots import draws, layer_outputs, params32, strong32, tiled_times, to32
+from ._shots import draws, eager_forward_at, layer_outputs, params32, strong32, tiled_times, to32
 
 
 def _moments(A, t):
@@ -115,6 +115,12 @@ class MomentProblem:
                                 f"to {float(np.max(np.abs(meas.layers()[ids.index(l)]))):.3g})")
         # forward returns every layer; only measured ones enter the loss
         self.dat = tuple(dat[ids.index(l)] if l in ids else None for l in range(1, meas.arch.depth + 1))
+
+    def probe(self, physics, params) -> None:
+        """One shot of the first input through the model, run eagerly: a plugin hook whose result is
+        not finite (or breaks its contract) raises its own one-line GiftInputError here."""
+        noise = draws(self.key, physics, self.meas, self.K)
+        eager_forward_at(params32(params), self.x, noise, strong32(physics), self.meas.arch, self.t, (0, 0))
 
     def loss(self, physics, params, free):
         """``theta -> moment loss`` for the free parameters (common random numbers: one set of
@@ -300,6 +306,7 @@ def fit_moments(problem: MomentProblem, physics, params, scan, rescan_s: bool = 
         grids[i] = np.log(max(float(physics.s), 1e-12)) + np.log([0.4, 0.55, 0.7, 0.85, 1.0, 1.1])
     theta, loss = optimise(f, theta0, grids)
     if not np.isfinite(loss):  # every value tried gave a non-finite loss: nothing was fitted
+        problem.probe(physics, params)  # a plugin hook behind it is named there (a bad input)
         raise NotFinite(f"the moment fit of {', '.join(free)} ({physics.describe()}): its loss is not finite at any "
                         f"value tried (the model's or the data's moments overflow float32)")
     return with_values(physics, {p: np.float64(v) for p, v in values_of(physics, free, theta).items()})

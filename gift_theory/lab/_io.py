@@ -53,7 +53,7 @@ def _float_array(arrays, key, where):
     bad = ~np.isfinite(a)
     if bad.any():
         i = np.unravel_index(int(np.argmax(bad)), a.shape)
-        raise GiftInputError(f"{where}: {key} contains NaN or Inf ({a[i]!r} at index {list(map(int, i))})")
+        raise GiftInputError(f"{where}: {key} contains NaN or Inf ({float(a[i])!r} at index {list(map(int, i))})")
     with np.errstate(over="ignore"):
         big = ~np.isfinite(a.astype(np.float32))
     if big.any():
@@ -444,8 +444,8 @@ def _same_on_every_row(path, values, group, label, lines, between: str = "its ro
     if differs.size:
         k = int(differs[0])
         j = int(np.argmax(values[k + 1] != values[k]))
-        raise GiftInputError(f"{path}: {label(int(group[k]), j)} differs between {between} ({values[k, j]!r} on line "
-                             f"{int(lines[k]) + 2}, {values[k + 1, j]!r} on line {int(lines[k + 1]) + 2})")
+        raise GiftInputError(f"{path}: {label(int(group[k]), j)} differs between {between} ({float(values[k, j])!r} on "
+                             f"line {int(lines[k]) + 2}, {float(values[k + 1, j])!r} on line {int(lines[k + 1]) + 2})")
 
 
 def load_wide_csv(path, *, weights=None) -> Measurement:
@@ -640,13 +640,13 @@ def load_csv(path, *, weights=None) -> Measurement:
                 i, s_, j = (int(v) for v in bad[0])
                 k0, k1 = s_sel[(i * r + s_) * d], s_sel[(i * r + s_) * d + j]
                 raise GiftInputError(f"{path}: input {int(ids[i])} shot {int(shots[s_])}: t differs between its rows "
-                                     f"({t[k0]!r} on line {int(k0) + 2}, {t[k1]!r} on line {int(k1) + 2})")
+                                     f"({float(t[k0])!r} on line {int(k0) + 2}, {float(t[k1])!r} on line {int(k1) + 2})")
             if "t" in arrays:
                 bad = np.argwhere(arrays["t"] != tt[:, :, 0])
                 if bad.size:
                     i, s_ = (int(v) for v in bad[0])
                     raise GiftInputError(f"{path}: input {int(ids[i])} shot {int(shots[s_])}: t differs between "
-                                         f"layers (layer {l} has {tt[i, s_, 0]!r}, an earlier one {arrays['t'][i, s_]!r})")
+                                         f"layers (layer {l} has {float(tt[i, s_, 0])!r}, an earlier one {float(arrays['t'][i, s_])!r})")
             arrays["t"] = tt[:, :, 0]
     sel = rows[layer == 0]
     require(sel.size, f"{path}: no rows of layer 0 (the inputs x)")

@@ -161,13 +161,13 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
         part = layer_outputs(params, x, noise, physics, meas.arch, t)
         check_all_finite(part, [lambda l=l: f"the model's shots of layer {l} ({model.describe()})"
                                 for l in range(1, len(part) + 1)],
-                         lambda k, i: _eager_forward_at(params, x, noise, physics, meas.arch, t, i))
+                         lambda k, i: eager_forward_at(params, x, noise, physics, meas.arch, t, i))
         parts.append(part)
     outs = parts[0] if len(parts) == 1 else tuple(jnp.concatenate(p, axis=1) for p in zip(*parts))
     return tuple(outs[l - 1] for l in meas.layer_ids())
 
 
-def _eager_forward_at(params, x, noise, physics, arch, t, at):
+def eager_forward_at(params, x, noise, physics, arch, t, at):
     """The forward pass of one shot (input ``at[0]``, shot ``at[1]`` of a batch of draws ``noise``)
     run eagerly: every plugin hook's result is then checked as it returns (a hook that returned
     NaN or inf is named, one line)."""

@@ -1065,7 +1065,8 @@ def _robust_trend_p(X, ebar, alive, p: int, theta) -> float:
 def _map_uncertainty(lay: _Layer, act: str, s_guess: float) -> float:
     """The map's standard error against its own size, at the programmed map: per neuron the rms
     standard error of its row of W (the per-input means' least squares, weighted by their
-    shots' variance) over the row's rms, the median over the layer's neurons. Above 1 the mean
+    shots' variance) over the row's rms, the median over the layer's neurons (without taps, at
+    least the regressor's Monte Carlo error over its spread across inputs). Above 1 the mean
     response carries no more about W_eff than noise (a saturated layer at s = 10: its least
     squares wandered to |z| ~ 1e7 along a flat valley, and its shape tests named
     activation_mismatch on correctly specified files)."""
@@ -1078,8 +1079,15 @@ def _map_uncertainty(lay: _Layer, act: str, s_guess: float) -> float:
     F = np.einsum("nia,ni,nib->iab", X, w, X)
     se = np.sqrt(np.maximum(np.einsum("iaa->ia", np.linalg.pinv(F, hermitian=True))[:, :p], 0.0))
     rms_w = np.sqrt(np.mean(lay.W ** 2, axis=1))
-    ratio = np.sqrt(np.mean(se ** 2, axis=1)) / np.maximum(rms_w, np.finfo(np.float64).tiny)
-    return float(np.median(ratio))
+    ratio = float(np.median(np.sqrt(np.mean(se ** 2, axis=1)) / np.maximum(rms_w, np.finfo(np.float64).tiny)))
+    if lay.draws and lay.Cin is not None and lay.Cin.ndim == 3:
+        # without taps the regressor is a Monte Carlo mean of the layer before: where its error
+        # across inputs exceeds its spread, the least squares fits the draws' noise, and its slope
+        # shrinks towards 0 (s = 10: W_eff = 0.03 W, "gain_error" on a correctly specified file)
+        mc = s2 * float(np.mean(np.einsum("nii->ni", lay.Cin))) / lay.draws
+        spread = float(np.mean(np.var(lay.A[:, 0, :], axis=0)))
+        ratio = max(ratio, float(np.sqrt(mc / max(spread, np.finfo(np.float64).tiny))))
+    return ratio
 
 
 def _unresolved_layer(lay: _Layer, act: str, s_guess: float, t, k: int, why: str = "") -> LayerIdentity:

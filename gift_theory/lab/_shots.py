@@ -89,7 +89,7 @@ def tiled_times(meas: Measurement, K: int):
 
 
 #: bytes of standard draws kept between calls (least recently used first out)
-DRAW_CACHE_BYTES = 256 << 20
+DRAW_CACHE_BYTES = 64 << 20
 _draw_cache: "collections.OrderedDict[tuple, jax.Array]" = collections.OrderedDict()
 _draw_lock = threading.Lock()
 _draw_bytes = [0]

@@ -78,10 +78,10 @@ class SimulatedChip:
         y, tp, t = _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots,
                             taps=tapped, with_t=with_t)
 
-        def rerun(j, at):  # the bad input's campaign again, eagerly: a plugin hook that made it is named
+        def rerun(j, at):  # the campaign again, eagerly: a plugin hook that made the bad value is named
             with jax.disable_jit():
-                _measure(k, params, jnp.asarray(x)[at[0]:at[0] + 1], self.physics, arch=self.arch, shots=shots,
-                         taps=tapped, with_t=with_t)
+                _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots, taps=tapped,
+                         with_t=with_t)
         check_all_finite(tuple(tp) + (y,), [f"the simulated shots of layer {l} ({self.physics.describe()})"
                                             for l in (range(1, self.arch.depth + 1) if tapped
                                                       else (self.arch.depth,))], rerun)

@@ -258,14 +258,18 @@ def predictive_moments(key, model: Model, meas: Measurement, *, shots: int | Non
 
 # ---- power: what a "consistent" verdict can and cannot rule out on this file ---------------------
 
-def _power_on(key, model: Model, big: Measurement, n: int, alpha: float) -> tuple[float, float]:
-    """The rejection rate of :func:`compare`'s test of ``model`` over the B = big.n / n files of
-    n inputs that ``big`` holds one after another, and its standard error."""
+def _power_p(key, model: Model, big: Measurement, n: int) -> np.ndarray:
+    """The p-values of :func:`compare`'s test of ``model`` on the B = big.n / n files of n inputs
+    that ``big`` holds one after another."""
     k_ref, k_model = jax.random.split(key)
     ref = reference(k_ref, big)
     C = channel_values(k_model, model, big, ref)
-    B = big.n // n
-    p = np.array([q_test(C[g * n:(g + 1) * n].reshape(n, -1))[1] for g in range(B)])
+    return np.array([q_test(C[g * n:(g + 1) * n].reshape(n, -1))[1] for g in range(big.n // n)])
+
+
+def _rate(p, alpha: float) -> tuple[float, float]:
+    """The rejection rate of p-values ``p`` at ``alpha`` and its binomial standard error."""
+    B = len(p)
     rate = float(np.mean(p < alpha))
     return rate, float(np.sqrt(max(rate * (1 - rate), 1.0 / B) / B))
 
@@ -319,25 +323,38 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
         q = q0 * 0.5 * v_model / max(v_shot, 1e-300)
         probes.append(("input_dependent_noise", "shot", phys.replace(s=s / np.sqrt(2.0)).with_effect("shot", q=q)))
     params = model.weights(meas)
-    x = np.tile(meas.x, (replicates, 1))
     hidden = len(meas.params) > 1
     common = {"replicates": replicates, "n": meas.n, "r": meas.r, "taps": meas.has_taps,
               "layers": list(meas.layer_ids())}
+    # the replicate files in batches of at most POWER_BYTES (one batch for a small file; a 50 MB
+    # file's 20 replicates at once were 1 GB of shots)
+    per_file = 8 * meas.n * meas.r * (sum(meas.arch.widths[1:]) + meas.arch.widths[0])
+    batch = int(max(1, min(replicates, POWER_BYTES // max(per_file, 1))))
     out = []
     for mech, name, phys in probes:
         k = named_subkey(key, f"power_{name}")
-        big = simulate_measurement(named_subkey(k, "files"), params, x, phys, shots=meas.r,
-                                   activation=meas.activation, taps=hidden)
-        if meas.t is not None:
-            big = dataclasses.replace(big, t=np.tile(meas.t, (replicates, 1)))
-        seen = big if meas.has_taps else dataclasses.replace(big, taps=None)
-        p, se = _power_on(named_subkey(k, "score"), model, seen, meas.n, alpha)
-        pt = None
-        if not meas.has_taps and hidden:
-            pt, _ = _power_on(named_subkey(k, "score"), model, big, meas.n, alpha)
+        ps, pts = [], []
+        for b0 in range(0, replicates, batch):
+            kb = k if batch >= replicates else jax.random.fold_in(k, b0)
+            nb = min(batch, replicates - b0)
+            big = simulate_measurement(named_subkey(kb, "files"), params, np.tile(meas.x, (nb, 1)), phys,
+                                       shots=meas.r, activation=meas.activation, taps=hidden)
+            if meas.t is not None:
+                big = dataclasses.replace(big, t=np.tile(meas.t, (nb, 1)))
+            seen = big if meas.has_taps else dataclasses.replace(big, taps=None)
+            ps.append(_power_p(named_subkey(kb, "score"), model, seen, meas.n))
+            if not meas.has_taps and hidden:
+                pts.append(_power_p(named_subkey(kb, "score"), model, big, meas.n))
+            del big, seen
+        p, se = _rate(np.concatenate(ps), alpha)
+        pt = _rate(np.concatenate(pts), alpha)[0] if pts else None
         out.append({"mechanism": mech, "probe": name, "power": p, "se": se, "power_with_taps": pt,
                     "probe_params": phys.params_json(), **common})
     return out
+
+
+#: bytes of simulated replicate files :func:`power_of` holds at once
+POWER_BYTES = 128 << 20
 
 
 def power_notes(power: list[dict], verdict_passes: bool, threshold: float = 0.8) -> list[str]:

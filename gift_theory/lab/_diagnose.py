@@ -80,6 +80,7 @@ from ._localise import (
     where_it_fails,
 )
 from ._identify import _shots_law, _subset, _two_sided, identify
+from ._memory import candidate_threads
 from ._qtest import over_inputs
 from ._explain_output import also_explaining, mean_refusal, summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
@@ -276,7 +277,7 @@ class Session:
         put("meas", meas)
         put("shots", shots)
         # threads for the refit nulls' replicates and the candidates (the numbers do not depend on it)
-        put("workers", default_workers() if workers is None else max(1, int(workers)))
+        put("workers", default_workers(meas) if workers is None else max(1, int(workers)))
         k_split, k_fit, k_cmp, k_ref, k_step = jax.random.split(key, 5)
         for name, v in (("k_fit", k_fit), ("k_cmp", k_cmp), ("k_step", k_step)):
             put(name, v)
@@ -849,8 +850,10 @@ def _localise(session: Session, base: Model, meas: Measurement, shots):
     return steps, failing, evidence, sigs, where
 
 
-def default_workers() -> int:
-    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``)."""
+def default_workers(meas: Measurement | None = None) -> int:
+    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``),
+    and -- given ``meas`` -- no more than :func:`~._memory.candidate_threads` allows for its size
+    (each thread holds a candidate's model shots and statistics; the numbers do not depend on it)."""
     env = os.environ.get("GIFT_LAB_THREADS", "").strip()
     if env.isdigit() and int(env) >= 1:
         return int(env)
@@ -858,7 +861,7 @@ def default_workers() -> int:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
         cores = os.cpu_count() or 1
-    return max(1, min(4, cores))
+    return max(1, min(4, cores, candidate_threads(meas) if meas is not None else 4))
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
@@ -889,7 +892,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     """
     t0 = time.time()
     names = default_candidates(meas) if candidates is None else _check_candidates(candidates, meas)
-    threads = default_workers() if workers is None else max(1, int(workers))
+    threads = default_workers(meas) if workers is None else max(1, int(workers))
     # the layer-wise identification (closed form, numpy: the mechanisms' backbone, and which
     # candidates to fit first) needs only the data: with threads to spare it runs beside the
     # baseline's fit, and localising -- which needs only the baseline -- beside the candidates

@@ -117,10 +117,10 @@ class MomentProblem:
         self.dat = tuple(dat[ids.index(l)] if l in ids else None for l in range(1, meas.arch.depth + 1))
 
     def probe(self, physics, params) -> None:
-        """One shot of the first input through the model, run eagerly: a plugin hook whose result is
-        not finite (or breaks its contract) raises its own one-line GiftInputError here."""
+        """The model's shots of the fitting inputs, run eagerly: a plugin hook whose result is not
+        finite (or breaks its contract) raises its own one-line GiftInputError here."""
         noise = draws(self.key, physics, self.meas, self.K)
-        eager_forward_at(params32(params), self.x, noise, strong32(physics), self.meas.arch, self.t, (0, 0))
+        eager_forward_at(params32(params), self.x, noise, strong32(physics), self.meas.arch, self.t)
 
     def loss(self, physics, params, free):
         """``theta -> moment loss`` for the free parameters (common random numbers: one set of

@@ -167,15 +167,14 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     return tuple(outs[l - 1] for l in meas.layer_ids())
 
 
-def eager_forward_at(params, x, noise, physics, arch, t, at):
-    """The forward pass of one shot (input ``at[0]``, shot ``at[1]`` of a batch of draws ``noise``)
-    run eagerly: every plugin hook's result is then checked as it returns (a hook that returned
-    NaN or inf is named, one line)."""
-    i, k = at[0], at[1]
-    one = {name: v[i:i + 1, k:k + 1] for name, v in noise.items()}
+def eager_forward_at(params, x, noise, physics, arch, t, at=None):
+    """The forward pass of a batch of draws ``noise`` run again eagerly (the failure path of a
+    non-finite stage; ``at``, the first bad index, is not needed: a hook's fault may depend on the
+    whole batch): every plugin hook's result is then checked as it returns, and a hook that
+    returned NaN or inf is named in one line."""
     with jax.disable_jit():
-        forward(params, jnp.asarray(x)[i:i + 1, None, :], one, physics, arch,
-                t=None if t is None else jnp.asarray(t)[i:i + 1, k:k + 1], taps=True)
+        forward(params, jnp.asarray(x)[:, None, :], noise, physics, arch, t=None if t is None else jnp.asarray(t),
+                taps=True)
 
 
 def strong32(physics):
@@ -220,10 +219,10 @@ def one_step_shots(key, model: Model, meas: Measurement, layer: int, draws: int 
 
 
 def _eager_one_step(key, W, b, a, physics, t, arch, layer, q):
-    """:func:`_one_step` eagerly on the first input (a plugin hook that returned a non-finite
-    value is named where it returns)."""
+    """:func:`_one_step` again, eagerly (a plugin hook that returned a non-finite value is named
+    where it returns)."""
     with jax.disable_jit():
-        _one_step(key, W, b, a[:1], physics, None if t is None else t[:1], arch, layer, q)
+        _one_step(key, W, b, a, physics, t, arch, layer, q)
 
 
 def one_step_pre(model: Model, meas: Measurement, layer: int) -> np.ndarray:
@@ -259,7 +258,7 @@ def _noiseless_of(model: Model, meas: Measurement, physics):
 
     def rerun(k, i):
         with jax.disable_jit():
-            _noiseless(p32, x32[i[0]:i[0] + 1], phys, meas.arch)
+            _noiseless(p32, x32, phys, meas.arch)
     check_all_finite(taps, [lambda l=l: f"the noiseless output of layer {l} ({physics.describe()})"
                             for l in range(1, len(taps) + 1)], rerun)
     return [np.asarray(z, np.float64) for z in pre], [np.asarray(a, np.float64) for a in taps]

@@ -182,7 +182,7 @@ def _to_bytes(key: str, value) -> bytes:
 def _read_entry(path: str, key: str):
     """The value stored at ``path`` for ``key``; raises ValueError (or OSError) when the entry is not
     a well-formed, untampered entry of that key."""
-    with np.load(path, allow_pickle=False) as f:
+    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as f:  # our handle: closed on a bad file
         files = set(f.files)
         if not {"__key__", "__skeleton__", "__digest__"} <= files:
             raise ValueError("not a memo entry")

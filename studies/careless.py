@@ -359,6 +359,16 @@ def c_shot_crosstalk(code, d):
                                     "--effect", "shot=0.002", "--effect", "crosstalk=0.04"])
 
 
+def c_pair_small_taps(code, d):
+    return _diag(code, d, "m.npz", ["--arch", "10-8-6-4", "--taps", "--effect", "awgn=0.015",
+                                    "--effect", "shot=0.002", "--effect", "crosstalk=0.04"])
+
+
+def c_pair_small_notaps(code, d):
+    return _diag(code, d, "m.npz", ["--arch", "10-8-6-4", "--effect", "awgn=0.015",
+                                    "--effect", "shot=0.002", "--effect", "crosstalk=0.04"])
+
+
 def c_readonly_cache(code, d):
     ro = os.path.join(d, "ro")
     os.makedirs(ro)
@@ -437,6 +447,8 @@ CASES = {
     "quantized_5bit_taps": (True, c_quantized_taps),
     "quantized_5bit_notaps": (True, c_quantized_notaps),
     "shot_crosstalk_pair": (True, c_shot_crosstalk),
+    "shot_crosstalk_10-8-6-4_taps": (True, c_pair_small_taps),
+    "shot_crosstalk_10-8-6-4_notaps": (True, c_pair_small_notaps),
     "readonly_cache_train": (True, c_readonly_cache),
     "truncated_cache_entry": (True, c_truncated_cache),
     "activation_bytes": (False, c_activation_bytes),

@@ -237,7 +237,7 @@ def _npz_arrays(path, what: str, keep=None) -> dict:
     """The arrays of an .npz (those ``keep`` accepts), never unpickled; a damaged archive or an array
     too large to hold is a bad input."""
     try:
-        with np.load(path, allow_pickle=False) as f:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as f:  # our handle: closed on a bad file
             return {k: f[k] for k in f.files if keep is None or keep(k)}
     except MemoryError:
         raise GiftInputError(f"{path}: an array in this .npz is too large to load into memory") from None

@@ -57,7 +57,7 @@ def load_weights(path: str):
     """``(params, meta)`` from a weight file written by :func:`save_weights` (or any npz with W1, b1, ...)."""
     require(os.path.isfile(path), f"{path}: no such weight file")
     try:
-        with np.load(path, allow_pickle=False) as f:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as f:  # our handle: closed on a bad file
             arrays = {k: f[k] for k in f.files}
     except Exception as exc:  # zip errors, truncated files
         raise GiftInputError(f"{path}: not a readable .npz file ({type(exc).__name__})") from None

@@ -1,6 +1,7 @@
 """False alarms of the lab on correctly specified files at extreme noise levels (issue 45, point 5).
 
     python -m studies.levels_null run OUT.jsonl [--levels 1e-6,1e-3,1,10] [--sets 200] [--taps both|yes|no]
+                                 [--minutes M]
     python -m studies.levels_null summary OUT.jsonl
 
 ``run`` simulates, per level s and taps setting, ``--sets`` null files (awgn at level s only: the
@@ -16,7 +17,10 @@ each what ``gift diagnose`` runs before it ranks candidates:
   over the layers; any is a false alarm) and each layer's level against the truth.
 
 The run is resumable: rows already in OUT (same level, taps and set) are skipped, every row is
-flushed as it is written, so a killed run continues where it stopped. ``summary`` prints per
+flushed as it is written, so a killed run continues where it stopped. Sets are taken in turn over
+the levels and taps settings (set 0 at every level, then set 1, ...), so a run stopped by
+``--minutes`` (no new set is started after M minutes) leaves the levels with equal counts. Each
+row names the code's commit (``+dirty``: the tree's gift_theory or studies differ from it). ``summary`` prints per
 level and taps the rates with their binomial 95 % intervals (Clopper-Pearson) and the binomial
 test of each count against 1 %.
 """
@@ -76,20 +80,34 @@ def one_set(s: float, taps: bool, i: int) -> dict:
     return out
 
 
-def run(path, levels, sets, taps_list):
+def _commit():
+    import subprocess
+
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    head = subprocess.run(["git", "-C", here, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    dirty = subprocess.run(["git", "-C", here, "status", "--porcelain", "--", "gift_theory", "studies/*.py"],
+                           capture_output=True, text=True)
+    return (head.stdout.strip() or "unknown") + ("+dirty" if dirty.stdout.strip() else "")
+
+
+def run(path, levels, sets, taps_list, minutes=None):
     done = _done(path)
+    commit = _commit()
+    t0 = time.time()
     with open(path, "a") as fh:
-        for taps in taps_list:
-            for s in levels:
-                t0 = time.time()
-                for i in range(sets):
+        for i in range(sets):
+            for taps in taps_list:
+                for s in levels:
                     if (s, taps, i) in done:
                         continue
+                    if minutes is not None and time.time() - t0 > 60 * minutes:
+                        sys.stderr.write(f"stopped after {minutes} minutes, before set {i}\n")
+                        return
                     row = one_set(s, taps, i)
-                    fh.write(json.dumps(row) + "\n")
+                    fh.write(json.dumps({**row, "commit": commit}) + "\n")
                     fh.flush()
-                    if (i + 1) % 20 == 0:
-                        sys.stderr.write(f"s = {s:g} taps {taps}: {i + 1}/{sets} ({time.time() - t0:.0f} s)\n")
+                    sys.stderr.write(f"s = {s:g} taps {taps}: set {i} ({row['seconds']:.0f} s, "
+                                     f"{time.time() - t0:.0f} s in all)\n")
 
 
 def _interval(k, n):
@@ -143,6 +161,7 @@ def main(argv=None):
     r.add_argument("--levels", default="1e-6,1e-3,1,10")
     r.add_argument("--sets", type=int, default=200)
     r.add_argument("--taps", choices=("both", "yes", "no"), default="both")
+    r.add_argument("--minutes", type=float, default=None, help="start no new set after this many minutes")
     sm = sub.add_parser("summary")
     sm.add_argument("out")
     a = p.parse_args(argv)
@@ -150,7 +169,7 @@ def main(argv=None):
         summary(a.out)
         return 0
     taps = {"both": [True, False], "yes": [True], "no": [False]}[a.taps]
-    run(a.out, [float(v) for v in a.levels.split(",")], a.sets, taps)
+    run(a.out, [float(v) for v in a.levels.split(",")], a.sets, taps, a.minutes)
     return 0
 
 

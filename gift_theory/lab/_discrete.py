@@ -8,12 +8,14 @@ diagnose`` exited 1 on such a file). Here:
 * :func:`resolution_var` -- the smallest variance a layer's cell can be read with: the rounding's
   variance step^2 / 12 on a lattice (Sheppard's correction for grouped data), else the float32
   resolution of its values; the identification reads every cell's variance at least at it;
-* :func:`lattice_rows` -- the identification's test of class ``readout_nonlinearity``: values on
+* :func:`lattice_row` -- the identification's test of class ``readout_nonlinearity``: values on
   a lattice are what no continuous noise gives (ties have probability 0), and where the
   rounding's variance is not negligible against the layer's noise the class is named.
 """
 
 from __future__ import annotations
+
+import hashlib
 
 import numpy as np
 from scipy import stats
@@ -29,8 +31,10 @@ _STEPS: dict = {}
 
 def _step(Y):
     """:func:`lattice_step` of one layer's array, kept for the arrays seen last (the identification
-    builds its layers several times over the same measurement)."""
-    key = (id(Y), Y.shape, Y.__array_interface__["data"][0])
+    builds its layers several times over the same measurement). Keyed by the array's content: an
+    id or an address is reused by the next array of that shape (a stale step, found in tests)."""
+    Y = np.ascontiguousarray(Y)
+    key = (Y.shape, Y.dtype.str, hashlib.blake2b(Y.view(np.uint8), digest_size=16).digest())
     if key not in _STEPS:
         if len(_STEPS) > 16:
             _STEPS.clear()

@@ -80,6 +80,13 @@ MC_DRAWS = 512
 #: ... within this many multiply-adds of the propagation (at least MC_MIN_DRAWS)
 MC_FLOPS = 1e9
 MC_MIN_DRAWS = 128
+#: ... and more, where the draws' error of the per-input mean is not small against that mean's
+#: spread across inputs: a regressor with an error attenuates the output's least squares by
+#: spread / (spread + error) (s = 1, 512 draws: W_eff = 0.67 W, a "dead" output neuron and
+#: a readout transfer named on 4 of 19 null files), so the draws grow until the error is at most
+#: MC_ATTENUATION of the spread, within MC_FLOPS_MAX multiply-adds
+MC_ATTENUATION = 0.05
+MC_FLOPS_MAX = 1e10
 #: the smooth part of the shared shape the map is tested against (Legendre degree, besides the bins)
 SHAPE_DEGREE = 7
 #: layers whose stacked parameters exceed this are treated neuron by neuron (block-diagonal)
@@ -180,17 +187,34 @@ def _propagate(meas: Measurement, s: float):
     each input's eigenbasis of the output's model covariance, W_L C W_L^T + I (:class:`_Layer`
     ``basis``; up to :data:`WIDE` outputs): the output's own noise is a larger share of its minor
     components than of any neuron, where the hidden layers' propagated noise dilutes a law
-    change of the output's own. Returns (mean, cov, draws, law or None, basis or None)."""
+    change of the output's own. The draws: see :data:`MC_DRAWS` and :data:`MC_ATTENUATION`.
+    Returns (mean, cov, draws, law or None, basis or None)."""
+    n, p = np.shape(meas.x)
+    macs = sum(np.size(W) for W, _ in meas.params[:-1]) + p
+    M = int(max(MC_MIN_DRAWS, min(MC_DRAWS, MC_FLOPS / max(n * macs, 1))))
+    out = _propagate_draws(meas, s, M, M)
+    mean, cov = out[0], out[1]
+    spread = float(np.mean(np.var(mean, axis=0)))
+    err = s * s * float(np.mean(np.einsum("nii->ni", cov))) / M  # the per-input mean's variance from the draws
+    if n > 1 and err > MC_ATTENUATION * spread:
+        cap = int(max(M, MC_FLOPS_MAX / max(n * macs, 1)))
+        want = M * err / (MC_ATTENUATION * max(spread, np.finfo(np.float64).tiny))
+        M2 = int(min(cap, M * 2 ** int(np.ceil(np.log2(want / M)))))  # powers of 2: the same draws across nearby s
+        if M2 > M:
+            out = _propagate_draws(meas, s, M2, M)
+    return out
+
+
+def _propagate_draws(meas: Measurement, s: float, M: int, M_law: int):
+    """:func:`_propagate` with M draws per input (the law from the first ``M_law`` of them)."""
     act = _ACT[meas.activation if meas.activation in _ACT else "tanh"][0]
     x = np.asarray(meas.x, np.float64)
     params = [(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in meas.params[:-1]]
     n, p = x.shape
-    macs = sum(W.size for W, _ in params) + p
-    M = int(max(MC_MIN_DRAWS, min(MC_DRAWS, MC_FLOPS / max(n * macs, 1))))
     d = params[-1][0].shape[0]
     W_L = np.asarray(meas.params[-1][0], np.float64)
     r = meas.r
-    G = M // r if r >= 5 else 0
+    G = min(M, M_law) // r if r >= 5 else 0
     rng = np.random.default_rng(20261127)
     rng_law = np.random.default_rng(20261128)
     chunk = max(1, int(4e6 // (M * max(p, W_L.shape[0], *(W.shape[0] for W, _ in params)))))

@@ -99,15 +99,18 @@ def test_a_coarse_quantizer_is_a_finding_named_readout_nonlinearity(taps):
 
 
 def test_a_fine_lattice_is_reported_not_named():
-    """A 16-bit readout on the same chip: the values sit on a lattice, but its rounding is far below
-    what the shots resolve -- the row is there (p = 1), the class is not named."""
+    """A 10-bit readout on the same chip (step 0.004 at s = 0.05): the values sit on a lattice, but
+    its rounding (variance 1.3e-6) is far below what the shots resolve -- each layer's row is there
+    with p = 1, the class is not named by it. (A 16-bit readout's values are mostly distinct: no
+    lattice is read at all.)"""
     arch = gt.Architecture((10, 8, 6, 4))
     params = gt.init_params(jax.random.PRNGKey(0), arch, gain=1.5)
     x = np.asarray(jax.random.uniform(jax.random.PRNGKey(100), (120, 10)))
-    phys = gt.Physics.create(s=0.05, quantization=dict(bits=16, v_range=2.0))
+    phys = gt.Physics.create(s=0.05, quantization=dict(bits=10, v_range=2.0))
     idn = identify(simulate_measurement(jax.random.PRNGKey(200), params, x, phys, shots=32, taps=True))
     lat = [r for r in idn.rows() if r["test"] == "lattice"]
-    assert lat and all(r["p"] == 1.0 for r in lat)
+    assert sorted(r["layer"] for r in lat) == [1, 2, 3]
+    assert all(r["p"] == 1.0 and abs(r["effect"] - 4.0 / 1024) < 1e-6 for r in lat), lat
 
 
 def test_a_constant_neuron_and_a_layer_with_few_inputs_are_findings():

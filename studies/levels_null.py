@@ -1,7 +1,7 @@
 """False alarms of the lab on correctly specified files at extreme noise levels (issue 45, point 5).
 
     python -m studies.levels_null run OUT.jsonl [--levels 1e-6,1e-3,1,10] [--sets 200] [--taps both|yes|no]
-                                 [--minutes M]
+                                 [--minutes M] [--only-sets I,J,...]
     python -m studies.levels_null summary OUT.jsonl
 
 ``run`` simulates, per level s and taps setting, ``--sets`` null files (awgn at level s only: the
@@ -90,12 +90,12 @@ def _commit():
     return (head.stdout.strip() or "unknown") + ("+dirty" if dirty.stdout.strip() else "")
 
 
-def run(path, levels, sets, taps_list, minutes=None):
+def run(path, levels, sets, taps_list, minutes=None, only=None):
     done = _done(path)
     commit = _commit()
     t0 = time.time()
     with open(path, "a") as fh:
-        for i in range(sets):
+        for i in (range(sets) if only is None else only):
             for taps in taps_list:
                 for s in levels:
                     if (s, taps, i) in done:
@@ -162,6 +162,7 @@ def main(argv=None):
     r.add_argument("--sets", type=int, default=200)
     r.add_argument("--taps", choices=("both", "yes", "no"), default="both")
     r.add_argument("--minutes", type=float, default=None, help="start no new set after this many minutes")
+    r.add_argument("--only-sets", default=None, help="these sets only (e.g. those an earlier code flagged)")
     sm = sub.add_parser("summary")
     sm.add_argument("out")
     a = p.parse_args(argv)
@@ -169,7 +170,8 @@ def main(argv=None):
         summary(a.out)
         return 0
     taps = {"both": [True, False], "yes": [True], "no": [False]}[a.taps]
-    run(a.out, [float(v) for v in a.levels.split(",")], a.sets, taps, a.minutes)
+    only = None if a.only_sets is None else [int(v) for v in a.only_sets.split(",")]
+    run(a.out, [float(v) for v in a.levels.split(",")], a.sets, taps, a.minutes, only)
     return 0
 
 

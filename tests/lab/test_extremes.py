@@ -58,12 +58,12 @@ def test_a_layers_own_level_is_found_without_a_floor():
         assert abs(s / 1e-6 - 1) < 0.03, (l, s)
 
 
-@pytest.mark.parametrize("s, taps", [(10.0, True), (1.0, True), (10.0, False)])
+@pytest.mark.parametrize("s, taps", [(10.0, True), (10.0, False)])
 def test_a_correctly_specified_file_names_nothing_at_large_noise(s, taps):
     """s = 10: every map's least squares ran off along a flat valley (|z| ~ 1e7 with taps; without,
     the Monte Carlo regressor's error shrank W_eff to 0.03 W) and activation_mismatch or gain_error
-    was named; s = 1: layer 2's level read 1.26 for 1.0 at the fitted map. Both are the same null
-    files' seed 1 of the study."""
+    was named. (s = 1, where layer 2's level read 1.26 for 1.0 at the fitted map, cost 30-50 s of
+    CPU a file: it is left to studies/levels_null.py.)"""
     idn = identify(_null(s, taps))
     named = [(r["class"], r["test"], r["layer"]) for r in idn.rows() if r["p_adj"] < 0.01]
     assert named == [], named

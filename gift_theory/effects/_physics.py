@@ -1,7 +1,7 @@
 """A composition of effects: the physics of one device or one model of it.
 
 :class:`Physics` holds the effects of one device in the canonical order and dispatches the
-stages of the generative process (CONTRACTS §2, §2b) to them::
+stages of the generative process (reference §2, §2b) to them::
 
     W_eff = effective_weights(W, l, L)          weights hooks, in order
     b_eff = bias(b, l, L)                       bias hooks, in order
@@ -362,7 +362,7 @@ def _natural_shape(hook: str, args, t) -> tuple:
 
 
 def checked_result(cls, hook: str, out, shape: tuple, like):
-    """A plugin hook's result, checked (CONTRACTS §2b: a plugin that breaks the contract is a bad
+    """A plugin hook's result, checked (reference §2b: a plugin that breaks the contract is a bad
     input naming its file, effect and hook): a floating array whose shape broadcasts to
     ``shape`` without growing it -- a weights hook keeps W's trailing (d_l, d_{l-1}) exactly --
     cast to the dtype of ``like`` (the stage's input); finite where its values are known (an

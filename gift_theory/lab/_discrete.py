@@ -1,6 +1,6 @@
 """Near-discrete data: a layer whose values sit on a lattice (a quantizing readout) is a finding.
 
-A quantized readout (CONTRACTS §2 ``quantization``) whose step is coarse against the noise gives
+A quantized readout (reference §2 ``quantization``) whose step is coarse against the noise gives
 cells whose r shots are all identical: a within-cell variance of 0, which the identification
 once divided by (a weight of 1 / 1e-300, an overflow, a singular normal matrix: ``gift
 diagnose`` exited 1 on such a file). Here:

@@ -1,4 +1,4 @@
-"""A plugin's hooks are checked where they return (CONTRACTS §2b): a result of the wrong shape,
+"""A plugin's hooks are checked where they return (reference §2b): a result of the wrong shape,
 dtype or with a non-finite value is a bad input naming the file, the effect and the hook -- in
 ``simulate``, ``fit`` and ``compare`` alike; a hook that takes ``t`` gets the file's times or
 the command refuses; a ``layers`` scope outside the network is refused. The property test draws

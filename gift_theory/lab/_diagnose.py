@@ -63,6 +63,7 @@ from scipy import stats
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from ..effects import BUILTIN, REGISTRY
+from ..effects._physics import scope_error
 from .._model import named_subkey
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, failing_layers, one_step_check
@@ -79,6 +80,7 @@ from ._localise import (
     where_it_fails,
 )
 from ._identify import _shots_law, _subset, _two_sided, identify
+from ._memory import candidate_threads
 from ._qtest import over_inputs
 from ._explain_output import also_explaining, mean_refusal, summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
@@ -106,7 +108,8 @@ def default_candidates(meas: Measurement) -> list[str]:
     """Every registered effect a diagnosis of ``meas`` tries: all but awgn, and those silent
     without acquisition times only when the file has them."""
     names = list(BUILTIN) + [n for n in REGISTRY if n not in BUILTIN]  # catalogue order, then plugins
-    return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)]
+    return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)
+            and scope_error(REGISTRY[n], meas.arch.depth) is None]
 
 
 #: a candidate's status (reference §6), in ranking order
@@ -274,7 +277,7 @@ class Session:
         put("meas", meas)
         put("shots", shots)
         # threads for the refit nulls' replicates and the candidates (the numbers do not depend on it)
-        put("workers", default_workers() if workers is None else max(1, int(workers)))
+        put("workers", default_workers(meas) if workers is None else max(1, int(workers)))
         k_split, k_fit, k_cmp, k_ref, k_step = jax.random.split(key, 5)
         for name, v in (("k_fit", k_fit), ("k_cmp", k_cmp), ("k_step", k_step)):
             put(name, v)
@@ -513,6 +516,8 @@ def _check_candidates(names, meas: Measurement) -> list:
                                      f"{', '.join(n for n in REGISTRY if n != 'awgn')}")
             if REGISTRY[e].needs_times and meas.t is None:
                 raise GiftInputError(f"--candidates {e}: needs acquisition times t in the measurement")
+            if scope_error(REGISTRY[e], meas.arch.depth):
+                raise GiftInputError(f"--candidates {e}: {scope_error(REGISTRY[e], meas.arch.depth)}")
     return list(names)
 
 
@@ -845,8 +850,10 @@ def _localise(session: Session, base: Model, meas: Measurement, shots):
     return steps, failing, evidence, sigs, where
 
 
-def default_workers() -> int:
-    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``)."""
+def default_workers(meas: Measurement | None = None) -> int:
+    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``),
+    and -- given ``meas`` -- no more than :func:`~._memory.candidate_threads` allows for its size
+    (each thread holds a candidate's model shots and statistics; the numbers do not depend on it)."""
     env = os.environ.get("GIFT_LAB_THREADS", "").strip()
     if env.isdigit() and int(env) >= 1:
         return int(env)
@@ -854,7 +861,7 @@ def default_workers() -> int:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
         cores = os.cpu_count() or 1
-    return max(1, min(4, cores))
+    return max(1, min(4, cores, candidate_threads(meas) if meas is not None else 4))
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
@@ -885,7 +892,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     """
     t0 = time.time()
     names = default_candidates(meas) if candidates is None else _check_candidates(candidates, meas)
-    threads = default_workers() if workers is None else max(1, int(workers))
+    threads = default_workers(meas) if workers is None else max(1, int(workers))
     # the layer-wise identification (closed form, numpy: the mechanisms' backbone, and which
     # candidates to fit first) needs only the data: with threads to spare it runs beside the
     # baseline's fit, and localising -- which needs only the baseline -- beside the candidates
@@ -968,6 +975,8 @@ def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, ve
             raise GiftInputError(f"--add: unknown effect {e!r}; known: {', '.join(REGISTRY)}")
         if REGISTRY[e].needs_times and meas.t is None:
             raise GiftInputError(f"--add {e}: the measurement has no acquisition times t; {e} is silent without them")
+        if scope_error(REGISTRY[e], meas.arch.depth):
+            raise GiftInputError(f"--add {e}: {scope_error(REGISTRY[e], meas.arch.depth)}")
     session = Session(key, meas, shots)
     base, base_cmp = session.baseline, session.baseline_comparison
     ladder = [("awgn", base_cmp)]

@@ -95,11 +95,12 @@ def _significant(ctx, cls, layers=None):
             and (layers is None or r["layer"] in layers)]
 
 
-def _identified(ctx, cls, exclude=()):
+def _identified(ctx, cls, exclude=(), tests=None):
     """(score, layers, evidence, p_value) of ``cls`` from the identification's tests: the layers
-    where a test of the class rejects after Holm's correction (less ``exclude``), the strongest
-    such test's z and evidence, the smallest adjusted p-value; None when none rejects."""
-    rows = [r for r in _significant(ctx, cls) if r["layer"] not in exclude]
+    where a test of the class rejects after Holm's correction (less ``exclude``; only the tests
+    ``tests`` accepts, when given), the strongest such test's z and evidence, the smallest
+    adjusted p-value; None when none rejects."""
+    rows = [r for r in _significant(ctx, cls) if r["layer"] not in exclude and (tests is None or tests(r["test"]))]
     if not rows:
         return None
     best = max(rows, key=lambda r: r["z"])
@@ -181,7 +182,8 @@ def rule_activation(ctx):
     if ctx.ident is not None:
         if ctx.taps:
             return _identified(ctx, "activation_mismatch")
-        r = _identified(ctx, "readout_nonlinearity")
+        # a lattice is a digitising readout's, never an activation's (continuous by nature)
+        r = _identified(ctx, "readout_nonlinearity", tests=lambda test: test != "lattice")
         if r is None or ctx.depth < 2:
             return None
         return (r[0] * 0.99, list(range(1, ctx.depth)), "the output's transfer is distorted; without taps a hidden "

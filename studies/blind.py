@@ -5,6 +5,8 @@
                                       [--seed 0] [--no-taps] [--setting random|reference]   physics outside it
     python -m studies.blind write DIR --physics new [--no-taps]        issue 24's second set (+ a null), reference setting
     python -m studies.blind write DIR --physics mesh [--strength default|small|large] [--no-taps]   the MZI-mesh chip
+    python -m studies.blind write DIR --physics time [--files-per-physics 3] [--nulls N] [--seed 0] [--no-taps]
+                                      issue 48's set: intensity wander, drifting weights, memory, shapes
     python -m studies.blind score DIR [--limit N] [--match TEXT] [--runner inprocess|subprocess] [--keep JSONDIR]
     python -m studies.blind rescore DIR --keep JSONDIR                 score kept diagnose JSONs again
     python -m studies.blind table A.jsonl [B.jsonl ...]                markdown tables of scored rows
@@ -577,10 +579,11 @@ def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m studies.blind", description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("write", "score", "rescore", "table"))
     p.add_argument("folder", nargs="+", help="the study folder (table: the JSONL files)")
-    p.add_argument("--physics", choices=("builtin", "open", "new", "mesh"), default="builtin",
+    p.add_argument("--physics", choices=("builtin", "open", "new", "mesh", "time"), default="builtin",
                    help="write: the built-in catalogue's effects, physics outside it (open; new: issue 24's second "
                         "set, one file each and a null on the reference setting), or the MZI-mesh chip "
-                        "(labels in labels.json)")
+                        "(labels in labels.json); time: issue 48's physics in acquisition time and activation "
+                        "shapes (studies.time_physics)")
     p.add_argument("--strength", choices=("default", "small", "large"), default="default",
                    help="mesh study: every physics small or large (default: weight errors small, loss and "
                         "crosstalk large)")
@@ -619,6 +622,9 @@ def main(argv=None):
         elif a.physics == "new":
             write_open(a.folder, a.files or 1, a.seed, a.taps, NEW_PHYSICS, 1 if a.nulls is None else a.nulls,
                        a.setting or "reference")
+        elif a.physics == "time":
+            from .time_physics import write_time
+            write_time(a.folder, a.files or 3, a.seed, a.taps, nulls=a.nulls)
         elif a.physics == "mesh":
             write_mesh(a.folder, a.files or 1, a.seed, a.taps, strength=None if a.strength == "default" else a.strength)
         else:

@@ -77,6 +77,12 @@ def render(out) -> str:
                          + ("explains  " if c["explains"] else "          ") + c["candidate"])
     if not out.get("explained", True) and out.get("reasons"):
         lines.append("why not explained: " + "; ".join(out["reasons"]))
+    if len(out.get("explained_by") or []) > 1:
+        lines.append("explained by each of: " + ", ".join("awgn + " + e for e in out["explained_by"]))
+    nxt = out.get("next_measurement")
+    if nxt:
+        lines.append(f"next measurement: {nxt['design']} -- separates {' / '.join(nxt['separates'])} with power "
+                     f"{nxt['power']:.2f} at 0.01 (gift design MEAS --out INPUTS.npz writes the inputs)")
     lines.append("ranking (held-out discrepancy after fitting): the models that pass (by parsimony-penalised "
                  "discrepancy), then those refused by a check of their fitted values, then those the data reject:")
     for i, r in enumerate(out["ranking"], 1):

@@ -84,6 +84,7 @@ from ._explain_output import also_explaining, mean_refusal, summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
 from ._shots import Model, model_shots
 from ._verdict import as_json_fields, refusals, time_free, verdict
+from . import _ambiguity
 
 #: the significance level of the goodness-of-fit test (CONTRACTS §4)
 ALPHA = 0.01
@@ -427,6 +428,12 @@ class Diagnosis:
     #: the verdict names the awgn model itself (it passes and the identification flags nothing):
     #: the JSON ranking then starts with it (CONTRACTS §6: ranking[0] is what the verdict names)
     names_baseline: bool = False
+    #: the models that explain the data, ranking[0] first (reference §8; empty when not explained)
+    explained_by: tuple = ()
+    #: the candidates the data cannot tell from ranking[0] (:mod:`._ambiguity`)
+    ambiguous_with: tuple = ()
+    #: the measurement that would tell the hypotheses left standing apart (:mod:`._design`), or None
+    next_measurement: dict | None = None
 
     @property
     def missing_effect_detected(self) -> bool:
@@ -449,8 +456,11 @@ class Diagnosis:
                              "se": c.se, "floor_se": c.floor_se, "channel_z": c.as_dict()["channel_z"]},
                 "missing_effect_detected": self.missing_effect_detected,
                 **as_json_fields(self.explained, self.reasons, self.verdict, self.failing_layers, self.mechanisms),
-                "ranking": ([self._baseline_entry()] if self.names_baseline else [])
-                           + [cand.as_json() for cand in self.ranking],
+                "ranking": _ambiguity.mark(([self._baseline_entry()] if self.names_baseline else [])
+                                           + [cand.as_json() for cand in self.ranking],
+                                           self.ranking[0] if self.ranking else None, self.ambiguous_with),
+                "explained_by": list(self.explained_by),
+                "next_measurement": _public_design(self.next_measurement),
                 "not_fitted": [dict(r) for r in self.not_fitted],
                 **({"output_explanations": list(self.output_explanations)} if self.output_explanations else {}),
                 "evidence": list(self.evidence),
@@ -461,6 +471,12 @@ class Diagnosis:
                 **({"refit_null_calibrated": self.has_taps} if any(c.comparison.replicates for c in self.ranking)
                    else {}),
                 "seconds": self.seconds}
+
+
+def _public_design(nxt):
+    from ._design import public
+
+    return public(nxt)
 
 
 def _status(c: Candidate) -> str:
@@ -722,7 +738,13 @@ def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> lis
     * b'': a trend in acquisition time (a time_drift test). The held-out test compares
       per-input means, which average an interleaved acquisition's trend away (a bias drift
       passed as layer_gain without taps, a gain drift as activation_gain). Refused: a candidate
-      with no effect that acts through the times.
+      with no effect that acts through the times (other than a memory).
+    * b'' for memory (issue 48): the shots carry the shot acquired before them (the memory
+      class's lag test). The held-out test compares each input's shots, whatever order they
+      were taken in (a detector's memory passed as bias offsets). Refused: a candidate with no
+      effect of class memory; and the converse, a candidate with a memory where the lag test
+      names none (a memory's shift and excess variance of each neuron are what other physics
+      gives too).
     * b''': any class, when the baseline itself passes its held-out test (``base_cmp``): that
       test has no power against what the identification finds (Student-t noise in one layer of a
       tapped chip passed as awgn at p = 0.40 while the kurtosis test rejected awgn with z = 10.7). Refused: a
@@ -744,15 +766,26 @@ def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> lis
     rows = [r for r in ident.rows() if named(r, ident.taps)]
     cands_out = getattr(ident, "output_candidates", ()) if not ident.taps else ()
     trend = [r for r in rows if r["class"] == "time_drift"]
+    memory = [r for r in rows if r["class"] == "memory"]  # issue 48 (lab/_memory.py)
+    t_ok = any(r["class"] == "memory" and r["test"] == "lag" for r in ident.rows())  # the lag test ran
     silent = base_cmp is not None and base_cmp.p_value >= ALPHA
     flagged = sorted({r["class"] for r in rows})
     out = []
     for c in cands:
         name = " + ".join(c.effects)
-        if c.status == "passes" and trend and not any(REGISTRY[e].needs_times for e in c.effects):
+        if c.status == "passes" and trend and not any(REGISTRY[e].needs_times and REGISTRY[e].mechanism != "memory"
+                                                       for e in c.effects):
             c = _refuse(c, f"the identification finds a trend in acquisition time (time_drift {_where(trend)}) that "
                            f"awgn + {name} has no term for: its held-out test compares per-input means, which "
                            f"average the trend away", lacks=True)
+        if (c.status == "passes" and not memory and t_ok and any(REGISTRY[e].mechanism == "memory" for e in c.effects)):
+            c = _refuse(c, f"awgn + {name} has a memory the identification does not find (its lag test names no "
+                           f"layer at Holm-adjusted 0.01): through each input's shots a memory is a shift and an excess "
+                           f"variance of each neuron, which other physics gives too")
+        if c.status == "passes" and memory and not any(REGISTRY[e].mechanism == "memory" for e in c.effects):
+            c = _refuse(c, f"the identification finds that the shots carry the shot acquired before them (memory "
+                           f"{_where(memory)}), which awgn + {name} has no term for: its held-out test compares each "
+                           f"input's shots, not the order they were taken in", lacks=True)
         why = mean_refusal(_classes("+".join(c.effects)), cands_out) if c.status == "passes" and cands_out else None
         if why:
             c = _refuse(c, f"awgn + {name}: {why}", lacks=True)
@@ -858,7 +891,7 @@ def default_workers() -> int:
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
-             verbose: bool = False, workers: int | None = None, progress=None) -> Diagnosis:
+             verbose: bool = False, workers: int | None = None, progress=None, design: bool = True) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
     Parameters
@@ -878,6 +911,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     progress : ``progress(i, n, label)``, called as each candidate of a batch is done (the
         candidates of the flagged classes, the others if none of those passes, the second
         stage: each batch counts from 0 to its own n)
+    design : whether to design the next measurement (:mod:`._design`) when the data do not choose
+        between models, or nothing explains them
 
     Returns
     -------
@@ -916,11 +951,26 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         if also:  # said, not hidden: the explanation is one of several the output allows
             reasons = list(reasons) + [also]
             line += "; " + also
+    names_baseline = bool(explained and base_cmp.p_value >= ALPHA and not flagged)
+    # ---- issue 48 hooks: the models the data cannot tell apart (lab/_ambiguity.py), and the
+    # measurement that would (lab/_design.py)
+    others = _ambiguity.peers(ranking, base_cmp) if explained and not names_baseline else []
+    if others:
+        amb = _ambiguity.sentence(ranking[0], others, base_cmp)
+        reasons = list(reasons) + [amb]
+        line += "; " + amb
+    by = (["awgn"] if names_baseline else _ambiguity.explained_by(ranking[0], others)) if explained else []
+    nxt = None
+    if design and not names_baseline and (others or not explained):
+        from ._design import next_measurement
+        nxt = next_measurement(named_subkey(key, "design"), meas, ranking, mechs, others if explained else None,
+                               base_cmp)
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),
                      tuple(evidence), tuple(not_fitted), tuple(summary(ident.output_candidates)),
-                     names_baseline=bool(explained and base_cmp.p_value >= ALPHA and not flagged))
+                     names_baseline=names_baseline, explained_by=tuple(by), ambiguous_with=tuple(others),
+                     next_measurement=nxt)
 
 
 @dataclasses.dataclass(frozen=True)

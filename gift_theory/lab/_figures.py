@@ -205,6 +205,29 @@ def moments_figure(moments, layer: int, *, fig=None, title: str | None = None):
     return _root(fig)
 
 
+def time_figure(data: dict, *, title: str = "residual against acquisition time", fig=None):
+    """Each measured layer's residual along the signal (the shot's relative gain against the
+    model's mean of its input) in bins of acquisition time, with 2 se bands
+    (:func:`gift_theory.lab._time.residual_in_time` computes it). A gain that drifts or wanders
+    shows as a curve, a fixed error as a level away from 0, white noise as a flat band."""
+    layers = [l for l in data if isinstance(l, int)]
+    if fig is None:
+        fig = _new_figure((6.4, 1.9 * max(len(layers), 1) + 0.6))
+    axes = fig.subplots(max(len(layers), 1), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, l in zip(axes, layers):
+        d = data[l]
+        ok = d["count"] > 1
+        ax.axhline(0.0, color="0.5", lw=0.8)
+        ax.fill_between(d["t"][ok], (d["mean"] - 2 * d["se"])[ok], (d["mean"] + 2 * d["se"])[ok],
+                        color="tab:blue", alpha=0.25, lw=0)
+        ax.plot(d["t"][ok], d["mean"][ok], color="tab:blue", lw=1.2)
+        ax.set_ylabel(f"layer {l}\nrelative gain", fontsize=8)
+        ax.grid(alpha=0.3, lw=0.5)
+    axes[-1].set_xlabel(f"acquisition time t (shots acquired {data.get('order', '?')})")
+    fig.suptitle(title, fontsize=10)
+    return _root(fig)
+
+
 def save_figures(figures: dict, folder: str) -> list[str]:
     """Write ``{file name: Figure}`` into ``folder`` (created), each atomically; the paths written."""
     return [save_figure(f, os.path.join(folder, name), bbox_inches="tight") for name, f in figures.items()]
@@ -240,6 +263,12 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
             top = diagnosis.ranking[0]
             models.append(("first ranked: " + " + ".join(top.model.effects), top.model))
         figs.update(_moments_figures(key, models, meas.subset(diagnosis.held_out)))
+        if meas.t is not None:  # issue 48: the residual against acquisition time, per layer
+            from .._model import named_subkey
+            from ._time import residual_in_time
+
+            figs["time.png"] = time_figure(residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas),
+                                           title="baseline: residual along the signal against acquisition time")
     return save_figures(figs, folder)
 
 

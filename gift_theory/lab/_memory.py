@@ -29,8 +29,11 @@ residual is biased against its neighbour by -1 / r.
 
 **Without the times** there is no order: the test is not run, and the row says so.
 
-**The estimate** of alpha: T less its null mean over the same sum with the residual replaced by
-the previous shot's centred value (its regression coefficient). When the layer's memory is
+**The estimate** of alpha: the same partial regression (with taps the previous shots' values
+less their regression on the shot's own input too), less its bias: a residual centred within
+its input is biased against a neighbour of the same input by the deals' mean m (about
+-1 / (r - 1) when the shots of an input are acquired one after the other), by m (1 + alpha)
+under a memory, so alpha = (raw - m) / (1 + m). When the layer's memory is
 named (p below :data:`UNDO_P`), the shots are read again with it taken out, exactly:
 ``v_k = out_k - alpha out_{k-1}`` (:func:`undo`), so the layer's map and noise are the
 detector's own and the memory's mean shift is not read as bias offsets.
@@ -49,8 +52,10 @@ CONTROL = 4
 PERMUTATIONS = 100
 #: a layer's memory is taken out of its shots (and the layer read again) below this p
 UNDO_P = 1e-3
-#: cosines of t (besides a line) the residuals are detrended by before the lag is read
+#: cosines of t (besides a line) the residuals are detrended by before the lag is read, where an
+#: input's shots spread over at least this much of the campaign (sd of t within the inputs)
 DETREND = 6
+SPREAD = 0.05
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,10 +91,12 @@ def _detrended(E, Y, t):
 
     n, r, d = E.shape
     e = E - E.mean(1, keepdims=True)
+    if float(np.std(t - t.mean(1, keepdims=True))) < SPREAD:
+        # an input's shots taken one after the other: a slow process hardly moves within them,
+        # and the cosines there are one short ramp, which would take a memory's transient
+        return e
     B = np.concatenate([t[..., None], basis(t, DETREND)], axis=2)
     B = B - B.mean(1, keepdims=True)  # (n, r, q)
-    if float(np.max(np.abs(B))) == 0.0:
-        return e
     ybar = Y.mean(1)  # (n, d)
     out = np.empty_like(e)
     Bf = B.reshape(n * r, -1)
@@ -161,9 +168,13 @@ def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
         x1f = _within_fw(_lagged(Yf, order, 1).reshape(n, r, d)[..., None], g, A)[..., 0].reshape(N, d)
         xLf = _within_fw(_lagged(Yf, order, CONTROL).reshape(n, r, d)[..., None], g, A)[..., 0].reshape(N, d)
         x1f[first], xLf[first] = 0.0, 0.0
-        alpha = _partial(e, x1f, xLf, v) - m
+        raw = _partial(e, x1f, xLf, v)
     else:
-        alpha = stat - m
+        raw = stat
+    # a residual centred within its input is biased against its neighbour of the same input by
+    # m = -1 / (r - 1) without memory (the deals' mean) and by m (1 + alpha) with it (Nickell's bias
+    # of a within regression): raw = alpha + m (1 + alpha)
+    alpha = (raw - m) / (1.0 + m) if 1.0 + m > 0.5 else raw - m
     row = row_of("memory", "lag", p, abs(z), alpha,
                  f"the shots of layer {layer} carry the shot acquired before them: {alpha:+.3g} of its value "
                  f"(+- {sd:.2g}; beyond the shot {CONTROL} before, z = {z:.1f} over {PERMUTATIONS} deals of "

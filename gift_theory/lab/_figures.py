@@ -246,7 +246,8 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
     """The figures of a :class:`~gift_theory.lab.Diagnosis`, written to ``folder``: the error
     ladder of the baseline and the three best candidates, where the baseline fails, and
     (given the measurement) each measured layer's moments under the baseline and the
-    top-ranked model on the held-out inputs."""
+    top-ranked model on the held-out inputs, and with acquisition times each layer's residual
+    against them (:func:`time_figure`)."""
     c = diagnosis.baseline_comparison
     rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
         ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)

@@ -16,7 +16,10 @@
       determined by the data rather than by its prior -- effective degrees of freedom at least
       half its number of values (:func:`~gift_theory.lab._offset_null.effective_dof`; without
       taps a few hundred weight offsets fitted to a few hundred output means are not: they can
-      follow almost any smooth distortion of the network, so their passing says nothing);
+      follow almost any smooth distortion of the network, so their passing says nothing); a
+      model whose only offsets are per-neuron parameters is identified when each value is, neuron
+      by neuron (:mod:`._neurons`: its standard error at most 1/sqrt(2) of the prior scale), and
+      then the outlier test of rule b does not refuse its values (a dead neuron is a finding);
    b. its fitted values look like its own effect: fitted weight offsets are neither
       proportional to the programmed weights nor a fixed linear map of them, nor are their
       rows coupled as the rows of the weights are; fitted bias offsets do not all go one way

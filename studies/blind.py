@@ -367,6 +367,7 @@ def score_row(out, label, taps: bool) -> dict:
                               else bool(mechs) and mechs[0].get("mechanism") in classes)
     row["container_explained"] = None if wrong is None else bool(wrong and top in label.get("contained_in", []))
     row["status_first"] = ranking[0].get("status") if ranking else None
+    row["explained_by"] = out.get("explained_by")  # reference §8 (several: the data cannot choose)
     row["rejected_first"] = rejected_first(ranking)
     steps = {int(w["layer"]): w.get("p_value") for w in out.get("where") or [] if "layer" in w}
     row["one_step_p"] = steps or None
@@ -554,7 +555,8 @@ def table(paths, out=None):
             out.write(f"| {r['file']} | {'/'.join(classes) or 'none'}; {r['layers_label']} "
                       f"| {_mark(r['detected'])} ({r['baseline_p']:.2g}) | {_mark(r.get('explained'))} "
                       f"| {_mark(r.get('wrong_explanation'))} | {'+'.join(r.get('first_entry') or []) or '-'} "
-                      f"({'-' if p_after is None else f'{p_after:.2g}'}, {r.get('status_first') or '-'}) "
+                      f"({'-' if p_after is None else f'{p_after:.2g}'}, {r.get('status_first') or '-'})"
+                      f"{' or ' + ' or '.join(r['explained_by'][1:]) if len(r.get('explained_by') or []) > 1 else ''} "
                       f"| {(r.get('mechanisms') or ['-'])[0] if r.get('mechanisms') else '-'} "
                       f"| {_mark(r.get('mechanism_first'))} | {r.get('failing_layers')} "
                       f"| {_mark(r.get('failing_layers_exact'))} | {_mark(r.get('rejected_first'))} |\n")

@@ -864,6 +864,36 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
     return ranked(ranking), not_fitted
 
 
+def _alternatives(session: Session, ranking: list, not_fitted: list, ident, verbose: bool, progress=None):
+    """Issue 48 (reference §8): without taps, when ranking[0] passes and the output's candidate
+    mechanisms (:mod:`._explain_output`) say the output's mean is reproduced as well by classes
+    of another group, the candidates of those classes left unfitted are fitted too, so the
+    verdict can say when the data cannot choose between them (:mod:`._ambiguity`). Among models
+    the data cannot tell apart, the one whose class the identification flags keeps the lead; one
+    better by more than the ambiguity's margin leads. Returns ``(ranking, not_fitted)``."""
+    from ._ambiguity import APART
+    from ._explain_output import MAP_CLASSES, _group
+
+    if ident is None or ident.taps or not ranking or ranking[0].status != "passes" or not not_fitted:
+        return ranking, not_fitted
+    top = ranking[0]
+    mine = {_group(c) for c in _classes("+".join(top.effects))}
+    also = {c.mechanism for c in getattr(ident, "output_candidates", ()) if c.explains
+            and c.mechanism in MAP_CLASSES and _group(c.mechanism) not in mine}
+    extra = [r["effect"] for r in not_fitted if _classes(r["effect"]) & also]
+    if not extra:
+        return ranking, not_fitted
+    _log(f"  also fitted (the output's mean is reproduced as well by {', '.join(sorted(also))}): "
+         f"{', '.join(extra)}", verbose)
+    new = _identification_refusals(session.candidates([_single(n) for n in extra], progress), ident,
+                                   session.baseline_comparison)
+    out = ranked(list(ranking) + new)
+    unit = session.baseline_comparison.se if session.baseline_comparison.se > 0 else 1.0
+    if out[0] is not top and out[0].status == "passes" and top.score - out[0].score < APART * unit:
+        out = [top] + [c for c in out if c is not top]
+    return out, [r for r in not_fitted if r["effect"] not in extra]
+
+
 def _localise(session: Session, base: Model, meas: Measurement, shots):
     """Where the baseline fails, each layer on its own: the one-step checks (with taps), the
     failing layers, the layer evidence, the signatures and where-it-fails (pure: keyed by
@@ -935,6 +965,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
                  if threads > 1 else None)
         ranking, not_fitted = _rank(session, names, second, verbose, ident, progress)
+        ranking, not_fitted = _alternatives(session, ranking, not_fitted, ident, verbose, progress)  # issue 48
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))
     taps = meas.has_taps

@@ -243,6 +243,14 @@ def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
                      path_variance=float(np.mean((path - path.mean(1, keepdims=True)) ** 2)),
                      path_rms=amp, slow_share=slow_share))
     if p_wander < PUT_P and slow_share >= SLOW_SHARE:
+        if use_a and not use_w:
+            # the inputs acquired one after the other: the path at the resolution the acquisition
+            # gives, one gain per input (its mean residual along its gain direction, beyond the
+            # path's mean: a fixed gain stays the map's) -- six cosines leave a wandering laser's
+            # faster part in the inputs' means, read as a weight error
+            wbar = wdir.mean(1)
+            gam = np.sum(ebar * wbar, 1) / np.maximum(np.sum(wbar * wbar, 1), 1e-300)
+            path = np.broadcast_to((gam - gam.mean())[:, None], (n, r))
         offset = path[:, :, None] * u
         # the map drift below is read beyond the wander's fit
         e = e - _within_fw((path[:, :, None] * wdir)[..., None], g, G)[..., 0]

@@ -39,7 +39,7 @@ def run(args):
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
-                   progress=Progress("gift design: candidates", args.quiet))
+                   progress=Progress("gift design: candidates", args.quiet), design=True)
     nxt = res.next_measurement
     out = {"next_measurement": public(nxt), "verdict": res.verdict, "explained_by": list(res.explained_by)}
     if args.out is not None and nxt is not None:

@@ -33,7 +33,7 @@ def run(args):
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
-                   progress=Progress("gift diagnose: candidates", args.quiet))
+                   progress=Progress("gift diagnose: candidates", args.quiet), design=True)
     out = res.as_json()
     if not res.missing_effect_detected:
         # "nothing missing" is only as strong as the test's power at this file's size (the

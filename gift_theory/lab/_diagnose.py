@@ -921,7 +921,7 @@ def default_workers() -> int:
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
-             verbose: bool = False, workers: int | None = None, progress=None, design: bool = True) -> Diagnosis:
+             verbose: bool = False, workers: int | None = None, progress=None, design: bool = False) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
     Parameters
@@ -942,7 +942,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         candidates of the flagged classes, the others if none of those passes, the second
         stage: each batch counts from 0 to its own n)
     design : whether to design the next measurement (:mod:`._design`) when the data do not choose
-        between models, or nothing explains them
+        between models, or nothing explains them (``gift diagnose`` does; it simulates a few
+        hundred campaigns, so it is asked for here); without it ``next_measurement`` is None
 
     Returns
     -------

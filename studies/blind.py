@@ -266,14 +266,14 @@ def _shape(path):
         return {"arch": widths, "n": int(z["y"].shape[0]), "r": int(z["y"].shape[1]), "taps": "a1" in z.files}
 
 
-def run_diagnose(path, seed: int, runner: str = "inprocess"):
+def run_diagnose(path, seed: int, runner: str = "inprocess", extra=()):
     """``gift diagnose PATH --json --seed SEED --quiet``; returns (JSON object or None, error line or None).
 
     ``inprocess``: the ``gift`` console entry point called in this process (the command's own
     code path; JAX's compilations are reused across files). ``subprocess``: the ``gift``
     program on PATH, one fresh process per file, exactly as a user types it.
     """
-    argv = ["diagnose", path, "--json", "--seed", str(seed), "--quiet"]
+    argv = ["diagnose", path, "--json", "--seed", str(seed), "--quiet", *extra]
     if runner == "subprocess":
         exe = shutil.which("gift")
         if exe is None:

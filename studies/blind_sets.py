@@ -5,7 +5,8 @@
 
 Each set is written once (``FILES_DIR/<set>``, by :func:`studies.blind.main` with the set's
 arguments below; the files depend only on those arguments, never on the code under test) and
-scored by ``gift diagnose FILE --json --seed i --quiet`` in this process, i the file's index in
+scored by ``gift diagnose FILE --json --seed i --quiet`` (``--no-design``: with ``--no-design``, which
+changes no scored field) in this process, i the file's index in
 its folder (the seeds of ``python -m studies.blind score``). Each file's whole JSON is kept
 (``OUT_DIR/json_<set>/FILE.json``); a file whose JSON is there is not run again, so a killed run
 resumes where it stopped. ``--table`` scores the kept JSON (:func:`studies.blind.score_row`)
@@ -61,7 +62,7 @@ def _chosen(folder: str, name: str):
     return [(i, f) for i, f in enumerate(files) if match is None or match in f]
 
 
-def run(files_dir: str, out_dir: str, sets, write_only: bool = False) -> None:
+def run(files_dir: str, out_dir: str, sets, write_only: bool = False, extra=()) -> None:
     from .blind import run_diagnose
 
     for name in sets:
@@ -74,7 +75,7 @@ def run(files_dir: str, out_dir: str, sets, write_only: bool = False) -> None:
         todo = [(i, f) for i, f in _chosen(folder, name) if not os.path.exists(os.path.join(keep, f[:-4] + ".json"))]
         for k, (i, f) in enumerate(todo):
             t0 = time.time()
-            res, err = run_diagnose(os.path.join(folder, f), i)
+            res, err = run_diagnose(os.path.join(folder, f), i, extra=extra)
             if res is None:
                 res = {"error": err}
             res["study_seconds"] = time.time() - t0
@@ -127,6 +128,8 @@ def main(argv=None):
     p.add_argument("--sets", default=",".join(SETS), help="comma-separated set names (default: all)")
     p.add_argument("--write-only", action="store_true", help="write the sets' files, score nothing")
     p.add_argument("--table", action="store_true", help="rows and markdown tables from the kept JSON")
+    p.add_argument("--no-design", action="store_true",
+                   help="gift diagnose --no-design (no next measurement: every scored field is the same, in less time)")
     a = p.parse_args(argv)
     sets = [s.strip() for s in a.sets.split(",") if s.strip()]
     bad = [s for s in sets if s not in SETS]
@@ -138,7 +141,7 @@ def main(argv=None):
 
         table(rows(a.files_dir, a.out_dir, sets))
         return 0
-    run(a.files_dir, a.out_dir, sets, a.write_only)
+    run(a.files_dir, a.out_dir, sets, a.write_only, extra=("--no-design",) if a.no_design else ())
     return 0
 
 

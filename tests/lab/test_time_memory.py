@@ -298,3 +298,30 @@ def test_a_per_neuron_plugin_that_finds_a_dead_neuron_explains_the_data(tmp_path
     finally:
         fx.REGISTRY.clear()
         fx.REGISTRY.update(before)
+
+
+# ---- gift design --------------------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_gift_design_prints_the_next_measurement_alone_and_writes_the_inputs(tmp_path, capsys):
+    """A chip whose first layer drifts (no catalogue effect is that): nothing explains the data,
+    and ``gift design`` prints the campaign that tells the first two mechanisms' best candidates
+    apart, as one JSON object, and writes its inputs; a bad --out is one line, exit 2, nothing
+    written."""
+    import json
+
+    from gift_theory.cli import main
+    from gift_theory.lab import save_measurement
+
+    path = str(tmp_path / "chip.npz")
+    save_measurement(path, sim(8, n=60, r=16, drift=0.3))
+    assert main(["design", path, "--out", str(tmp_path / "next.npz"), "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    nxt = out["next_measurement"]
+    assert nxt is not None and len(nxt["separates"]) == 2 and 0.0 <= nxt["power"] <= 1.0
+    assert nxt["shots"] == nxt["inputs"] * nxt["r"] and out["out"].endswith("next.npz")
+    with np.load(tmp_path / "next.npz") as z:
+        assert z["x"].shape == (nxt["inputs"], 5) and int(z["shots"]) == nxt["r"]
+    assert main(["design", path, "--out", str(tmp_path / "next.txt"), "--json", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--out" in err[0] and not (tmp_path / "next.txt").exists()

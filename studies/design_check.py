@@ -17,7 +17,9 @@ ambiguous chips resolved (right) by each campaign and the shots each took.
 Scenarios (``SCENARIOS``): ``shot_vs_mult`` -- shot noise at every readout (q), seen without taps,
 where a per-neuron multiplicative gain noise can pass as well; ``kappa_vs_gain`` -- an activation
 slope kappa on the hidden layers with small biases, seen without taps, where a gain on each layer's
-weighted sum does nearly the same.
+weighted sum does nearly the same; ``saturation`` -- a mild compression of every readout (v_max
+1.5-3 times the output's rms), seen without taps, where an activation's slope or a gain can pass
+as well.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import numpy as np
 SCENARIOS = {
     "shot_vs_mult": {"class": "input_dependent_noise", "truth": "shot"},
     "kappa_vs_gain": {"class": "activation_mismatch", "truth": "activation_gain"},
+    "saturation": {"class": "readout_nonlinearity", "truth": "saturation"},
 }
 
 
@@ -45,6 +48,12 @@ def _chip(scenario: str, i: int, seed: int):
     if scenario == "kappa_vs_gain":
         bs = [rng.normal(0.0, 0.05, widths[l + 1]) for l in range(L)]
         effects = {"activation_gain": {"kappa": float(1.0 + rng.choice([-1, 1]) * rng.uniform(0.1, 0.2))}}
+    elif scenario == "saturation":
+        bs = [rng.normal(0.0, 0.3, widths[l + 1]) for l in range(L)]
+        # a mild compression: v_max 1.5-3 times the output's rms (the study's inputs, noiseless)
+        x0 = rng.uniform(-1.0, 1.0, (200, widths[0]))
+        out = np.tanh(x0 @ Ws[0].T + bs[0]) @ Ws[1].T + bs[1]
+        effects = {"saturation": {"v_max": float(np.sqrt(np.mean(out ** 2)) * rng.uniform(1.5, 3.0))}}
     else:
         bs = [rng.normal(0.0, 0.3, widths[l + 1]) for l in range(L)]
         effects = {"shot": {"q": float(np.exp(rng.uniform(np.log(0.01), np.log(0.03))))}}

@@ -2,6 +2,7 @@
 
     python -m studies.blind_sets FILES_DIR OUT_DIR [--sets open_nt,open_t,...] [--write-only]
     python -m studies.blind_sets FILES_DIR OUT_DIR --table            (rows and tables from the kept JSON)
+    python -m studies.blind_sets FILES_DIR OUT_DIR --compare BEFORE_DIR   (every set's counts, before -> after)
 
 Each set is written once (``FILES_DIR/<set>``, by :func:`studies.blind.main` with the set's
 arguments below; the files depend only on those arguments, never on the code under test) and
@@ -121,6 +122,53 @@ def rows(files_dir: str, out_dir: str, sets) -> list[str]:
     return paths
 
 
+#: the columns of the before/after table: (name, rows counted, field, a higher count is better)
+COLUMNS = (("detected", "effects", "detected", True), ("false alarms", "nulls", "detected", False),
+           ("explained correct", "all", "explained_correct", True),
+           ("wrong explanations", "all", "wrong_explanation", False),
+           ("first class right", "effects", "mechanism_first", True),
+           ("failing layers exact", "all", "failing_layers_exact", True),
+           ("rejected first", "all", "rejected_first", False))
+
+
+def counts(path: str) -> dict:
+    """``{column: (count, of)}`` of one set's scored rows (:data:`COLUMNS`)."""
+    with open(path) as f:
+        rs = [json.loads(line) for line in f if line.strip()]
+    rs = [r for r in rs if not r.get("error")]
+    out = {}
+    for name, which, field, _ in COLUMNS:
+        sel = [r for r in rs if which == "all" or (which == "nulls") == (r["physics"] == "none")]
+        vals = [r.get(field) for r in sel if r.get(field) is not None]
+        out[name] = (int(sum(bool(v) for v in vals)), len(vals))
+    return out
+
+
+def compare(files_dir: str, before: str, after: str, sets) -> str:
+    """The markdown table of every set's counts before and after (each column "before -> after",
+    a count that got worse marked **), from the kept JSON of both runs."""
+    rows(files_dir, before, sets)
+    rows(files_dir, after, sets)
+    head = "| set | " + " | ".join(c[0] for c in COLUMNS) + " |\n|---|" + "---|" * len(COLUMNS) + "\n"
+    lines = []
+    for name in sets:
+        pb, pa = os.path.join(before, f"{name}.jsonl"), os.path.join(after, f"{name}.jsonl")
+        if not (os.path.exists(pb) and os.path.exists(pa)):
+            continue
+        cb, ca = counts(pb), counts(pa)
+        cells = []
+        for col, _, _, higher in COLUMNS:
+            (kb, nb), (ka, na) = cb[col], ca[col]
+            if not nb and not na:
+                cells.append("-")
+                continue
+            worse = (ka < kb) if higher else (ka > kb)
+            cell = f"{kb}/{nb} -> {ka}/{na}"
+            cells.append(f"**{cell}**" if worse else cell)
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return head + "\n".join(lines) + "\n"
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m studies.blind_sets", description=__doc__.split("\n\n")[0])
     p.add_argument("files_dir")
@@ -128,6 +176,8 @@ def main(argv=None):
     p.add_argument("--sets", default=",".join(SETS), help="comma-separated set names (default: all)")
     p.add_argument("--write-only", action="store_true", help="write the sets' files, score nothing")
     p.add_argument("--table", action="store_true", help="rows and markdown tables from the kept JSON")
+    p.add_argument("--compare", default=None, metavar="BEFORE_DIR",
+                   help="the before/after table of every set's counts: BEFORE_DIR's kept JSON against OUT_DIR's")
     p.add_argument("--no-design", action="store_true",
                    help="gift diagnose --no-design (no next measurement: every scored field is the same, in less time)")
     a = p.parse_args(argv)
@@ -136,6 +186,9 @@ def main(argv=None):
     if bad:
         sys.stderr.write(f"python -m studies.blind_sets: unknown set {bad[0]!r}; known: {', '.join(SETS)}\n")
         return 2
+    if a.compare:
+        sys.stdout.write(compare(a.files_dir, a.compare, a.out_dir, sets))
+        return 0
     if a.table:
         from .blind import table
 

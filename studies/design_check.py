@@ -8,9 +8,11 @@ Per chip (a random small tanh network and its true physics, simulated by the pla
 ``gift diagnose`` does (:func:`gift_theory.lab.diagnose`, the next measurement designed). When the
 data cannot choose (``explained_by`` holds two or more models), two more campaigns are simulated on
 the same chip -- the advised one (its inputs, shots, taps, order) and, as a yardstick, one of the
-same size with the first design (the same inputs, the same shots per input, fresh noise) -- and
-each is diagnosed on its own. A campaign *resolves* the ambiguity when its diagnosis is explained
-by one model, and *resolves it right* when that model is of the chip's true class. One JSON line
+same size with the first design (the same inputs, as many shots in all, fresh noise). On each,
+the advised statistic decides (:func:`gift_theory.lab._design.decide`: the hypotheses as fitted on
+campaign 1, each rejected at 0.01 or not): the campaign *decides* when exactly one hypothesis is
+left, *right* when it is of the chip's true class. Each is also diagnosed on its own, and the
+diagnosis counted when it is explained by one model (of the true class). One JSON line
 per chip (resumable: chips already in OUT are skipped); ``--summary`` tables the share of
 ambiguous chips resolved (right) by each campaign and the shots each took.
 
@@ -105,14 +107,30 @@ def one(scenario: str, i: int, seed: int) -> dict:
     row = {"chip": i, "scenario": scenario, "arch": widths, "s": s, "effects": effects, "first": out1,
            "first_shots": int(first.n * first.r), "ambiguous": len(out1["explained_by"]) >= 2}
     if row["ambiguous"] and d1.next_measurement is not None:
+        import jax
+
+        from gift_theory.lab._design import Design, decide, designs, hypotheses
+
         nxt = d1.next_measurement
-        adv = _campaign(rng, widths, Ws, bs, np.asarray(nxt["_x"]), int(nxt["r"]), s, effects,
-                        taps=bool(nxt["taps"]), order=nxt["order"], later=bool(nxt["later"]))
-        rep = _campaign(rng, widths, Ws, bs, x, r, s, effects, taps=False)
-        for name, camp in (("advised", adv), ("repeat", rep)):
+        hyps = hypotheses(list(d1.ranking), list(d1.mechanisms), list(d1.ambiguous_with))
+        advised = Design(nxt["kind"], nxt["design"], np.asarray(nxt["_x"]), int(nxt["r"]), tuple(nxt["taps"]),
+                         nxt["order"], bool(nxt["later"]))
+        # the yardstick: the first design (the same inputs, no tap, the same order) with as many shots
+        r_rep = max(r, -(-advised.shots() // first.n))
+        repeat = designs(first)[0].at(r_rep // r) if r_rep % r == 0 else Design(
+            "repeat", "the same inputs again", x, r_rep, (), "random")
+        for name, dz in (("advised", advised), ("repeat", repeat)):
+            camp = _campaign(rng, widths, Ws, bs, dz.x, dz.r, s, effects, taps=bool(dz.taps), order=dz.order,
+                             later=dz.later)
+            # the separating test of the design (the hypotheses as fitted on campaign 1, nothing refitted)
+            rej = decide(jax.random.PRNGKey(i), hyps, first, dz, camp)
+            left = [h for h, x in rej.items() if not x]
             o, _ = _diag(i + 1000, camp, False)
             one_model = o["explained"] and len(o["explained_by"]) == 1
-            row[name] = dict(o, shots=int(camp.n * camp.r), resolved=one_model,
+            row[name] = dict(o, shots=int(camp.n * camp.r), rejected=rej,
+                             decided=len(left) == 1, decided_right=bool(len(left) == 1
+                                                                      and spec["class"] in _class_of(left[0])),
+                             resolved=one_model,
                              right=bool(one_model and spec["class"] in _class_of(o["explained_by"][0])))
     row["seconds"] = time.time() - t0
     return row
@@ -129,8 +147,10 @@ def summary(path: str) -> dict:
                    "explained_by_one_first": sum(1 for r in rs if r["first"]["explained"]
                                                  and len(r["first"]["explained_by"]) == 1)}
         for name in ("advised", "repeat"):
-            out[sc][name] = {"resolved": sum(r[name]["resolved"] for r in amb),
-                             "resolved_right": sum(r[name]["right"] for r in amb),
+            out[sc][name] = {"decided": sum(r[name]["decided"] for r in amb),
+                             "decided_right": sum(r[name]["decided_right"] for r in amb),
+                             "diagnosis_one_model": sum(r[name]["resolved"] for r in amb),
+                             "diagnosis_one_model_right": sum(r[name]["right"] for r in amb),
                              "shots_mean": float(np.mean([r[name]["shots"] for r in amb])) if amb else None}
         out[sc]["predicted_power_mean"] = (float(np.mean([r["first"]["next_measurement"]["power"] for r in amb]))
                                            if amb else None)

@@ -185,9 +185,9 @@ def _pooled(cells) -> tuple:
     return np.mean([c[0] for c in cells], axis=0), np.mean([c[1] for c in cells], axis=0)
 
 
-def _power(key, hyps, meas: Measurement, design: Design, replicates: int):
-    """The design's simulated power (min over ordered pairs of hypotheses) and, per pair, the
-    statistic's mean gap and spreads under each (for the extrapolation in shots)."""
+def _predict(key, hyps, meas: Measurement, design: Design, replicates: int):
+    """Each hypothesis' predicted cells on the design and ``replicates`` simulated campaigns' cells:
+    ``(preds, sims, layer_idx, halves, r_eff, scale, sub)``."""
     n = design.x.shape[0]
     sub = design
     scale = 1.0
@@ -205,19 +205,53 @@ def _power(key, hyps, meas: Measurement, design: Design, replicates: int):
         kj = named_subkey(key, f"hyp{j}")
         preds.append(_pooled(_simulate(named_subkey(kj, "pred"), h.model, camp, layer_idx, halves, copies)))
         sims.append(_simulate(named_subkey(kj, "data"), h.model, camp, layer_idx, halves, replicates))
-    r_eff = sub.r // 2 if halves else sub.r
-    z99 = stats.norm.isf(ALPHA)
-    worst, pairs = 1.0, []
-    for a in range(len(hyps)):
-        for b in range(a + 1, len(hyps)):
+    return preds, sims, layer_idx, halves, (sub.r // 2 if halves else sub.r), scale, sub
+
+
+def _pair_laws(preds, sims, r_eff, scale):
+    """Per pair (a, b): T's mean and spread under a and under b."""
+    out = {}
+    for a in range(len(preds)):
+        for b in range(a + 1, len(preds)):
             Ta = np.array([_statistic(d, preds[a], preds[b], r_eff) for d in sims[a]]) * scale
             Tb = np.array([_statistic(d, preds[a], preds[b], r_eff) for d in sims[b]]) * scale
-            ma, sa, mb, sb = Ta.mean(), max(Ta.std(ddof=1), 1e-12), Tb.mean(), max(Tb.std(ddof=1), 1e-12)
-            pa = float(stats.norm.sf((mb + z99 * sb - ma) / sa))  # data from a reject b
-            pb = float(stats.norm.cdf((ma - z99 * sa - mb) / sb))  # data from b reject a
-            worst = min(worst, pa, pb)
-            pairs.append((ma - mb, sa, sb))
+            out[(a, b)] = (Ta.mean(), max(Ta.std(ddof=1), 1e-12), Tb.mean(), max(Tb.std(ddof=1), 1e-12))
+    return out
+
+
+def _power(key, hyps, meas: Measurement, design: Design, replicates: int):
+    """The design's simulated power (min over ordered pairs of hypotheses) and, per pair, the
+    statistic's mean gap and spreads under each (for the extrapolation in shots)."""
+    preds, sims, _, _, r_eff, scale, _ = _predict(key, hyps, meas, design, replicates)
+    z99 = stats.norm.isf(ALPHA)
+    worst, pairs = 1.0, []
+    for (ma, sa, mb, sb) in _pair_laws(preds, sims, r_eff, scale).values():
+        pa = float(stats.norm.sf((mb + z99 * sb - ma) / sa))  # data from a reject b
+        pb = float(stats.norm.cdf((ma - z99 * sa - mb) / sb))  # data from b reject a
+        worst = min(worst, pa, pb)
+        pairs.append((ma - mb, sa, sb))
     return worst, pairs
+
+
+def decide(key, hyps, meas: Measurement, design: Design, data: Measurement, replicates: int = REPLICATES) -> dict:
+    """The separating test on a measured campaign of ``design`` (``data``: its shots, same inputs,
+    shots and times): ``{name: rejected}`` -- a hypothesis is rejected when for some other one the
+    statistic falls beyond its 1 % tail (T above b's 99th percentile rejects b; below a's 1st, a),
+    the laws simulated as for the power (the same key gives the same laws)."""
+    preds, sims, _, halves, r_eff, scale, sub = _predict(key, hyps, meas, design, replicates)
+    laws = _pair_laws(preds, sims, r_eff, scale)
+    if sub is not design:
+        raise ValueError("decide: a campaign of at most MAX_INPUTS inputs")
+    ids = list(data.layer_ids())
+    read = sorted(set(design.taps) | {meas.arch.depth})
+    cells = _cells([data.layers()[ids.index(l)] for l in read], data.t, halves)
+    z99 = stats.norm.isf(ALPHA)
+    rejected = [False] * len(hyps)
+    for (a, b), (ma, sa, mb, sb) in laws.items():
+        T = _statistic(cells, preds[a], preds[b], r_eff) * scale
+        rejected[b] |= T > mb + z99 * sb
+        rejected[a] |= T < ma - z99 * sa
+    return {"+".join(h.effects): bool(x) for h, x in zip(hyps, rejected)}
 
 
 def _factor(pairs) -> float:

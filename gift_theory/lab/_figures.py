@@ -223,7 +223,8 @@ def time_figure(data: dict, *, title: str = "residual against acquisition time",
         ax.plot(d["t"][ok], d["mean"][ok], color="tab:blue", lw=1.2)
         ax.set_ylabel(f"layer {l}\nrelative gain", fontsize=8)
         ax.grid(alpha=0.3, lw=0.5)
-    axes[-1].set_xlabel(f"acquisition time t (shots acquired {data.get('order', '?')})")
+    how = {"blocked": "each input's shots one after the other", "random": "each input's shots spread over the campaign"}
+    axes[-1].set_xlabel(f"acquisition time t ({how.get(data.get('order'), 'order unknown')})")
     fig.suptitle(title, fontsize=10)
     return _root(fig)
 

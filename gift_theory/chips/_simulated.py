@@ -55,8 +55,8 @@ class SimulatedChip:
         Returns a :class:`~gift_theory.Measurement` with ``y`` of shape (n, shots, d_L), the
         programmed weights (float64) and, with ``taps``, the hidden layers. The shots are
         acquired input by input, shot by shot: t = (i shots + j) / (n shots - 1), recorded when
-        ``times`` is true (default: when the device drifts). Charges ``n * shots`` shots to the
-        ledger first (raises BudgetExceeded without measuring).
+        ``times`` is true (default: when an effect of the device needs them -- drift, memory).
+        Charges ``n * shots`` shots to the ledger first (raises BudgetExceeded without measuring).
         """
         params = check_params(params, self.arch, "chip weights")
         x = np.asarray(x)
@@ -67,7 +67,7 @@ class SimulatedChip:
         self.ledger.charge(x.shape[0] * shots)
         k = jax.random.fold_in(self.key, self._calls) if key is None else key
         self._calls += 1
-        with_t = "drift" in self.physics if times is None else bool(times)
+        with_t = bool(self.physics.needs_times()) if times is None else bool(times)
         y, tp, t = _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots,
                             taps=bool(taps) and self.arch.depth > 1, with_t=with_t)
         programmed = tuple(Layer(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in params)

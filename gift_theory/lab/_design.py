@@ -37,7 +37,6 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import jax
 import numpy as np
 from scipy import stats
 

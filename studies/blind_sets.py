@@ -57,13 +57,15 @@ def _write(folder: str, name: str) -> None:
         raise SystemExit(f"writing {name} failed ({rc})")
 
 
-def _chosen(folder: str, name: str):
+def _chosen(folder: str, name: str, only=None):
+    """(index, file) of the set's scored files (the index in the folder: the file's seed);
+    ``only``: a name fragment that further restricts them (a smaller run, said as such)."""
     files = sorted(f for f in os.listdir(folder) if f.endswith(".npz"))
     match = SETS[name][1]
-    return [(i, f) for i, f in enumerate(files) if match is None or match in f]
+    return [(i, f) for i, f in enumerate(files) if (match is None or match in f) and (only is None or only in f)]
 
 
-def run(files_dir: str, out_dir: str, sets, write_only: bool = False, extra=()) -> None:
+def run(files_dir: str, out_dir: str, sets, write_only: bool = False, extra=(), only=None) -> None:
     from .blind import run_diagnose
 
     for name in sets:
@@ -73,7 +75,7 @@ def run(files_dir: str, out_dir: str, sets, write_only: bool = False, extra=()) 
             continue
         keep = os.path.join(out_dir, f"json_{name}")
         os.makedirs(keep, exist_ok=True)
-        todo = [(i, f) for i, f in _chosen(folder, name) if not os.path.exists(os.path.join(keep, f[:-4] + ".json"))]
+        todo = [(i, f) for i, f in _chosen(folder, name, only) if not os.path.exists(os.path.join(keep, f[:-4] + ".json"))]
         for k, (i, f) in enumerate(todo):
             t0 = time.time()
             res, err = run_diagnose(os.path.join(folder, f), i, extra=extra)
@@ -131,11 +133,17 @@ COLUMNS = (("detected", "effects", "detected", True), ("false alarms", "nulls", 
            ("rejected first", "all", "rejected_first", False))
 
 
-def counts(path: str) -> dict:
-    """``{column: (count, of)}`` of one set's scored rows (:data:`COLUMNS`)."""
+def _files(path: str) -> set:
+    with open(path) as f:
+        return {json.loads(line)["file"] for line in f if line.strip()}
+
+
+def counts(path: str, files=None) -> dict:
+    """``{column: (count, of)}`` of one set's scored rows (:data:`COLUMNS`); ``files``: only
+    these files' rows."""
     with open(path) as f:
         rs = [json.loads(line) for line in f if line.strip()]
-    rs = [r for r in rs if not r.get("error")]
+    rs = [r for r in rs if not r.get("error") and (files is None or r["file"] in files)]
     out = {}
     for name, which, field, _ in COLUMNS:
         sel = [r for r in rs if which == "all" or (which == "nulls") == (r["physics"] == "none")]
@@ -155,7 +163,8 @@ def compare(files_dir: str, before: str, after: str, sets) -> str:
         pb, pa = os.path.join(before, f"{name}.jsonl"), os.path.join(after, f"{name}.jsonl")
         if not (os.path.exists(pb) and os.path.exists(pa)):
             continue
-        cb, ca = counts(pb), counts(pa)
+        both = _files(pb) & _files(pa)  # the files both runs scored
+        cb, ca = counts(pb, both), counts(pa, both)
         cells = []
         for col, _, _, higher in COLUMNS:
             (kb, nb), (ka, na) = cb[col], ca[col]
@@ -178,6 +187,9 @@ def main(argv=None):
     p.add_argument("--table", action="store_true", help="rows and markdown tables from the kept JSON")
     p.add_argument("--compare", default=None, metavar="BEFORE_DIR",
                    help="the before/after table of every set's counts: BEFORE_DIR's kept JSON against OUT_DIR's")
+    p.add_argument("--match", default=None, metavar="TEXT",
+                   help="score only the set's files whose name holds TEXT (a smaller run; --table and --compare "
+                        "count the files both runs scored)")
     p.add_argument("--no-design", action="store_true",
                    help="gift diagnose --no-design (no next measurement: every scored field is the same, in less time)")
     a = p.parse_args(argv)
@@ -194,7 +206,7 @@ def main(argv=None):
 
         table(rows(a.files_dir, a.out_dir, sets))
         return 0
-    run(a.files_dir, a.out_dir, sets, a.write_only, extra=("--no-design",) if a.no_design else ())
+    run(a.files_dir, a.out_dir, sets, a.write_only, extra=("--no-design",) if a.no_design else (), only=a.match)
     return 0
 
 

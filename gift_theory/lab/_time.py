@@ -90,13 +90,18 @@ def basis(t, modes: int = MODES, first: int = 1) -> np.ndarray:
     return np.cos(np.pi * tt * m) - slope * (tt - 0.5)
 
 
-def _wald(C, e, w):
+def _wald(C, e, w, dof_used: int = 0):
     """A Wald test of beta = 0 in e = C beta + error, the inputs independent, the error's
-    covariance within an input free (the sandwich over the inputs, HC1), referred to F(q, n - q).
+    covariance within an input free (the sandwich over the inputs, HC1), referred to
+    F(q, n - k - q).
 
     C (n, m, q) each input's m observations' columns, e (n, m) their residuals, w (n, m) their
-    weights (inverse variances). Returns (p, B, S, M): B = sum C^T w C and S = sum C^T w e, the
-    normal equations, and M the sandwich's meat (summed by a caller that combines readings)."""
+    weights (inverse variances); ``dof_used`` (k): parameters per observation the residuals were
+    fitted with before (the map's columns, read off the same inputs' means: the residuals are
+    smaller than the errors by n / (n - k), and the meat with them -- without it the across
+    reading rejected 4 of 48 null layers at 0.01). Returns (p, B, S, M): B = sum C^T w C and
+    S = sum C^T w e, the normal equations, and M the sandwich's meat (summed by a caller that
+    combines readings)."""
     n, _, q = C.shape
     Cw = C * w[:, :, None]
     B = np.einsum("nmq,nmk->qk", Cw, C)
@@ -106,21 +111,28 @@ def _wald(C, e, w):
     psi = np.einsum("nmq,nm->nq", Cw, e - C @ beta)
     w_, U = np.linalg.eigh(B)
     rank = int(np.sum(w_ > 1e-10 * max(float(w_.max()), 1e-300)))
-    M = psi.T @ psi * (n / max(n - rank, 1))
-    if rank == 0 or n - rank < 2:
+    dof = n - dof_used - rank
+    M = psi.T @ psi * (n / max(dof, 1))
+    if rank == 0 or dof < 2:
         return 1.0, B, S, M
     V = Bi @ M @ Bi
     stat = float(beta @ np.linalg.pinv(V, rcond=1e-10) @ beta)
-    return float(stats.f.sf(stat / rank, rank, n - rank)), B, S, M
+    return float(stats.f.sf(stat / rank, rank, dof)), B, S, M
 
 
-def _ftest(C, e, w, dof_used: int):
+def _ftest(C, e, w, dof_used: int, robust: bool = False):
     """The classical F test of beta = 0 in e = C beta + error, the errors independent with
     variance 1 / w up to one common scale estimated from the residuals (one number, not a q x q
-    covariance: with tens of coefficients per neuron and a hundred inputs a sandwich's inverse is
-    noise). C (N, q), e (N,), w (N,); ``dof_used``: degrees of freedom the residuals lost before
-    (the inputs' means, a regression on the shot's own input, the map's columns). Returns
-    (p, B, S, M) as :func:`_wald` (M: B times the residuals' scale, the estimate's meat)."""
+    covariance: with tens of coefficients per neuron and a hundred inputs a sandwich over the
+    inputs is noise). C (N, q), e (N,), w (N,); ``dof_used``: degrees of freedom the residuals
+    lost before (the inputs' means, a regression on the shot's own input, the map's columns).
+
+    ``robust``: the observations' own sandwich instead of the common scale (HC3: each residual
+    over one less its leverage), for the within reading's thousands of shots. A neuron saturated
+    on most shots has columns (its slope times t a) that live on the few shots near its linear
+    range, where the map's misfit is too: one scale for all shots read that misfit as a drift (a
+    null file's neuron at p = 1e-32). Returns (p, B, S, M) as :func:`_wald` (M: the estimate's
+    meat -- B times the residuals' scale, or the sandwich's)."""
     Cw = C * w[:, None]
     B = Cw.T @ C
     S = Cw.T @ e
@@ -132,6 +144,13 @@ def _ftest(C, e, w, dof_used: int):
     dof = e.size - dof_used - rank
     if rank == 0 or dof < 5:
         return 1.0, B, S, B
+    if robust:
+        lev = np.einsum("nq,qk,nk->n", Cw, Bi, C)
+        u = w * res / np.maximum(1.0 - lev, 1e-3)
+        M = (C * u[:, None]).T @ (C * u[:, None])
+        V = Bi @ M @ Bi
+        stat = float(beta @ np.linalg.pinv(V, rcond=RCOND) @ beta)
+        return float(stats.f.sf(stat / rank, rank, dof)), B, S, M
     scale = float(np.sum(w * res * res)) / dof
     F = float(beta @ B @ beta) / rank / max(scale, 1e-300)
     return float(stats.f.sf(F, rank, dof)), B, S, B * scale
@@ -217,7 +236,7 @@ def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
             rw = _wald(C.reshape(n, r * d, q), e.reshape(n, r * d), wts) if n >= 3 * q + 3 else None
         if use_a and n >= 3 * q + 3:
             Tt = _project_off(np.einsum("nrm,nrd->ndm", Phi, wdir) / r, X)
-            ra = _wald(Tt, ebar, r / obs)
+            ra = _wald(Tt, ebar, r / obs, X.shape[2])
         return rw, ra
 
     Phi = basis(t)
@@ -263,20 +282,28 @@ def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
     p_n = np.ones(d)
     Dm = np.zeros((d, k1))
     Dcov = np.zeros((d, k1, k1))
+    tc = t - tbar[:, None]
     if k1 <= MAP_MAX and (use_w or use_a) and n >= 3 * k1 + 3:
         for i in range(d):  # neuron by neuron: (n, r, p + 1) columns at a time
             cols = g[:, :, i, None] * A1 * t[:, :, None]  # (n, r, k1): how the mean moves with D_i, c_i
             rw_i = ra_i = None
             if use_w:
-                Ci = _within_fw(cols[:, :, None, :], g[:, :, i:i + 1], G)[:, :, 0, :]
+                # t less its input's mean time: the columns then have no part along the shot's own
+                # slope and input that an input's mean time carries (the pooled regression on the
+                # shot's own input leaves each input's part; where the map misfits a saturated
+                # neuron that part correlates with the residual, and a null file's neuron read a
+                # drift at p = 1e-32). Shots of one input are exchangeable in time without a drift:
+                # these columns' score has mean 0 whatever the map's misfit.
+                colc = g[:, :, i, None] * A1 * tc[:, :, None]
+                Ci = _within_fw(colc[:, :, None, :], g[:, :, i:i + 1], G)[:, :, 0, :]
                 # beyond this neuron's own gain and additive trends (the map's straight lines)
-                Li = _within_fw(np.stack([g[:, :, i] * t, g[:, :, i] * u1[:, :, i] * t], -1)[:, :, None, :],
+                Li = _within_fw(np.stack([g[:, :, i] * tc, g[:, :, i] * u1[:, :, i] * tc], -1)[:, :, None, :],
                                 g[:, :, i:i + 1], G)[:, :, 0, :].reshape(n * r, 2)
                 Cf = Ci.reshape(n * r, k1)
                 Cb = Cf - Li @ np.linalg.lstsq(Li, Cf, rcond=None)[0]
                 wi = np.broadcast_to(1.0 / obs[:, i, None], (n, r)).ravel()
                 used = n + (p if G is not None else 0)  # the inputs' means, the shot's own input
-                rw_i = _ftest(Cb, e[:, :, i].ravel(), wi, used + 2)
+                rw_i = _ftest(Cb, e[:, :, i].ravel(), wi, used + 2, robust=True)
                 full_w = _ftest(Cf, e[:, :, i].ravel(), wi, used)
             if use_a:
                 Tt = _project_off((cols.mean(1))[:, None, :], X[:, i:i + 1, :])[:, 0, :]

@@ -4,7 +4,8 @@ Runs the diagnosis of ``gift diagnose`` on the file and prints its ``next_measur
 alone (reference §8): the design, the models it separates, its predicted power at 0.01 and the
 shots it takes -- or null when nothing is left to separate (the data are explained by one
 model, or the awgn model fits). ``--out INPUTS.npz`` writes the inputs to send (``x``) with how
-to measure them (``shots`` per input, ``taps``, ``order``, ``later``).
+to measure them (``shots`` per input, ``taps``, ``order``, ``later``), and the object gains
+``"out"``: the path written.
 """
 
 from __future__ import annotations
@@ -41,8 +42,10 @@ def run(args):
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
                    progress=Progress("gift design: candidates", args.quiet), design=True)
     nxt = res.next_measurement
-    out = {"next_measurement": public(nxt), "verdict": res.verdict, "explained_by": list(res.explained_by)}
-    if args.out is not None and nxt is not None:
+    if nxt is None:
+        return None
+    out = public(nxt)
+    if args.out is not None:
         with atomic_path(args.out) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **inputs_arrays(nxt))
@@ -50,12 +53,12 @@ def run(args):
     return out
 
 
-def render(out) -> str:
-    nxt = out.get("next_measurement")
+def render(nxt) -> str:
     if nxt is None:
-        return "nothing left to separate: " + out.get("verdict", "")
+        return ("nothing left to separate: the data are explained by one model or the awgn model fits, or fewer than "
+                "two hypotheses can be simulated (gift diagnose says which)")
     line = (f"next measurement: {nxt['design']} -- separates {' / '.join(nxt['separates'])} with power "
             f"{nxt['power']:.2f} at 0.01")
-    if out.get("out"):
-        line += f"\ninputs to send written to {out['out']}"
+    if nxt.get("out"):
+        line += f"\ninputs to send written to {nxt['out']}"
     return line

@@ -5,10 +5,12 @@
 1. both pass (status ``"passes"``: the held-out test at 0.01 and every check of the verdict's
    rule, :mod:`._verdict`),
 2. their models are of different mechanism classes (§6; for a pair, its set of classes), and
-3. their penalised held-out discrepancies (the ranking's order: held-out discrepancy plus 2 sd per
-   parameter) differ by less than :data:`APART` baseline standard deviations of the discrepancy
-   -- the price of one parameter: what the ranking asks an extra parameter to buy, the twin rule
-   (b') asks a trend in time to buy, and so what the data must show to prefer one model.
+3. their held-out discrepancies differ by less than :data:`APART` baseline standard deviations
+   of the discrepancy -- the price of one parameter: what the ranking asks an extra parameter to
+   buy, the twin rule (b') asks a trend in time to buy, and so what the data must show to prefer
+   one model. The discrepancies, not the ranking's penalised scores: the penalty is the ranking's
+   preference for fewer parameters, not evidence in the data (a gain per layer that fits exactly
+   as an activation's slope sits 2 sd behind it by its second parameter alone).
 
 When ranking[0] has such peers, the data are explained (``explained`` stays true) by each of
 them: the verdict line names them all ("the data cannot tell ... from ..."), ``explained_by``
@@ -65,17 +67,16 @@ def peers(ranking, base_cmp) -> list:
     unit = base_cmp.se if base_cmp is not None and base_cmp.se > 0 else 1.0
     own = classes_of(top)
     return [c for c in ranking[1:] if c.status == "passes" and classes_of(c) != own
-            and abs(c.score - top.score) < APART * unit]
+            and abs(c.comparison.discrepancy - top.comparison.discrepancy) < APART * unit]
 
 
 def sentence(top, others, base_cmp) -> str:
     """The plain sentence the verdict adds: which models, their discrepancies, the rule's margin."""
     unit = base_cmp.se if base_cmp is not None and base_cmp.se > 0 else 1.0
     names = [describe(top)] + [describe(c) for c in others]
-    scores = ", ".join(f"{c.score:.3g}" for c in [top] + list(others))
+    scores = ", ".join(f"{c.comparison.discrepancy:.3g}" for c in [top] + list(others))
     return (f"the data cannot tell {', '.join(names[:-1])} from {names[-1]}: each passes every check, their "
-            f"penalised held-out discrepancies ({scores}) are within {APART:g} sd ({APART * unit:.3g}) of each "
-            f"other")
+            f"held-out discrepancies ({scores}) are within {APART:g} sd ({APART * unit:.3g}) of each other")
 
 
 def explained_by(top, others) -> list[str]:

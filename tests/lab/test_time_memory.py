@@ -1,6 +1,7 @@
 """Time, memory and ambiguity (issue 48, reference §8): the memory effect and its lag test, a gain
-that wanders and a map that drifts over the campaign, the models the data cannot tell apart, a
-per-neuron explanation, the next measurement and the time figure.
+that wanders and a map that drifts over the campaign, the models the data cannot tell apart, the
+next measurement and the time figure (a per-neuron explanation: test_plugins_real.py, on its
+plugin's diagnosis).
 
 Files come from a plain-numpy simulator written here from reference §1-§3 and §8 (not gift's
 forward pass): a small tanh network, awgn, acquisition in random order, input by input
@@ -193,8 +194,10 @@ def test_on_null_files_the_new_tests_are_quiet():
 
 # ---- ambiguity ----------------------------------------------------------------------------------
 
-def _cand(effects, score, status="passes"):
-    return types.SimpleNamespace(effects=tuple(effects), score=score, status=status)
+def _cand(effects, discrepancy, status="passes"):
+    # the ranking's penalised score 2 sd per parameter behind: the rule reads the discrepancy
+    return types.SimpleNamespace(effects=tuple(effects), score=discrepancy + 6.0 * len(effects), status=status,
+                                 comparison=types.SimpleNamespace(discrepancy=discrepancy))
 
 
 def test_models_of_other_classes_within_two_sd_are_indistinguishable_and_only_they():
@@ -269,59 +272,56 @@ def test_the_time_figure_draws_each_layer_against_acquisition_time():
     assert np.allclose(axes[0].lines[-1].get_ydata(), 0.1 * tt)
 
 
-# ---- a per-neuron explanation -------------------------------------------------------------------
+# ---- the data cannot choose, and the measurement that would: through the command line ---------
+
+def _kappa_chip():
+    """One hidden layer of 8 whose activation is tanh(0.8 z), its biases small (N(0, 0.05)), no
+    taps: a gain of 0.8 on W_1 gives almost the same output -- the two differ only through the
+    biases, which the first campaign's inputs barely move. A tap on layer 1 would tell them."""
+    import gift_theory as gt
+    from gift_theory.lab import simulate_measurement
+
+    rng = np.random.default_rng(0)
+    params = gt.init_params(jax.random.PRNGKey(0), gt.Architecture((3, 8, 2)), gain=1.5)
+    params = (Layer(params[0].W, jnp.asarray(rng.normal(0, 0.05, 8))), params[1])
+    x = rng.uniform(-1, 1, (60, 3))
+    return simulate_measurement(jax.random.PRNGKey(7), params, x,
+                                gt.Physics.create(s=0.05, activation_gain={"kappa": 0.8}), shots=16)
+
 
 @pytest.mark.slow
-def test_a_per_neuron_plugin_that_finds_a_dead_neuron_explains_the_data(tmp_path):
-    """A transmission per hidden neuron, one neuron dead (0.02): its fitted values are identified
-    neuron by neuron, so the outlier among them is the finding, and the model that fits to the
-    floor explains the data (before: refused as "not a draw of N(0, e^2)"). bias_offset keeps its
-    prior: the rule does not apply to it."""
-    from gift_theory import effects as fx
-    from gift_theory.lab import Model, diagnose
-    from gift_theory.lab._neurons import per_neuron_families
-
-    from .test_plugins_real import PLUGINS, _measurement
-
-    before = dict(fx.REGISTRY)
-    try:
-        path = tmp_path / "transmission.py"
-        path.write_text(PLUGINS["transmission"])
-        fx.load_plugin(str(path))
-        d = diagnose(jax.random.PRNGKey(0), _measurement("transmission"),
-                     candidates=["transmission", "activation_gain", "bias_offset"], second=0, design=False)
-        assert d.explained and d.ranking[0].effects == ("transmission",) and d.ranking[0].status == "passes"
-        assert "identified neuron by neuron" in d.reasons[0]
-        assert d.as_json()["explained_by"] == ["transmission"]
-        assert per_neuron_families(d.ranking[0].model) == [("transmission", "alive")]
-        assert per_neuron_families(Model(d.baseline.physics, None, {"bias_offset": 0.1})) == []
-    finally:
-        fx.REGISTRY.clear()
-        fx.REGISTRY.update(before)
-
-
-# ---- gift design --------------------------------------------------------------------------------
-
-@pytest.mark.slow
-def test_gift_design_prints_the_next_measurement_alone_and_writes_the_inputs(tmp_path, capsys):
-    """A chip whose first layer drifts (no catalogue effect is that): nothing explains the data,
-    and ``gift design`` prints the campaign that tells the first two mechanisms' best candidates
-    apart, as one JSON object, and writes its inputs; a bad --out is one line, exit 2, nothing
-    written."""
+def test_diagnose_names_every_model_the_data_cannot_tell_apart_and_design_advises_the_tap(tmp_path, capsys):
+    """``gift diagnose --json``: the activation's slope and a gain per layer both pass and fit
+    alike, so ``explained_by`` holds both, each ranking entry names the other, the verdict line
+    says the data cannot tell them apart -- never one alone -- and ``next_measurement`` separates
+    them with power >= 0.8 (a tap on layer 1: the hidden layer shows the biases' share). ``gift
+    design`` prints that object alone and writes the inputs; a bad --out is one line, exit 2,
+    nothing written."""
     import json
 
     from gift_theory.cli import main
     from gift_theory.lab import save_measurement
 
     path = str(tmp_path / "chip.npz")
-    save_measurement(path, sim(8, n=60, r=16, drift=0.3))
-    assert main(["design", path, "--out", str(tmp_path / "next.npz"), "--json", "--quiet"]) == 0
+    save_measurement(path, _kappa_chip())
+    cands = "--candidates=activation_gain,layer_gain"
+    assert main(["diagnose", path, cands, "--json", "--quiet", "--power-replicates", "0"]) == 0
     out = json.loads(capsys.readouterr().out)
+    assert out["explained"] and sorted(out["explained_by"]) == ["activation_gain", "layer_gain"], out["verdict"]
+    marks = {e["effect"]: e.get("indistinguishable_from") for e in out["ranking"]}
+    assert marks == {"activation_gain": ["layer_gain"], "layer_gain": ["activation_gain"]}
+    assert "the data cannot tell" in out["verdict"] and "activation_gain" in out["verdict"] \
+        and "layer_gain" in out["verdict"]
     nxt = out["next_measurement"]
-    assert nxt is not None and len(nxt["separates"]) == 2 and 0.0 <= nxt["power"] <= 1.0
-    assert nxt["shots"] == nxt["inputs"] * nxt["r"] and out["out"].endswith("next.npz")
+    assert sorted(nxt["separates"]) == ["activation_gain", "layer_gain"] and nxt["power"] >= 0.8
+    assert nxt["shots"] == nxt["inputs"] * nxt["r"]
+
+    assert main(["design", path, cands, "--out", str(tmp_path / "next.npz"), "--json", "--quiet"]) == 0
+    alone = json.loads(capsys.readouterr().out)
+    assert alone.pop("out").endswith("next.npz") and alone == nxt  # the same object, the same seed
     with np.load(tmp_path / "next.npz") as z:
-        assert z["x"].shape == (nxt["inputs"], 5) and int(z["shots"]) == nxt["r"]
+        assert z["x"].shape == (nxt["inputs"], 3) and int(z["shots"]) == nxt["r"]
+        assert list(z["taps"]) == nxt["taps"]
     assert main(["design", path, "--out", str(tmp_path / "next.txt"), "--json", "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--out" in err[0] and not (tmp_path / "next.txt").exists()

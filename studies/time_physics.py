@@ -1,7 +1,7 @@
 """Physics in acquisition time, and activation shapes: issue 48's blind set, in plain numpy.
 
 Written from the text of docs/reference.md (§1-§3, §8) and the issue, not from gift's forward
-pass, like :mod:`studies.contract_sim`: the generative process of CONTRACTS §2 with awgn at
+pass, like :mod:`studies.contract_sim`: the generative process of reference §2 with awgn at
 level s, plus one of the physics below. ``python -m studies.blind write DIR --physics time``
 writes the files (labels in ``DIR/labels.json``, never in a file gift reads).
 
@@ -174,7 +174,7 @@ def simulate_time(rng, widths, Ws, bs, x, r: int, s: float, name: str | None, pa
 
 def write_time(folder: str, files_per_physics: int, seed: int, taps: bool, physics=tuple(TIME_PHYSICS),
                nulls: int | None = None):
-    """The time set's files (CONTRACTS §3 keys, t always) and ``folder/labels.json``; returns the
+    """The time set's files (reference §3 keys, t always) and ``folder/labels.json``; returns the
     file names. Random networks as :func:`studies.blind._draw_setting` draws them; each file's
     draws from the stream (seed, physics, index), so the files with and without taps hold the
     same shots."""

@@ -1,5 +1,5 @@
 """``memory``: each layer output fed forward, and the readout, adds alpha times the same neuron's
-value of the shot acquired just before, in acquisition-time order (CONTRACTS §8; §6 class
+value of the shot acquired just before, in acquisition-time order (reference §8; §6 class
 ``memory``: detector bandwidth, thermal memory). It needs the acquisition times t.
 
 The last link of the readout chain D: ``out_k = D(v_k) + alpha out_{k-1}``, k the shot's rank

@@ -1,4 +1,4 @@
-"""Memory: does a layer's shot carry the shot acquired before it? (CONTRACTS §6 class ``memory``.)
+"""Memory: does a layer's shot carry the shot acquired before it? (reference §6 class ``memory``.)
 
 A detector whose response to one shot lingers into the next (finite bandwidth, thermal memory)
 measures ``out_k = v_k + alpha out_{k-1}``, k the shot's rank in acquisition time over the whole

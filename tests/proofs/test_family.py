@@ -122,3 +122,14 @@ def test_w0_critical_is_a_power_backed_hypothesis(x64):
         r = theorem1(family(J, np.full(2, c * scale)), 0.3, 0.6, confidence=0.95)
         verified[scale] = next(h["verified"] for h in r["hypotheses"] if h["name"] == "w0_critical")
     assert verified == {1.0: True, 1.3: False}
+
+
+def test_a_decimal_w0_is_not_critical_exactly_and_the_check_says_why_and_what_to_do():
+    s, w = sp.Symbol("s", positive=True), sp.Symbol("w", real=True)
+    J = (w - sp.sqrt(2) * s) ** 2 + s ** 2 * w ** 4 / 10
+    w0 = float(sp.nsolve(sp.diff(J, w).subs(s, 1), w, 1.3))  # a critical point to a float's precision
+    detail = next(h["detail"] for h in theorem1(family(J, w0, s=s, w=w), "1", "1.1")["hypotheses"]
+                  if h["name"] == "w0_critical")
+    assert "zero to a float's precision, not exactly" in detail and "sp.Rational" in detail
+    far = next(h for h in theorem1(family(J, 1.0, s=s, w=w), "1", "1.1")["hypotheses"] if h["name"] == "w0_critical")
+    assert far["verified"] is False and "float's precision" not in far["detail"]  # really not critical: no hint

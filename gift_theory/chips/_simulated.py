@@ -57,7 +57,7 @@ class SimulatedChip:
         Returns a :class:`~gift_theory.Measurement` with ``y`` of shape (n, shots, d_L), the
         programmed weights (float64) and, with ``taps``, the hidden layers. The shots are
         acquired input by input, shot by shot: t = (i shots + j) / (n shots - 1), recorded when
-        ``times`` is true (default: when an effect of the device acts through them, ``needs_times``;
+        ``times`` is true (default: when an effect of the device acts through them -- drift, memory: ``needs_times``;
         ``times=False`` then is a bad input). Charges ``n * shots`` shots to the
         ledger first (raises BudgetExceeded without measuring).
         """

@@ -51,6 +51,7 @@ import numpy as np
 from scipy import stats
 
 from .._measurement import Measurement
+from . import _memory, _time
 from ._qtest import over_inputs
 from ._discrete import lattice_row, resolution_var
 from ._smoothing import smoothed  # noqa: F401  (the lab's modules import it from here)
@@ -1317,9 +1318,10 @@ def _detector_or_modulator(lay: _Layer, act: str, s2: float, obs, mf: float, ali
 
 
 def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: bool,
-                    trends: bool = True) -> LayerIdentity:
+                    trends: bool = True, memory: bool = True) -> LayerIdentity:
     """One layer's identification; ``trends``: whether a trend within the inputs' shots may be
-    put into the map (see :func:`_within_trend`)."""
+    put into the map (see :func:`_within_trend`); ``memory``: whether the layer's memory is tested
+    (:mod:`._memory`; False once it was taken out of the shots)."""
     n, r, d = lay.Y.shape
     p = lay.W.shape[1]
     l = lay.layer
@@ -1362,7 +1364,31 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
         return _fit_map(lay, act, s2, tt, W0=W0, b0=b0), s2, W0, b0
 
     (W_eff, b_eff, drift, z, m, g, var, X, E), s2, W0, b0 = fit_at_level(lay, s2, W0, b0)
-    E_time = None
+    extra_rows = []
+    # ---- issue 48 hook: a gain wandering over the campaign, a map drifting (lab/_time.py), tested
+    # beyond the straight lines read below; a named one is put into the map as a known term of the
+    # pre-activation, like those lines, so the map is read at t = 0
+    E_slow, slow = None, None
+    if t is not None:
+        slow = _time.slow_terms(lay, E, g, X, t, l, _row, _within)
+        extra_rows.extend(slow.rows)
+        if slow.offset is not None:
+            E_slow = _within(E, g, lay.A)
+            lay = dataclasses.replace(lay, offset=slow.offset)
+            (W_eff, b_eff, drift, z, m, g, var, X, E), s2, W0, b0 = fit_at_level(lay, s2, W0, b0)
+    # ---- issue 48 hook: memory (lab/_memory.py), read on the residuals beyond those slow terms; a
+    # memory that is named is taken out of the shots and the layer read again, so its mean shift
+    # is not read as the map's
+    if memory and t is not None:
+        lag = _memory.lag_test(l, _within(E, g, lay.A), lay.Y, t, _row, g, lay.A)
+        if lag.p < _memory.UNDO_P:
+            inner = _identify_layer(dataclasses.replace(lay, Y=_memory.undo(lay.Y, lag), offset=None), act, s_guess,
+                                    t, depth, taps, trends, memory=False)
+            return dataclasses.replace(inner, rows=inner.rows + (lag.row,))
+        extra_rows.append(lag.row)
+    elif memory:
+        extra_rows.append(_memory.lag_test(l, E, lay.Y, None, _row).row)
+    E_time = E_slow  # the time tests of the noise read the residuals without the terms put in
     # (the residuals with W_eff's error along each shot's own input removed, as the time tests read them)
     Ew = _within(E, g, lay.A) if tt is None and t is not None else None
     within = _within_trend(lay, Ew, g, t, _cell_var(Ew, lay.res_var)) if Ew is not None and trends else None
@@ -1373,8 +1399,8 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
         # interleaved acquisition its time average is the same shift -- or gain -- of every
         # input's z: a bias drift was read as a shifted transfer and named activation_mismatch),
         # and the noise level without it; the time tests read the residuals with it
-        E_time = Ew
-        lay = dataclasses.replace(lay, offset=offset)
+        E_time = Ew if E_time is None else E_time
+        lay = dataclasses.replace(lay, offset=offset if lay.offset is None else lay.offset + offset)
         (W_eff, b_eff, drift, z, m, g, var, X, E), s2, W0, b0 = fit_at_level(lay, s2, W0, b0)
         Ew = None
     E = _within(E, g, lay.A) if Ew is None else Ew  # (already made for the trend's test)
@@ -1401,6 +1427,8 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
                 S += trend_se ** 2 * np.outer(v.ravel(), v.ravel())
             else:
                 S += trend_se ** 2 * v[:, :, None] * v[:, None, :]
+    if slow is not None and slow.cov is not None:  # issue 48 hook: the map drift's error (lab/_time.py)
+        _time.add_cov(S, full, slow.cov, k)
     # the covariance's own degrees of freedom: r - 1 per input, inputs weighted by their leverage
     lev = np.einsum("nip->n", X ** 2)
     nu = float(lev.sum() ** 2 / max(np.sum(lev ** 2), 1e-300)) * max(r - 1, 1)
@@ -1682,15 +1710,18 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     noise_rows, s_lvl, s_se, kurt = _noise_rows(lay, act, l, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2,
                                                 _unit_var(lay, W_n), _unit_cov(lay, W_n, sub), E_time)
     rows.extend(noise_rows)
+    _time.attach_share(extra_rows, noise_rows)  # issue 48: the wander's share of the gain's variance
     if trend_kind == "gain":
         share = next((r_.get("share") for r_ in noise_rows if r_["test"] == "time_within"), None)
         if share is not None and share < TREND_SHARE:
             # the gain's trend carries little of its variance within the inputs' shots: the path of
             # a fluctuating gain (an AR(1) laser), whose straight line's value at t = 0 means
             # nothing -- the map is read without it (put in, it read a gain of 0.89 at t = 0)
-            return _identify_layer(dataclasses.replace(lay, offset=None), act, s_guess, t, depth, taps, trends=False)
+            inner = _identify_layer(dataclasses.replace(lay, offset=None), act, s_guess, t, depth, taps, trends=False,
+                                    memory=False)
+            return dataclasses.replace(inner, rows=inner.rows + tuple(extra_rows))
     return LayerIdentity(l, W_eff, b_eff, se, gain, gain_se, tuple(dead), choice, zc, gam, curve,
-                         s_lvl, s_se, kurt, tuple(rows))
+                         s_lvl, s_se, kurt, tuple(rows) + tuple(extra_rows))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -27,9 +27,11 @@ itself is :class:`gift_theory.Measurement`, the type chips return.
 
 from __future__ import annotations
 
+import gc
 import os
 import re
 import stat
+import sys
 import zipfile
 
 import numpy as np
@@ -292,15 +294,34 @@ def load_netcdf(path, *, weights=None) -> Measurement:
     path = os.fspath(path)
     engine = "scipy" if detect_format(path) == "netcdf3" else "h5netcdf"
     kw = {"phony_dims": "sort"} if engine == "h5netcdf" else {}  # plain HDF5 has no dimension names
+    hook, failure = sys.unraisablehook, None
     try:
         with xr.open_dataset(path, engine=engine, mask_and_scale=False, decode_times=False, **kw) as ds:
             arrays = dataset_arrays(ds.load(), where=path)
     except GiftInputError:
         raise
     except Exception as exc:  # h5py / scipy raise many kinds on a damaged file
-        raise GiftInputError(f"{path}: not a readable netCDF / HDF5 file ({type(exc).__name__}: "
-                             f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+        failure = (f"{path}: not a readable netCDF / HDF5 file ({type(exc).__name__}: "
+                   f"{str(exc).splitlines()[0] if str(exc) else ''})")
+        sys.unraisablehook = _quiet_half_open(hook)
+    if failure is not None:
+        try:  # the half-opened h5netcdf File is collected here, before the one-line error
+            gc.collect()
+        finally:
+            sys.unraisablehook = hook
+        raise GiftInputError(failure) from None
     return validate_arrays(_needs_weights(path, arrays, weights), where=path)
+
+
+def _quiet_half_open(hook):
+    """An unraisable hook that drops h5netcdf's File.close failing on a File whose opening failed
+    (it has no ``_writable`` yet: 'Exception ignored in File.close' on stderr after the one-line
+    error) and passes everything else to ``hook``."""
+    def quiet(u):
+        if isinstance(u.exc_value, AttributeError) and "h5netcdf" in getattr(u.object, "__module__", ""):
+            return None
+        return hook(u)
+    return quiet
 
 
 def save_netcdf(path, meas: Measurement) -> None:

@@ -180,8 +180,6 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
             break
         with phase("chip"):
             meas = problem.chip.measure(_layers32(prog), x_cal, int(shots), taps=True)
-        with phase("calibration fit"):
-            fits = fit_layers(meas, s=s_hat)
         taps = meas.has_taps
         if k == 0:
             first_meas = meas
@@ -192,6 +190,8 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
                          [(W.copy(), b.copy()) for W, b in prog]))
         if len(measured) >= 3 and measured[-1][0] > measured[-2][0] > measured[-3][0]:
             break  # the chip's loss rose twice running: the corrections no longer help; the budget goes to the confirmation
+        with phase("calibration fit"):
+            fits = fit_layers(meas, s=s_hat)
         s_hat = float(np.median([f.s for f in fits]))
         new_pins = 0
         for f in fits:

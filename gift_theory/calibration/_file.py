@@ -35,7 +35,7 @@ from .._measurement import Measurement
 from .._params import Layer, params32
 from ._fit import fit_layers
 from ._loop import _SLOPES, _row_gain, correction, noise_physics
-from ._model import ChipModel, LayerResponse
+from ._model import ChipModel, LayerResponse, effect_json
 
 @dataclasses.dataclass(frozen=True)
 class FileCalibration:
@@ -137,8 +137,8 @@ def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), retrain: bo
         step, _ = correction(f, target[i], (pW, pb), gW, gb, ridge, slope)
         corrected[i] = (np.where(pW, f.W_prog, f.W_prog + step[:, :-1]), np.where(pb, f.b_prog, f.b_prog + step[:, -1]))
         responses.append(LayerResponse(f.layer, f.W, f.b, f.W_prog, f.b_prog, gW, gb, f.W_se, f.b_se, pW, pb))
-    effects_json = tuple({"name": e.name, "params": e.param_json()} for e in physics.effects)
-    model = ChipModel(tuple(arch.widths), arch.activation, tuple(responses), effects_json, source)
+    model = ChipModel(tuple(arch.widths), arch.activation, tuple(responses),
+                      tuple(effect_json(e) for e in physics.effects), source, plugins=physics.plugin_names)
     corrected = tuple(Layer(W, b) for W, b in corrected)
     preds = {}
     for name, p in (("after", corrected), ("before", tuple(Layer(W, b) for W, b in prog))):

@@ -9,7 +9,12 @@ programmed, ``gain_l`` each row's gain), the layers not read (no taps: the hidde
 programmed, and the noise as a :class:`~gift_theory.Physics`. :meth:`ChipModel.realise` maps
 programmed weights to the weights the chip is predicted to realise; with :meth:`ChipModel.physics`
 they are a model of the chip's shots, which ``gift compare --chip-model`` scores against a new
-measurement. Saved as one ``.npz`` of arrays plus a JSON string (no pickle): :meth:`save`, :func:`load_chip_model`.
+measurement and ``gift simulate --chip-model`` draws new measurements from. Saved as one ``.npz`` of
+arrays plus a JSON string (no pickle): :meth:`save`, :func:`load_chip_model`.
+
+Two commands write one: ``gift calibrate`` (the maps read with taps, the noise) and ``gift fit
+--save-model`` (the fitted physics and, when an effect was fitted as per-device offsets, those
+offsets as the layers' realised maps: ``realised = programmed + offset``).
 """
 
 from __future__ import annotations
@@ -52,8 +57,11 @@ class ChipModel:
 
     widths : the network; activation : its name
     responses : one :class:`LayerResponse` per layer read
-    effects : ``[{"name": ..., "params": {...}}, ...]`` the noise's effects (awgn first)
+    effects : ``[{"name": ..., "params": {...}}, ...]`` the noise's effects (awgn first); a
+        device's configuration (``seed``) rides with the parameters
     source : the measurement it was fitted to (a path or a label)
+    intervals : ``{param: [lo, hi]}``, the fit's 95 % intervals (informative; not used to draw)
+    plugins : the effects that come from plugins (loading the model needs them registered)
     """
 
     widths: tuple
@@ -61,6 +69,25 @@ class ChipModel:
     responses: tuple
     effects: tuple
     source: str = ""
+    intervals: dict = dataclasses.field(default_factory=dict, compare=False)
+    plugins: tuple = ()
+
+    @classmethod
+    def from_model(cls, model, meas, *, source: str = "", intervals=None) -> "ChipModel":
+        """The chip model of a fitted lab model (:class:`gift_theory.lab.Model`) of ``meas``: its
+        physics, and its weights where they differ from the programmed ones (effects fitted as
+        per-device offsets) as layers realising ``programmed + offset``."""
+        responses = []
+        for l, ((W, b), (pW, pb)) in enumerate(zip(model.weights(meas), meas.params), start=1):
+            W, b, pW, pb = (np.asarray(a, np.float64) for a in (W, b, pW, pb))
+            if np.array_equal(W, pW) and np.array_equal(b, pb):
+                continue
+            responses.append(LayerResponse(l, W, b, pW, pb, np.ones(W.shape[0]), np.ones(b.shape[0]),
+                                           np.zeros_like(W), np.zeros_like(b), np.zeros(W.shape, bool),
+                                           np.zeros(b.shape, bool)))
+        effects = tuple(effect_json(e) for e in model.physics.effects)
+        return cls(tuple(meas.arch.widths), meas.arch.activation, tuple(responses), effects, source,
+                   dict(intervals or {}), model.physics.plugin_names)
 
     @property
     def physics(self):
@@ -96,7 +123,8 @@ class ChipModel:
                 if f.name != "layer":
                     arrays[f"l{r.layer}_{f.name}"] = np.asarray(getattr(r, f.name))
         meta = {"kind": "gift chip model", "version": 1, "widths": list(self.widths), "activation": self.activation,
-                "layers": [r.layer for r in self.responses], "effects": list(self.effects), "source": self.source}
+                "layers": [r.layer for r in self.responses], "effects": list(self.effects), "source": self.source,
+                "intervals": dict(self.intervals), "plugins": list(self.plugins)}
         arrays["meta_json"] = np.asarray(json.dumps(meta))
         return atomic_write(path, lambda fh: np.savez(fh, **arrays))
 
@@ -120,6 +148,19 @@ def load_chip_model(path) -> ChipModel:
         require(not missing, f"{path}: layer {l} lacks {missing[0] if missing else ''}")
         responses.append(LayerResponse(int(l), **{n: arrays[f"l{l}_{n}"] for n in names}))
     model = ChipModel(tuple(meta["widths"]), meta["activation"], tuple(responses), tuple(meta["effects"]),
-                      meta.get("source", ""))
-    model.physics  # unknown effects (a plugin not loaded) are a bad input here, not later
+                      meta.get("source", ""), dict(meta.get("intervals", {})), tuple(meta.get("plugins", ())))
+    from ..effects import REGISTRY
+
+    missing = [e["name"] for e in model.effects if e["name"] not in REGISTRY]
+    require(not missing, f"{path}: effect {missing[0] if missing else ''} is not registered: "
+                         f"load the plugin that defines it (--plugin FILE.py)")
+    model.physics  # a value outside its effect's bounds is a bad input here, not later
     return model
+
+
+def effect_json(effect) -> dict:
+    """One effect as ``{"name": ..., "params": {...}}``: its parameters (a per-neuron one as a list
+    per layer) and its configuration fields (a device ``seed``), what :func:`make_effect` takes."""
+    params = effect.param_json()
+    params.update({f: getattr(effect, f) for f in effect.static_fields})
+    return {"name": effect.name, "params": params}

@@ -27,6 +27,10 @@ def add_arguments(parser):
     parser.add_argument("--power-replicates", type=int, default=20, metavar="B",
                         help="simulated files behind the power figures next to the verdict on the fitted model "
                              "(default 20; 0: none)")
+    parser.add_argument("--save-model", default=None, metavar="M.chip.npz",
+                        help="save the fitted model as a chip model (its effects, parameters, intervals, the plugins "
+                             "it needs, fitted offsets as realised weights): gift simulate --chip-model draws from it, "
+                             "gift compare --chip-model scores it, gt.Physics.load reads its physics")
 
 
 def run(args):
@@ -43,6 +47,12 @@ def run(args):
 
     require(args.replicates is None or args.replicates >= 2, f"--replicates {args.replicates}: needs at least 2")
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
+    if args.save_model is not None:  # a path that cannot be written is refused before any work
+        import os
+
+        require(args.save_model.endswith(".npz"), f"--save-model {args.save_model}: a chip model is written as .npz")
+        parent = os.path.dirname(os.path.abspath(args.save_model))
+        require(os.path.isdir(parent), f"--save-model {args.save_model}: folder {parent} does not exist")
     folder = figure_dir(args, "fit")  # a folder of another command's: refused before any work
     meas = load(args)
     res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
@@ -64,6 +74,12 @@ def run(args):
 
     if all(c.channel_values is not None for _, c in res.ladder) and len(res.ladder) > 1:
         out["model_comparison"] = comparison_table([(lab, c, "") for lab, c in res.ladder][::-1])
+    if args.save_model is not None:
+        from ..calibration import ChipModel
+
+        scalar = {k: v for k, v in unc.get("intervals", {}).items()}
+        out["chip_model"] = ChipModel.from_model(res.after, meas, source=args.measurement,
+                                                 intervals=scalar).save(args.save_model)
     if folder:
         from ..lab import where_it_fails
 
@@ -141,4 +157,6 @@ def render(out) -> str:
                         f"the inputs)" if d else ""))
     if out.get("figures"):
         lines.append("figures: " + ", ".join(out["figures"]))
+    if out.get("chip_model"):
+        lines.append(f"chip model: {out['chip_model']} (gift simulate --chip-model, gift compare --chip-model)")
     return "\n".join(lines)

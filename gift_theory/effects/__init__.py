@@ -50,7 +50,8 @@ Public API
 ----------
 :class:`Effect`, :func:`register`, :data:`REGISTRY`, :data:`STAGES`, :data:`MECHANISMS`,
 :data:`BUILTIN`, :data:`EFFECT_NAMES`, :class:`Physics`, :func:`awgn`, :func:`make_effect`,
-:func:`parse_effect`, :func:`load_plugin`, :func:`load_entry_points`.
+:func:`parse_effect`, :func:`load_plugin`, :func:`load_entry_points`, :data:`PRESETS` (preset chips,
+:meth:`Physics.preset`).
 """
 
 from ._base import MECHANISMS as MECHANISMS
@@ -76,6 +77,7 @@ from .activation_gain import ActivationGain as ActivationGain
 from .layer_gain import LayerGain as LayerGain
 from .memory import Memory as Memory
 from ._physics import Physics as Physics
+from ._presets import PRESETS as PRESETS
 from ._physics import awgn as awgn
 from ._plugins import load_entry_points as load_entry_points
 from ._plugins import load_plugin as load_plugin

@@ -120,10 +120,33 @@ class Physics:
                 out.append(e)
         return cls.of(out, where)
 
+    @classmethod
+    def preset(cls, name: str, **levels) -> "Physics":
+        """A preset chip's physics (:data:`gift_theory.effects.PRESETS`: ``coherent-mzi-mesh``,
+        ``incoherent-intensity``); ``levels`` change parameters by name (``s=0.05``)."""
+        from ._presets import preset_effects
+
+        phys = cls.of([make_effect(n, f"preset {name}", **v) for n, v in preset_effects(name).items()],
+                      f"preset {name}")
+        return phys.replace(f"preset {name}", **levels) if levels else phys
+
+    @classmethod
+    def load(cls, path) -> "Physics":
+        """The noise physics of a saved chip model (``gift fit --save-model``, ``gift calibrate``);
+        :func:`gift_theory.calibration.load_chip_model` gives the whole model (its realised maps too)."""
+        from ..calibration import load_chip_model
+
+        return load_chip_model(path).physics
+
     # ---- queries ------------------------------------------------------------------
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(e.name for e in self.effects)
+
+    @property
+    def plugin_names(self) -> tuple[str, ...]:
+        """The effects that come from plugins (not built in): a saved model needs them registered."""
+        return tuple(e.name for e in self.effects if not _is_builtin(type(e)))
 
     def __contains__(self, name: str) -> bool:
         return name in self.names

@@ -32,9 +32,10 @@ import jax
 import numpy as np
 
 from .._measurement import Measurement
+from .._errors import require
 from .._params import Layer, params32
 from ._fit import fit_layers
-from ._loop import _SLOPES, _row_gain, correction, noise_physics
+from ._loop import _SLOPES, NOISE_CLASSES, _row_gain, correction, noise_physics
 from ._model import ChipModel, LayerResponse, effect_json
 
 @dataclasses.dataclass(frozen=True)
@@ -46,6 +47,8 @@ class FileCalibration:
     predicted_accuracy, predicted_accuracy_interval : of ``params`` on the chip (test set)
     accuracy_before, accuracy_before_interval : of the programmed weights, by the same model
     identified : per layer read, what it showed; not_identified : what the file cannot show
+    noise_model_dropped : the effects of a given noise model that are fixed maps (read off the file
+        instead: taking them too would count them twice)
     """
 
     params: tuple
@@ -56,6 +59,7 @@ class FileCalibration:
     accuracy_before_interval: tuple
     identified: dict
     not_identified: tuple
+    noise_model_dropped: tuple = ()
 
     def as_json(self) -> dict:
         ph = self.model.physics
@@ -64,7 +68,8 @@ class FileCalibration:
                 "predicted_accuracy_interval": list(self.predicted_accuracy_interval),
                 "accuracy_before": self.accuracy_before,
                 "accuracy_before_interval": list(self.accuracy_before_interval),
-                "identified": self.identified, "not_identified": list(self.not_identified)}
+                "identified": self.identified, "not_identified": list(self.not_identified),
+                **({"noise_model_dropped": list(self.noise_model_dropped)} if self.noise_model_dropped else {})}
 
 
 def _accuracy(key, params, x, labels, physics, arch, shots):
@@ -73,8 +78,8 @@ def _accuracy(key, params, x, labels, physics, arch, shots):
     return float(np.mean(np.argmax(np.asarray(out.y), axis=-1) == np.asarray(labels)[:, None]))
 
 
-def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), retrain: bool = True, draws: int = 40,
-                          shots: int = 32, ridge: float = 0.01, source: str = "") -> FileCalibration:
+def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), noise=None, retrain: bool = True,
+                          draws: int = 40, shots: int = 32, ridge: float = 0.01, source: str = "") -> FileCalibration:
     """Corrected weights for the chip ``meas`` measured (module docstring).
 
     Parameters
@@ -83,6 +88,8 @@ def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), retrain: bo
     meas : Measurement of the programmed weights
     ds : the data set the network classifies (the retraining's and the prediction's)
     effects : names of effects to fit as the noise (default: the diagnosis' choice)
+    noise : a :class:`~gift_theory.Physics` taken as the chip's noise instead (nothing fitted;
+        e.g. a saved chip model's, ``Physics.load``); not with ``effects``
     retrain : False keeps the programmed weights as the target (pre-compensation only)
     draws, shots : the prediction's posterior draws and shots per test input
     ridge : as in :func:`~gift_theory.calibration.calibrate`
@@ -118,7 +125,14 @@ def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), retrain: bo
             "dead_neurons": [int(j) for j in np.where(pinned[i][0].all(axis=1))[0]], "noise_level": f.s}
     realised = dataclasses.replace(meas, params=tuple(Layer(W, b) for W, b in eff))
     k_noise, k_train, k_pred = jax.random.split(key, 3)
-    physics, _ = noise_physics(k_noise, realised, effects, s=float(np.median([f.s for f in fits])))
+    fixed = ()
+    if noise is not None:
+        require(not effects, "calibrate: the noise is given; do not also name effects to fit")
+        fixed = tuple(e.name for e in noise.effects if e.mechanism not in NOISE_CLASSES)
+        physics = type(noise)(tuple(e for e in noise.effects if e.mechanism in NOISE_CLASSES))
+        physics = physics.check_scope(arch, "the noise model").validate("the noise model", arch)
+    else:
+        physics, _ = noise_physics(k_noise, realised, effects, s=float(np.median([f.s for f in fits])))
     target = prog
     if retrain:
         start = [(np.where(pW, eW, W), np.where(pb, eb, b)) for (W, b), (eW, eb), (pW, pb) in zip(prog, eff, pinned)]
@@ -153,4 +167,4 @@ def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), retrain: bo
     not_identified += ("stuck weights (one file cannot show what does not follow a change of the programming; a "
                        "measurement of the corrected weights can: gift compare NEW --chip-model)",)
     return FileCalibration(corrected, model, preds["after"][0], preds["after"][1], preds["before"][0],
-                           preds["before"][1], identified, not_identified)
+                           preds["before"][1], identified, not_identified, fixed)

@@ -23,6 +23,9 @@ def add_arguments(parser):
     parser.add_argument("--weights", help="weights .npz (W1..WL, b1..bL) for a file that holds none (CSV, netCDF)")
     parser.add_argument("--add", action="append", default=[], metavar="NAME",
                         help="fit these effects as the chip's noise (default: the diagnosis' model), repeatable")
+    parser.add_argument("--noise-model", default=None, metavar="M.chip.npz",
+                        help="take the chip's noise from a saved chip model (gift fit --save-model; reference §7b) "
+                             "instead of fitting it (not with --add)")
     parser.add_argument("--out", required=True, metavar="W.npz", help="where the corrected weights go")
     parser.add_argument("--no-retrain", action="store_true",
                         help="keep the programmed weights as the target (pre-compensate the maps only)")
@@ -41,13 +44,19 @@ def run(args) -> dict:
     check_data_folder(args)
     require(args.out.endswith(".npz"), f"--out {args.out}: the weights are written as .npz (W1.., b1..)")
     require(args.draws >= 2, f"--draws {args.draws}: needs at least 2")
+    require(not (args.noise_model and args.add), "--noise-model and --add: the noise is either given or fitted")
     load_plugins(args)
+    noise = None
+    if args.noise_model:
+        from ..calibration import load_chip_model
+
+        noise = load_chip_model(args.noise_model).physics
     meas = load_measurement(args.measurement, weights=args.weights)
     ds = load_dataset(args.dataset, folder=args.data_folder)
     if meas.arch.widths[0] != ds.n_inputs or meas.arch.widths[-1] != ds.n_outputs:
         raise GiftInputError(f"{args.measurement}: the network {'-'.join(map(str, meas.arch.widths))} does not fit "
                              f"--dataset {args.dataset} (inputs {ds.n_inputs}, outputs {ds.n_outputs})")
-    res = calibrate_measurement(jax.random.PRNGKey(args.seed), meas, ds, effects=tuple(args.add),
+    res = calibrate_measurement(jax.random.PRNGKey(args.seed), meas, ds, effects=tuple(args.add), noise=noise,
                                 retrain=not args.no_retrain, draws=args.draws, source=args.measurement)
     import numpy as np
 
@@ -71,7 +80,10 @@ def render(r: dict) -> str:
     for l, d in r["identified"].items():
         lines.append(f"  layer {l}: rows' gains {d['rows_gain_range'][0]:.3g}-{d['rows_gain_range'][1]:.3g}, weights off "
                      f"by {d['weight_deviation_rms']:.3g} rms, biases by {d['bias_deviation_rms']:.3g} rms"
-                     + (f", dead neurons {', '.join(str(i + 1) for i in d['dead_neurons'])}" if d["dead_neurons"] else ""))
+                     + (f", dead neurons (from 0) {', '.join(str(i) for i in d['dead_neurons'])}" if d["dead_neurons"] else ""))
+    if r.get("noise_model_dropped"):
+        lines.append(f"  from the noise model: {', '.join(r['noise_model_dropped'])} left out (fixed maps: read off "
+                     f"this file instead)")
     for w in r["not_identified"]:
         lines.append(f"  not identified: {w}")
     lines.append(f"corrected weights: {r['out']}; the chip model: {r['chip_model']} "

@@ -326,6 +326,30 @@ def test_gift_calibrate_from_a_file_predicts_what_the_chip_then_realises(capsys,
     assert c["per_layer"]["layer1"] < 5 * c["noise_floor"]  # layer 1's prediction (a loss) holds
 
 
+def test_calibrate_takes_the_noise_of_a_saved_model_without_its_fixed_maps(capsys, tmp_path, setting):
+    """--noise-model: the noise-like effects of a saved model are the chip's noise (nothing fitted);
+    its fixed maps (crosstalk here) are left out, since the maps are read off the file."""
+    from gift_theory.calibration import ChipModel
+    from gift_theory.lab import save_measurement
+    ds, w0 = setting
+    chip = FixedErrorChip(gains=(0.8, 1.0))
+    meas_path = str(tmp_path / "meas.npz")
+    save_measurement(meas_path, chip.measure(w0, ds.x_train[:200], 8, taps=True))
+    noise = ChipModel((4, 8, 2), "tanh", (), ({"name": "awgn", "params": {"s": 0.0437}},
+                                              {"name": "crosstalk", "params": {"k": 0.03}},
+                                              {"name": "shot", "params": {"q": 0.004}}), "test")
+    model = noise.save(str(tmp_path / "noise.chip.npz"))
+    rc, so, err = _cli(capsys, "calibrate", meas_path, "--dataset", "teacher", "--out", str(tmp_path / "w.npz"),
+                       "--noise-model", model, "--no-retrain", "--draws", "2", "--json")
+    assert rc == 0, err
+    r = json.loads(so)
+    assert r["effects"] == ["awgn", "shot"] and r["noise_model_dropped"] == ["crosstalk"]
+    assert r["params"] == {"s": pytest.approx(0.0437), "q": pytest.approx(0.004)}
+    rc, so, err = _cli(capsys, "calibrate", meas_path, "--dataset", "teacher", "--out", str(tmp_path / "w2.npz"),
+                       "--noise-model", model, "--add", "shot")
+    assert rc == 2 and "--noise-model and --add" in err and not os.path.exists(tmp_path / "w2.npz")
+
+
 def test_a_chip_model_round_trips_and_refuses_a_file_that_is_not_one(tmp_path, setting):
     from gift_theory.calibration import ChipModel, LayerResponse, load_chip_model
     ds, w0 = setting

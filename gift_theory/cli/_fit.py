@@ -73,7 +73,8 @@ def run(args):
     from ..lab._figures import comparison_table
 
     if all(c.channel_values is not None for _, c in res.ladder) and len(res.ladder) > 1:
-        out["model_comparison"] = comparison_table([(lab, c, "") for lab, c in res.ladder][::-1])
+        out["model_comparison"] = comparison_table([(lab, c, "passes" if c.p_value >= 0.01 else "fails")
+                                                    for lab, c in res.ladder][::-1])
     if args.save_model is not None:
         from ..calibration import ChipModel
 

@@ -48,6 +48,10 @@ def fitted(tmp_path_factory):
 def test_fit_saves_the_model_it_reports(fitted):
     d, fit = fitted
     assert fit["chip_model"] == str(d / "m.chip.npz")
+    # the ladder's comparison, fitted model first, says which rung the data reject
+    assert [(r["model"], r["status"]) for r in fit["model_comparison"]] == [
+        ("awgn + weight_error", "passes" if fit["p_value_after"] >= 0.01 else "fails"), ("awgn", "fails")]
+    assert fit["p_value_after"] >= 0.01
     from gift_theory.calibration import load_chip_model
 
     cm = load_chip_model(fit["chip_model"])

@@ -55,8 +55,8 @@ from ._diagnose import split_inputs as split_inputs
 from ._fit import fit_model as fit_model
 from ._fit import fit_uncertainty as fit_uncertainty
 from ._fit_moments import MomentProblem as MomentProblem
-from ._identify import Identification as Identification
-from ._identify import identify as identify
+from .identification import Identification as Identification
+from .identification import identify as identify
 from ._compare import PredictiveShots as PredictiveShots
 from ._compare import discrepancy_difference as discrepancy_difference
 from ._compare import predictive_shots as predictive_shots

@@ -30,7 +30,7 @@ the refused and the rejected by the held-out discrepancy itself. So ranking[0] i
 verdict line names, and an effect the data reject at 0.01 is never first while another entry
 passes or is refused.
 
-**Which candidates are fitted.** The closed-form identification (:mod:`._identify`, every
+**Which candidates are fitted.** The closed-form identification (:mod:`.identification`, every
 class a test with a Holm-adjusted p-value) runs first. The candidates of the classes it flags
 (a test rejecting at 0.01) are fitted first; when one of them passes every check, the others --
 whose classes no test flags -- are not fitted and are listed under ``not_fitted`` with that
@@ -79,7 +79,9 @@ from ._localise import (
     signatures,
     where_it_fails,
 )
-from ._identify import _shots_law, _subset, _two_sided, identify
+from .identification import identify
+from .identification._layers import _subset
+from .identification._stats import _shots_law, _two_sided
 from ._budget import candidate_threads
 from ._qtest import over_inputs
 from ._explain_output import also_explaining, mean_refusal, summary
@@ -619,7 +621,7 @@ STRICT = 1e-4
 def _corr_z(shots, r: int):
     """(n, K // r, pairs): per input and sample of r consecutive shots of ``shots`` (n, K, d),
     Fisher's z (atanh) of the correlation of each pair of neurons (on at most
-    :data:`~gift_theory.lab._identify.WIDE` of them) -- a measurement's r shots (one sample) or a
+    :data:`~gift_theory.lab.identification._layers.WIDE` of them) -- a measurement's r shots (one sample) or a
     model's K."""
     n, K, d = shots.shape
     sub = _subset(d)

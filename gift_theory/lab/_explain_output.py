@@ -2,7 +2,7 @@
 
 Without taps only the output is measured, and every layer's deviation folds into the output's
 mean map: a dead neuron in layer 2, a transfer that is not tanh, a detector's gain and offset
-all show as ``W_eff - W`` at the output, and the layer-wise tests (:mod:`._identify`) read them
+all show as ``W_eff - W`` at the output, and the layer-wise tests (:mod:`.identification`) read them
 as a weight error there. This module asks the converse question, at the network level: for each
 candidate mechanism H -- a class of reference §6 at a layer, with its own few parameters --
 does the model *with H in it* reproduce the per-input mean of every output neuron?
@@ -49,6 +49,7 @@ import sys
 import numpy as np
 from scipy import stats
 
+from .._arch import NUMPY_ACTIVATIONS
 from .._measurement import Measurement
 
 #: Legendre degree of a shared transfer's deformation
@@ -80,15 +81,13 @@ TRACE = False
 #: the map classes this module orders (noise classes are not a question of the mean)
 MAP_CLASSES = ("gain_error", "bias_offset", "activation_mismatch", "readout_nonlinearity", "weight_error")
 
-_ACT = {
-    "tanh": (np.tanh, lambda f: 1.0 - f * f),
-    "sigmoid": (lambda z: 1.0 / (1.0 + np.exp(-z)), lambda f: f * (1.0 - f)),
-    "identity": (lambda z: z, lambda f: np.ones_like(f)),
-}
+#: the activations whose output the candidates are put into (another reads as tanh, as it always has)
+_EXPLAINED = ("tanh", "sigmoid", "identity")
+_ACT = {name: NUMPY_ACTIVATIONS[name] for name in _EXPLAINED}
 
 
 @dataclasses.dataclass(frozen=True)
-class Candidate:
+class OutputCandidate:
     """One mechanism put into the model: its class, what it is, its layers, its parameters
     (``k``, the noise level included), its lack of fit (``q``, its ``z`` and one-sided ``p``)."""
 
@@ -319,7 +318,7 @@ def _accumulate(cols, c0, c, n, params, act, rec, y0, scales, deform, want):
 
 def _slope(act, z):
     f, df = _ACT[act]
-    return df(f(z))
+    return df(z, f(z))
 
 
 @dataclasses.dataclass
@@ -569,7 +568,7 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
         if spec.blocks and id(f_) not in refined and lin[id(f_)] < REFINE_Z:
             continue  # could pass on its linearisation alone, but was not checked: not reported
         z = zval(q, k)
-        out.append(Candidate(spec.mechanism, spec.name, spec.layers, int(k), q, float(z), float(stats.norm.sf(z)),
+        out.append(OutputCandidate(spec.mechanism, spec.name, spec.layers, int(k), q, float(z), float(stats.norm.sf(z)),
                              float(q + k * np.log(N))))
     return sorted(out, key=lambda c: c.z)
 
@@ -577,7 +576,7 @@ def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
 def order_map_classes(mechs: list, candidates) -> list:
     """The mechanism list with the output's explanations applied (no taps): when the programmed
     model does not reproduce the output's mean but a candidate mechanism does, its class leads
-    (by the information criterion :attr:`Candidate.bic`: the fewest parameters unless more of
+    (by the information criterion :attr:`OutputCandidate.bic`: the fewest parameters unless more of
     them fit clearly better), scored at
     least by how far it lowers the lack of fit, with the candidate named in its evidence; a map
     class no candidate of which explains the mean follows them. A class that explains but was

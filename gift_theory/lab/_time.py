@@ -1,6 +1,6 @@
 """Maps and gains that change over the acquisition: a slow wander of a gain, a drifting map.
 
-The identification (:mod:`._identify`) already reads a straight-line trend of each layer's
+The identification (:mod:`.identification`) already reads a straight-line trend of each layer's
 map (additive per neuron, a gain) across the inputs' mean times and within the inputs' shots.
 A laser whose intensity wanders over the campaign, or weights that drift (W + t D), do more:
 
@@ -24,7 +24,7 @@ Each is read twice, where each acquisition order shows it:
   own columns projected out, neuron by neuron (the map can take any fixed part of them). Each
   input's contribution to the score is one draw, and Hotelling's T^2 over the inputs tests their
   mean -- valid for any misfit of the mean that does not go with the acquisition order (a
-  saturating readout's curve enters at random), as ``_identify._robust_trend_p`` does for the
+  saturating readout's curve enters at random), as ``identification._trend._robust_trend_p`` does for the
   straight line.
 
 The two p-values are combined by Bonferroni (the smaller, doubled). The map drift is tested
@@ -41,7 +41,7 @@ weight_error first, a wandering laser weight_error or gain_error).
 **Slow, or shot to shot.** A gain that fluctuates on a time scale shorter than the campaign has
 a realised path with slow components too. The wander's row carries ``share``: the variance of
 its fitted path within the inputs' shots over the gain's variance the shared-gain covariance
-measures (``_identify._noise_rows``); below ``_identify.TREND_SHARE`` the mechanisms list puts
+measures (``identification._noise``); below ``identification._trend.TREND_SHARE`` the mechanisms list puts
 gain_fluctuation before time_drift (:func:`~gift_theory.lab._mechanisms._fluctuation_before_trend`).
 """
 
@@ -206,8 +206,8 @@ def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
     E : (n, r, d) each shot's residual at the map fitted without these terms; g (n, r, d) the
         slope of the layer's mean at each shot; X (n, d, k) the map's design per input
     t : (n, r) acquisition times
-    within : ``_identify._within`` (a residual less its regression on the shot's own input)
-    row_of : ``_identify._row``
+    within : ``identification._stats._within`` (a residual less its regression on the shot's own input)
+    row_of : ``identification._stats._row``
     """
     n, r, d = E.shape
     A = np.broadcast_to(lay.A, (n, r, lay.A.shape[2]))

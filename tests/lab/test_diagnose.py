@@ -479,7 +479,7 @@ def test_a_law_with_the_wrong_tails_is_refused_and_the_right_law_is_not():
     (heavy tails in every layer) uniform noise (light tails) is refused by it, Laplace is not;
     on an awgn chip the kurtosis names nothing and the rule has nothing to read."""
     from gift_theory.lab._diagnose import Session, _law_check, _single
-    from gift_theory.lab._identify import identify
+    from gift_theory.lab import identify
 
     meas = _chip(HIDDEN["laplace"], seed=2, n=60, r=24)
     session = Session(jax.random.PRNGKey(5), meas)
@@ -501,7 +501,7 @@ def test_a_model_without_the_measured_correlation_is_refused_and_one_with_it_is_
     shared gain noise (multiplicative + common_mode) the per-neuron noise alone is refused by it,
     the pair is not; on an awgn chip the rule has nothing to read."""
     from gift_theory.lab._diagnose import Session, _cov_check, _single
-    from gift_theory.lab._identify import identify
+    from gift_theory.lab import identify
 
     meas = _chip({"multiplicative": 0.3, "common_mode": 0.3}, seed=2, n=60, r=24)
     session = Session(jax.random.PRNGKey(5), meas)
@@ -523,7 +523,7 @@ def test_a_misfit_of_the_mean_is_no_trend_in_time_and_a_small_drift_is_one(spec,
     (a misfit of the mean the shape's bins do not absorb) had been read as a trend at layer 1
     with p = 1e-65 against the noise's covariance alone; a gain drift of 5 % over the campaign
     is still found."""
-    from gift_theory.lab._identify import identify
+    from gift_theory.lab import identify
 
     rows = [r for r in identify(_chip(spec)).rows() if r["class"] == "time_drift" and r["p_adj"] < 0.01]
     assert bool(rows) == trend, [(r["layer"], r["test"], r["p_adj"]) for r in rows]

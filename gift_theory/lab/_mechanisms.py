@@ -34,12 +34,11 @@ from scipy import stats
 
 from ..effects import MECHANISMS, REGISTRY
 from ._explain_output import order_map_classes
+from ._level import ALPHA
 from .identification._trend import TREND_SHARE
 
 #: without an identification, a class is listed when its evidence stands this many standard deviations out
 THRESHOLD = 4.0
-#: with an identification, a class is listed when its Holm-adjusted p-value is below this
-ALPHA = 0.01
 
 
 @dataclasses.dataclass

@@ -56,7 +56,7 @@ def one_set(s: float, taps: bool, i: int) -> dict:
 
     import gift_theory as gt
     from gift_theory.lab import Session, identify, simulate_measurement
-    from gift_theory.lab._compare import failing_layers, one_step_check
+    from gift_theory.lab import failing_layers, one_step_check
 
     from .calibrate import _network
 

@@ -94,7 +94,7 @@ def noise_physics(key, meas, effects=(), *, s: float | None = None, alpha: float
     """
     from ..effects import REGISTRY
     from ..lab import default_candidates, diagnose, fit_effects
-    from ..lab._offset_kinds import fitted_as_offsets
+    from ..lab import fitted_as_offsets
 
     if effects:
         ph = fit_effects(key, meas, list(effects)).after.physics

@@ -33,13 +33,13 @@ def run(args):
     import sys
 
     from ..lab import fit_effects
-    from ..lab._figures import fit_figures
-    from ..lab._fit import fit_uncertainty
+    from ..lab import fit_figures
+    from ..lab import fit_uncertainty
 
     from .._errors import require
 
     from .._model import named_subkey
-    from ..lab._compare import power_notes, power_of
+    from ..lab import power_notes, power_of
 
     require(args.replicates is None or args.replicates >= 2, f"--replicates {args.replicates}: needs at least 2")
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
@@ -60,7 +60,7 @@ def run(args):
     out["power"] = (power_of(named_subkey(key(args), "power"), res.after, meas.subset(res.held_out),
                              replicates=args.power_replicates) if args.power_replicates else [])
     out["power_notes"] = power_notes(out["power"], verdict_passes=res.comparison_after.p_value >= 0.01)
-    from ..lab._figures import comparison_table
+    from ..lab import comparison_table
 
     if all(c.channel_values is not None for _, c in res.ladder) and len(res.ladder) > 1:
         out["model_comparison"] = comparison_table([(lab, c, "") for lab, c in res.ladder][::-1])

@@ -222,7 +222,7 @@ def test_the_pair_plot_draws_the_intervals_gift_fit_reports():
 
 
 def test_the_demo_s_bars_say_what_their_colours_mean():
-    from gift_theory._demo import plot_finetune
+    from gift_theory.cli._demo_parts import plot_finetune
 
     rows = [{"method": m, "loss_before": 1.0, "loss_after": v} for m, v in (("gift", 0.9), ("spsa", 1.1), ("ift", 1.0))]
     curve = {k: [0.0, 1.0] for k in ("alpha", "truth", "truth_se", "predicted", "predicted_model_C2", "chip_alpha",

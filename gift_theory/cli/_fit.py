@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from ._labargs import add_common, figure_dir, key, load, write_manifest
 
-# measured (docs/lab.md section 6): without taps the offsets of all but the smallest nets are
-# not identified, and the refit null then rejects a correct weight_error model too often
+# without taps the offsets of all but the smallest nets are not identified, and the refit null
+# then rejects a correct weight_error model too often (docs/record/lab_record.md)
 def no_taps_caveat(names) -> str:
     """The caution under a fitted-offset model's p on a file without taps, naming the effects
     whose offsets were fitted (the rate is the one measured, for weight_error)."""

@@ -2,22 +2,38 @@
 missing physical effect -- or say plainly that none it knows explains the data -- add it,
 fit it, watch the error fall.
 
-The stages, one module each, in the order one :func:`diagnose` runs them::
+The stages, one module each -- which module decides what -- in the order one :func:`diagnose`
+runs them::
 
-    _io          measurement files (reference §3)
-    _shots       a model of the device and its shots (the core's sampler and forward pass)
-    _channels    the channels of a cell and the measurement's noise floor
-    _qtest       the discrepancy test
-    _compare     one model against one measurement; the one-step check per layer
-    _identify    each layer's transfer and noise read off the shots; a test per mechanism class
-    _time        a gain that wanders and a map that drifts over the acquisition (within _identify)
-    _memory      the lag test of memory: a shot carrying the shot acquired before it (within _identify)
-    _fit*        fitting a model: moments, per-device offsets, values read off the data
-    _localise    where a model fails; each effect's signature
-    _diagnose    the pipeline: split, fit, score, rank
-    _neurons     per-neuron values identified neuron by neuron: an explanation (the verdict's rule a)
-    _ambiguity   the models the data cannot tell apart (reference §8)
-    _design      the next measurement that would tell them apart (reference §8, ``gift design``)
+    _io            measurement files (reference §3; the arrays' rules: gift_theory._measurement)
+    _shots         a model of the device and its shots (the core's sampler and forward pass)
+    _channels      the channels of a cell and the measurement's noise floor
+    _qtest         the discrepancy test
+    _compare       one model against one measurement; the one-step check per layer
+    _level         the one significance level every test decides at (ALPHA)
+    identification each layer's transfer and noise read off the shots; a test per mechanism class
+                   (its package docstring maps its modules: statistics, layers and propagation,
+                   the map, the map's rows, the noise, time trends, one layer, the network)
+    _time          a gain that wanders and a map that drifts over the acquisition (read by
+                   identification)
+    _memory        the lag test of memory: a shot carrying the shot acquired before it (read by
+                   identification)
+    _explain_output without taps: candidate mechanisms put into the model, against the output's means
+    _fit*          fitting a model: moments, per-device offsets, values read off the data
+    _session       one measurement's split, reference, moments and baseline (Session.create);
+                   a candidate fitted, scored and checked, purely
+    _verdict       the rules: whether a candidate that passes is an explanation, each rule a
+                   named function; whether the data are explained; the verdict line
+    _ranking       which candidates are fitted, their order, the greedy second step
+    _results       Candidate, Diagnosis, FitResult and their JSON
+    _localise      where a model fails; each effect's signature
+    _mechanisms    the mechanism classes named from the evidence
+    _diagnose      the pipeline: the stages above, in order
+    _neurons       per-neuron values identified neuron by neuron: an explanation
+    _ambiguity     the models the data cannot tell apart (reference §8)
+    _design        the next measurement that would tell them apart (reference §8, ``gift design``)
+    _figures       drawing each figure from numbers already computed
+    _figure_sets   the figures of ``gift compare/fit/diagnose``, each written beside its numbers
 
 Public API (a notebook can do everything ``gift simulate/compare/diagnose/fit`` do)::
 
@@ -69,10 +85,11 @@ from ._design import hypotheses as hypotheses
 from ._design import inputs_arrays as design_inputs
 from ._design import next_measurement as next_measurement
 from ._design import public as design_json
-from ._figures import compare_figures as compare_figures
-from ._figures import diagnosis_comparison as diagnosis_comparison
-from ._figures import diagnosis_figures as diagnosis_figures
-from ._figures import fit_figures as fit_figures
+from ._figure_sets import compare_figures as compare_figures
+from ._figure_sets import diagnosis_comparison as diagnosis_comparison
+from ._figure_sets import diagnosis_figures as diagnosis_figures
+from ._figure_sets import fit_figures as fit_figures
+from ._figure_sets import save_figures as save_figures
 from ._io import NETCDF_EXTENSIONS as NETCDF_EXTENSIONS
 from ._io import detect_format as detect_format
 from ._offset_kinds import fitted_as_offsets as fitted_as_offsets

@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 
 import gift_theory as gt
 from gift_theory.lab import Model, simulate_measurement
-from gift_theory.lab._compare import predictive_moments
+from gift_theory.lab import predictive_moments
 from gift_theory.lab import diagnosis_figures, error_ladder, fit_figures, moments_figure, save_figures, where_figure
 
 

@@ -98,7 +98,7 @@ def null_study(sets, widths, n, r, s, taps, fitted, out, effect=None):
         key = jax.random.PRNGKey(4000 + i)
         prior = None
         if fitted:  # exactly as diagnose scores a candidate
-            session = Session(key, meas)
+            session = Session.create(key, meas)
             model = None if effect is None else session.fit(tuple(HIDDEN[effect]), start=session.baseline)
             c = session.baseline_comparison if effect is None else session.score(model)
             if model is not None and model.offsets:  # the verdict's check of the fitted values (rule b)

@@ -9,7 +9,7 @@ Per chip (a random small tanh network and its true physics, simulated by the pla
 data cannot choose (``explained_by`` holds two or more models), two more campaigns are simulated on
 the same chip -- the advised one (its inputs, shots, taps, order) and, as a yardstick, one of the
 same size with the first design (the same inputs, as many shots in all, fresh noise). On each,
-the advised statistic decides (:func:`gift_theory.lab._design.decide`: the hypotheses as fitted on
+the advised statistic decides (:func:`gift_theory.lab.decide`: the hypotheses as fitted on
 campaign 1, each rejected at 0.01 or not): the campaign *decides* when exactly one hypothesis is
 left, *right* when it is of the chip's true class. Each is also diagnosed on its own, and the
 diagnosis counted when it is explained by one model (of the true class). One JSON line
@@ -109,7 +109,7 @@ def one(scenario: str, i: int, seed: int) -> dict:
     if row["ambiguous"] and d1.next_measurement is not None:
         import jax
 
-        from gift_theory.lab._design import Design, decide, designs, hypotheses
+        from gift_theory.lab import Design, decide, designs, hypotheses
 
         nxt = d1.next_measurement
         hyps = hypotheses(list(d1.ranking), list(d1.mechanisms), list(d1.ambiguous_with))

@@ -56,7 +56,7 @@ def one_set(s: float, taps: bool, i: int) -> dict:
 
     import gift_theory as gt
     from gift_theory.lab import Session, identify, simulate_measurement
-    from gift_theory.lab._compare import failing_layers, one_step_check
+    from gift_theory.lab import failing_layers, one_step_check
 
     from .calibrate import _network
 
@@ -65,7 +65,7 @@ def one_set(s: float, taps: bool, i: int) -> dict:
     x = np.asarray(jax.random.uniform(jax.random.PRNGKey(2000 + i), (INPUTS, WIDTHS[0])))
     meas = simulate_measurement(jax.random.PRNGKey(3000 + i), params, x, gt.Physics.create(s=s), shots=SHOTS,
                                 taps=taps)
-    session = Session(jax.random.PRNGKey(4000 + i), meas)
+    session = Session.create(jax.random.PRNGKey(4000 + i), meas)
     c = session.baseline_comparison
     rows = identify(meas).rows()
     named = sorted({r["class"] for r in rows if r.get("p_adj", 1.0) < 0.01})

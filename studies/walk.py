@@ -28,8 +28,8 @@ import sys
 PIPELINE = "gift_theory.lab._diagnose"
 ORDER = tuple(f"gift_theory.lab.{m}" for m in ("_io", "_shots", "_qtest", "_channels", "_compare", "_fit_moments",
                                                "_offset_kinds", "_offset_fit", "_offset_null", "_offset_prior",
-                                               "_fit", "_identify", "_localise", "_mechanisms", "_verdict",
-                                               "_diagnose"))
+                                               "_fit", "identification", "_session", "_localise", "_mechanisms",
+                                               "_verdict", "_ranking", "_diagnose"))
 
 
 def _module(frame) -> str | None:

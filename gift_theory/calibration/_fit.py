@@ -71,12 +71,12 @@ class LayerMap:
 
 def _unit_var(data, W):
     """(n, d): the pre-activation noise variance per s^2 (the lab's, on this fit's data)."""
-    from ..lab._identify import _unit_var as unit_var
-    return unit_var(data, W)
+    from ..lab.identification import unit_variance
+    return unit_variance(data.Cin, W, data.Y.shape[0])
 
 
 def _activation(name: str):
-    from ..lab._identify import smoothed  # the lab's smoothed activation (Gauss-Hermite)
+    from ..lab.identification import smoothed  # the lab's smoothed activation (Gauss-Hermite)
     return lambda z, v: smoothed(name, z, v, var=True)
 
 

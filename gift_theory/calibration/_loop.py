@@ -94,7 +94,7 @@ def noise_physics(key, meas, effects=(), *, s: float | None = None, alpha: float
     """
     from ..effects import REGISTRY
     from ..lab import default_candidates, diagnose, fit_effects
-    from ..lab._offset_kinds import fitted_as_offsets
+    from ..lab import fitted_as_offsets
 
     if effects:
         ph = fit_effects(key, meas, list(effects)).after.physics
@@ -234,6 +234,14 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     if not history:
         info.update(accepted=False, reason="budget below one round and the confirmation: nothing measured")
         return problem.w0, info
+    return _confirmed(problem, prog, measured, taps, retrain, first_meas, s_hat, z_accept, info)
+
+
+def _confirmed(problem, prog, measured, taps, retrain, first_meas, s_hat, z_accept, info):
+    """The chip chooses, by the confirmation (:func:`~gift_theory.finetune._linesearch.confirm_best`),
+    between the calibrated weights, a round's that measured lower, and without taps the weights
+    retrained under the diagnosis' model and trained further on the chip's outputs; w0 when none
+    is confirmed. Returns (params, info)."""
     from ..finetune._linesearch import confirm_best
     candidates = [_layers32(prog)]
     names = ["the calibrated weights"]

@@ -1,9 +1,11 @@
 """A simulated chip: the model M_s with hidden true physics (noise level st and any
-reference §2 effects). Fresh noise on every call -- a real device cannot repeat its noise,
-so methods get no common random numbers across calls from it."""
+reference §2 effects). Each campaign's noise is drawn from the chip's key and what the campaign
+asks (weights, inputs, shots, taps, times): different campaigns get independent noise, the same
+campaign the same noise, whatever was measured before it (same seed, same numbers, in any order)."""
 
 from __future__ import annotations
 
+import hashlib
 from functools import partial
 
 import jax
@@ -31,6 +33,19 @@ def _measure(key, params, x, physics, *, arch, shots, taps, with_t):
     return out.y, (out.taps[:-1] if taps else ()), t
 
 
+def campaign_key(key, params, x, shots: int, taps: bool, times: bool):
+    """``key`` folded with a digest of a campaign (the weights, the inputs, the shots, whether it
+    records taps and times): the noise of a campaign depends on what it asks, never on the order
+    campaigns are run in."""
+    h = hashlib.sha256()
+    for W, b in params:
+        h.update(np.ascontiguousarray(np.asarray(W, np.float64)).tobytes())
+        h.update(np.ascontiguousarray(np.asarray(b, np.float64)).tobytes())
+    h.update(np.ascontiguousarray(np.asarray(x, np.float64)).tobytes())
+    h.update(f"{np.shape(x)}/{int(shots)}/{bool(taps)}/{bool(times)}".encode())
+    return jax.random.fold_in(key, int.from_bytes(h.digest()[:4], "little") & 0x7FFFFFFF)
+
+
 class SimulatedChip:
     """The model with hidden true physics, behind the :class:`~gift_theory.chips.Chip` protocol.
 
@@ -38,7 +53,8 @@ class SimulatedChip:
     ----------
     arch : Architecture
     physics : Physics, the device's true effects (e.g. ``Physics.create(s=0.2, shot=0.01)``)
-    key : PRNG key of the device's noise; call ``c`` uses ``fold_in(key, c)``
+    key : PRNG key of the device's noise; a campaign uses it folded with a digest of what it asks
+        (:func:`campaign_key`), unless :meth:`measure` is given a key of its own
     budget_shots : optional shot budget (see :class:`Ledger`)
     """
 
@@ -49,7 +65,6 @@ class SimulatedChip:
         self.physics = physics
         self.key = jax.random.PRNGKey(0) if key is None else key
         self.ledger = Ledger(budget_shots)
-        self._calls = 0
 
     def measure(self, params, x, shots: int, *, taps: bool = False, key=None, times: bool | None = None) -> Measurement:
         """Send each row of ``x`` (n, d_0) ``shots`` times through the device with ``params``.
@@ -59,7 +74,8 @@ class SimulatedChip:
         acquired input by input, shot by shot: t = (i shots + j) / (n shots - 1), recorded when
         ``times`` is true (default: when an effect of the device acts through them -- drift, memory: ``needs_times``;
         ``times=False`` then is a bad input). Charges ``n * shots`` shots to the
-        ledger first (raises BudgetExceeded without measuring).
+        ledger first (raises BudgetExceeded without measuring). ``key``: the campaign's noise
+        (default :func:`campaign_key`: the same campaign, the same shots).
         """
         params = check_params(params, self.arch, "chip weights")
         x = np.asarray(x)
@@ -68,13 +84,12 @@ class SimulatedChip:
         shots = int(shots)
         require(shots >= 1, f"chip: shots must be at least 1, got {shots}")
         self.ledger.charge(x.shape[0] * shots)
-        k = jax.random.fold_in(self.key, self._calls) if key is None else key
-        self._calls += 1
         need = self.physics.needs_times()
         require(times is None or times or not need, f"chip: effect {', '.join(need)} acts through the acquisition "
                                                    f"times t; a campaign without times cannot run it")
         with_t = bool(need) if times is None else bool(times)
         tapped = bool(taps) and self.arch.depth > 1
+        k = campaign_key(self.key, params, x, shots, tapped, with_t) if key is None else key
         y, tp, t = _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots,
                             taps=tapped, with_t=with_t)
 

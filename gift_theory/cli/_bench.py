@@ -23,7 +23,7 @@ def _log(msg):
 
 
 def run(args) -> dict:
-    from .._bench import run_benchmarks
+    from ._bench_runs import run_benchmarks
 
     return run_benchmarks(repeats=args.repeats, eff_K1=args.eff_K1, ref_K2=args.ref_K2, quick=args.quick,
                           log=None if args.quiet else _log)

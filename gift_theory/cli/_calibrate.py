@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import os
 
-from .._errors import GiftInputError, require
+from .. import GiftInputError
+from .._errors import require
 from ._common import add_data_arguments, check_data_folder
 from ._plugins import add_plugin_argument, load_plugins
 
@@ -60,8 +61,8 @@ def run(args) -> dict:
                                 retrain=not args.no_retrain, draws=args.draws, source=args.measurement)
     import numpy as np
 
-    from .._io import atomic_write
-    from .._params import params_to_arrays
+    from .. import atomic_write
+    from .. import params_to_arrays
 
     stem = os.path.splitext(args.out)[0]
     model_path = res.model.save(stem + ".chip.npz")

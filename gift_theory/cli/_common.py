@@ -10,8 +10,8 @@ import re
 import sys
 import time
 
-from .._arch import Architecture
-from .._errors import GiftInputError
+from .. import Architecture
+from .. import GiftInputError
 
 #: the reference page every ``--help`` points to (file formats, JSON outputs, effect table)
 REFERENCE = "docs/reference.md in the gift repository"

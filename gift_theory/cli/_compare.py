@@ -6,7 +6,7 @@ scored); without, the awgn model is fitted on half the inputs and scored on the 
 
 Next to the verdict, ``power_notes`` say in words which classes the test could not see at
 this file's size (inputs, shots, taps or not), from the power computed on the file
-(:func:`gift_theory.lab._compare.power_of`; ``power`` holds the figures).
+(:func:`gift_theory.lab.power_of`; ``power`` holds the figures).
 """
 
 from __future__ import annotations
@@ -30,8 +30,7 @@ def run(args):
     import gift_theory as gt
     from .._model import named_subkey
     from ..lab import compare_measurement, where_it_fails
-    from ..lab._compare import power_notes, power_of
-    from ..lab._figures import compare_figures
+    from ..lab import compare_figures, power_notes, power_of
 
     folder = figure_dir(args, "compare")  # a folder of another command's: refused before any work
     meas = load(args, MIN_INPUTS_SCORED if args.effect else MIN_INPUTS_FITTED)  # plugins first: --effect may name one

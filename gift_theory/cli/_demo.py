@@ -1,4 +1,4 @@
-"""``gift demo``: the main job, in three parts (the work is :mod:`gift_theory._demo`).
+"""``gift demo``: the main job, in three parts (the work is :mod:`gift_theory.cli._demo_parts`).
 
 1. Fine-tuning: train (or load from the cache), fine-tune one misspecified pair against a
    simulated chip with GIFT and its rivals under one chip budget, print one table (a line
@@ -25,8 +25,8 @@ import time
 
 import numpy as np
 
-from .._demo import PARTS
-from .._errors import GiftInputError
+from ._demo_parts import PARTS
+from .. import GiftInputError
 from ._common import Progress, add_data_arguments, check_data_folder, nonneg_float, nonneg_int, positive_float
 
 
@@ -78,7 +78,7 @@ def _report(quiet):
 
 
 def run(args):
-    from .. import _demo
+    from . import _demo_parts as _demo
     from ._common import default_arch
 
     t0 = time.perf_counter()
@@ -136,8 +136,8 @@ def _save_figure(args, rows, curve) -> str:
     import matplotlib
 
     matplotlib.use("agg")  # the command writes files; a notebook calls plot_finetune itself
-    from .. import _demo
-    from .._io import atomic_write, save_figure
+    from . import _demo_parts as _demo
+    from .. import atomic_write, save_figure
 
     os.makedirs(args.out, exist_ok=True)
     stem = os.path.join(args.out, f"demo_{args.dataset}_s0{args.s0:g}_st{args.st:g}")

@@ -31,7 +31,7 @@ def run(args):
     from .. import atomic_path
     from .._errors import require
     from ..lab import diagnose
-    from ..lab._design import inputs_arrays, public
+    from ..lab import design_inputs as inputs_arrays, design_json as public
 
     if args.out is not None:
         require(args.out.endswith(".npz"), f"--out {args.out}: the inputs are written as .npz")

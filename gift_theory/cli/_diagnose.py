@@ -30,8 +30,7 @@ def run(args):
     from .._errors import require
     from .._model import named_subkey
     from ..lab import diagnose
-    from ..lab._compare import power_notes, power_of
-    from ..lab._figures import diagnosis_comparison, diagnosis_figures
+    from ..lab import diagnosis_comparison, diagnosis_figures, power_notes, power_of
 
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
     folder = figure_dir(args, "diagnose")  # a folder of another command's: refused before any work

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from .._errors import GiftInputError
+from .. import GiftInputError
 from ._common import add_data_arguments, check_data_folder, nonneg_float, nonneg_int, positive_float
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from ._labargs import add_common, figure_dir, key, load, write_manifest
 
-# measured (docs/lab.md section 6): without taps the offsets of all but the smallest nets are
-# not identified, and the refit null then rejects a correct weight_error model too often
+# without taps the offsets of all but the smallest nets are not identified, and the refit null
+# then rejects a correct weight_error model too often (docs/record/lab_record.md)
 def no_taps_caveat(names) -> str:
     """The caution under a fitted-offset model's p on a file without taps, naming the effects
     whose offsets were fitted (the rate is the one measured, for weight_error)."""
@@ -37,13 +37,13 @@ def run(args):
     import sys
 
     from ..lab import fit_effects
-    from ..lab._figures import fit_figures
-    from ..lab._fit import fit_uncertainty
+    from ..lab import fit_figures
+    from ..lab import fit_uncertainty
 
     from .._errors import require
 
     from .._model import named_subkey
-    from ..lab._compare import power_notes, power_of
+    from ..lab import power_notes, power_of
 
     require(args.replicates is None or args.replicates >= 2, f"--replicates {args.replicates}: needs at least 2")
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
@@ -70,7 +70,7 @@ def run(args):
     out["power"] = (power_of(named_subkey(key(args), "power"), res.after, meas.subset(res.held_out),
                              replicates=args.power_replicates) if args.power_replicates else [])
     out["power_notes"] = power_notes(out["power"], verdict_passes=res.comparison_after.p_value >= 0.01)
-    from ..lab._figures import comparison_table
+    from ..lab import comparison_table
 
     if all(c.channel_values is not None for _, c in res.ladder) and len(res.ladder) > 1:
         out["model_comparison"] = comparison_table([(lab, c, "passes" if c.p_value >= 0.01 else "fails")

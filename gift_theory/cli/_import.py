@@ -24,7 +24,7 @@ def add_arguments(parser):
 
 def run(args):
     from .._errors import require
-    from ..lab._io import NETCDF_EXTENSIONS, detect_format, load_measurement, save_file
+    from ..lab import NETCDF_EXTENSIONS, detect_format, load_measurement, save_file
 
     ext = os.path.splitext(args.out)[1].lower()
     require(ext in (".npz", ".csv") + NETCDF_EXTENSIONS,

@@ -103,7 +103,7 @@ def write_manifest(folder: str, command: str, args, figures: list) -> None:
     """Record in ``folder`` which command wrote its figures, from which file (:data:`MANIFEST`)."""
     import json
 
-    from .._io import atomic_write_text
+    from .. import atomic_write_text
 
     atomic_write_text(os.path.join(folder, MANIFEST), json.dumps(
         {"command": command, "measurement": os.path.abspath(args.measurement),

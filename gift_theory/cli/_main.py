@@ -23,7 +23,7 @@ import math
 import os
 import sys
 
-from .._errors import GiftInputError
+from .. import GiftInputError
 
 #: the core's subcommands -> (module, one-line help); packages on top register theirs through
 #: the entry-point group ``gift.commands`` (:func:`commands`)
@@ -162,7 +162,7 @@ def main(argv=None) -> int:
         return 0
     name = argv[0]
     from .._process import fewer_malloc_arenas
-    from .._xla import use_compilation_cache
+    from .. import use_compilation_cache
 
     fewer_malloc_arenas()  # the work's freed temporaries go back to fewer pools: a lower peak
 

@@ -46,10 +46,10 @@ def add_arguments(parser):
 
 def run(args):
     import gift_theory as gt
-    from .._io import atomic_write
+    from .. import atomic_write
     from .._model import named_subkey
     from ..lab import load_weight_arrays, save_csv, simulate_measurement
-    from ..lab._io import NETCDF_EXTENSIONS, save_file
+    from ..lab import NETCDF_EXTENSIONS, save_file
 
     load_plugins(args)
     require(args.inputs >= 1, f"--inputs {args.inputs}: needs at least 1")

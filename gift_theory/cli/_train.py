@@ -28,7 +28,7 @@ def add_arguments(parser) -> None:
 def run(args) -> dict:
     import dataclasses
 
-    from .._arch import Architecture
+    from .. import Architecture
     from ..training import default_config, load_or_train, save_weights
 
     check_data_folder(args)

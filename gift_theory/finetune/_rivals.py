@@ -90,7 +90,7 @@ def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps
     physics, info (the inputs and shots used, the baseline p-value, the ranking's top three)
     """
     from ..lab import default_candidates, diagnose
-    from ..lab._offset_kinds import fitted_as_offsets
+    from ..lab import fitted_as_offsets
 
     n = int(min(problem.K1, max(8, math.floor(evaluations * problem.unit_shots / shots))))
     meas = problem.chip.measure(problem.w0, problem.x_ft[:n], shots, taps=taps)
@@ -110,7 +110,7 @@ def physics_of(key, meas):
     (the top three), ``top_status``, ``used``)
     """
     from ..lab import default_candidates, diagnose
-    from ..lab._offset_kinds import fitted_as_offsets
+    from ..lab import fitted_as_offsets
 
     d = diagnose(key, meas, candidates=[c for c in default_candidates(meas) if not fitted_as_offsets(c)])
     top = d.ranking[0] if d.ranking else None

@@ -2,22 +2,38 @@
 missing physical effect -- or say plainly that none it knows explains the data -- add it,
 fit it, watch the error fall.
 
-The stages, one module each, in the order one :func:`diagnose` runs them::
+The stages, one module each -- which module decides what -- in the order one :func:`diagnose`
+runs them::
 
-    _io          measurement files (reference §3)
-    _shots       a model of the device and its shots (the core's sampler and forward pass)
-    _channels    the channels of a cell and the measurement's noise floor
-    _qtest       the discrepancy test
-    _compare     one model against one measurement; the one-step check per layer
-    _identify    each layer's transfer and noise read off the shots; a test per mechanism class
-    _time        a gain that wanders and a map that drifts over the acquisition (within _identify)
-    _memory      the lag test of memory: a shot carrying the shot acquired before it (within _identify)
-    _fit*        fitting a model: moments, per-device offsets, values read off the data
-    _localise    where a model fails; each effect's signature
-    _diagnose    the pipeline: split, fit, score, rank
-    _neurons     per-neuron values identified neuron by neuron: an explanation (the verdict's rule a)
-    _ambiguity   the models the data cannot tell apart (reference §8)
-    _design      the next measurement that would tell them apart (reference §8, ``gift design``)
+    _io            measurement files (reference §3; the arrays' rules: gift_theory._measurement)
+    _shots         a model of the device and its shots (the core's sampler and forward pass)
+    _channels      the channels of a cell and the measurement's noise floor
+    _qtest         the discrepancy test
+    _compare       one model against one measurement; the one-step check per layer
+    _level         the one significance level every test decides at (ALPHA)
+    identification each layer's transfer and noise read off the shots; a test per mechanism class
+                   (its package docstring maps its modules: statistics, layers and propagation,
+                   the map, the map's rows, the noise, time trends, one layer, the network)
+    _time          a gain that wanders and a map that drifts over the acquisition (read by
+                   identification)
+    _memory        the lag test of memory: a shot carrying the shot acquired before it (read by
+                   identification)
+    _explain_output without taps: candidate mechanisms put into the model, against the output's means
+    _fit*          fitting a model: moments, per-device offsets, values read off the data
+    _session       one measurement's split, reference, moments and baseline (Session.create);
+                   a candidate fitted, scored and checked, purely
+    _verdict       the rules: whether a candidate that passes is an explanation, each rule a
+                   named function; whether the data are explained; the verdict line
+    _ranking       which candidates are fitted, their order, the greedy second step
+    _results       Candidate, Diagnosis, FitResult and their JSON
+    _localise      where a model fails; each effect's signature
+    _mechanisms    the mechanism classes named from the evidence
+    _diagnose      the pipeline: the stages above, in order
+    _neurons       per-neuron values identified neuron by neuron: an explanation
+    _ambiguity     the models the data cannot tell apart (reference §8)
+    _design        the next measurement that would tell them apart (reference §8, ``gift design``)
+    _figures       drawing each figure from numbers already computed
+    _figure_sets   the figures of ``gift compare/fit/diagnose``, each written beside its numbers
 
 Public API (a notebook can do everything ``gift simulate/compare/diagnose/fit`` do)::
 
@@ -41,25 +57,42 @@ from ._compare import one_step_check as one_step_check
 from ._compare import power_notes as power_notes
 from ._compare import power_of as power_of
 from ._compare import predictive_moments as predictive_moments
-from ._diagnose import Candidate as Candidate
-from ._diagnose import Session as Session
-from ._diagnose import Diagnosis as Diagnosis
-from ._diagnose import FitResult as FitResult
 from ._diagnose import compare_measurement as compare_measurement
 from ._diagnose import default_candidates as default_candidates
 from ._diagnose import diagnose as diagnose
 from ._diagnose import fit_effects as fit_effects
-from ._diagnose import penalised_score as penalised_score
-from ._diagnose import ranked as ranked
-from ._diagnose import split_inputs as split_inputs
+from ._ranking import ranked as ranked
+from ._results import STATUSES as STATUSES
+from ._results import Candidate as Candidate
+from ._results import Diagnosis as Diagnosis
+from ._results import FitResult as FitResult
+from ._results import penalised_score as penalised_score
+from ._session import Session as Session
+from ._session import split_inputs as split_inputs
 from ._fit import fit_model as fit_model
 from ._fit import fit_uncertainty as fit_uncertainty
 from ._fit_moments import MomentProblem as MomentProblem
-from ._identify import Identification as Identification
-from ._identify import identify as identify
+from .identification import Identification as Identification
+from .identification import identify as identify
 from ._compare import PredictiveShots as PredictiveShots
 from ._compare import discrepancy_difference as discrepancy_difference
 from ._compare import predictive_shots as predictive_shots
+from ._compare import failing_layers as failing_layers
+from ._design import Design as Design
+from ._design import decide as decide
+from ._design import designs as designs
+from ._design import hypotheses as hypotheses
+from ._design import inputs_arrays as design_inputs
+from ._design import next_measurement as next_measurement
+from ._design import public as design_json
+from ._figure_sets import compare_figures as compare_figures
+from ._figure_sets import diagnosis_comparison as diagnosis_comparison
+from ._figure_sets import diagnosis_figures as diagnosis_figures
+from ._figure_sets import fit_figures as fit_figures
+from ._figure_sets import save_figures as save_figures
+from ._io import NETCDF_EXTENSIONS as NETCDF_EXTENSIONS
+from ._io import detect_format as detect_format
+from ._offset_kinds import fitted_as_offsets as fitted_as_offsets
 from ._figures import comparison_figure as comparison_figure
 from ._figures import comparison_table as comparison_table
 from ._figures import correlation_figure as correlation_figure

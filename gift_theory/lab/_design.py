@@ -43,11 +43,11 @@ from scipy import stats
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._ambiguity import classes_of
+from ._level import ALPHA
 from ._shots import model_shots
 
 #: the power a design must reach at the 0.01 level
 POWER = 0.8
-ALPHA = 0.01
 #: simulated campaigns per hypothesis and design (an even number)
 REPLICATES = 16
 #: model shots per input behind each hypothesis' predicted cell means and variances (at least)

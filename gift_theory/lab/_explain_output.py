@@ -2,7 +2,7 @@
 
 Without taps only the output is measured, and every layer's deviation folds into the output's
 mean map: a dead neuron in layer 2, a transfer that is not tanh, a detector's gain and offset
-all show as ``W_eff - W`` at the output, and the layer-wise tests (:mod:`._identify`) read them
+all show as ``W_eff - W`` at the output, and the layer-wise tests (:mod:`.identification`) read them
 as a weight error there. This module asks the converse question, at the network level: for each
 candidate mechanism H -- a class of reference §6 at a layer, with its own few parameters --
 does the model *with H in it* reproduce the per-input mean of every output neuron?
@@ -49,6 +49,7 @@ import sys
 import numpy as np
 from scipy import stats
 
+from .._arch import NUMPY_ACTIVATIONS
 from .._measurement import Measurement
 
 #: Legendre degree of a shared transfer's deformation
@@ -80,15 +81,13 @@ TRACE = False
 #: the map classes this module orders (noise classes are not a question of the mean)
 MAP_CLASSES = ("gain_error", "bias_offset", "activation_mismatch", "readout_nonlinearity", "weight_error")
 
-_ACT = {
-    "tanh": (np.tanh, lambda f: 1.0 - f * f),
-    "sigmoid": (lambda z: 1.0 / (1.0 + np.exp(-z)), lambda f: f * (1.0 - f)),
-    "identity": (lambda z: z, lambda f: np.ones_like(f)),
-}
+#: the activations whose output the candidates are put into (another reads as tanh, as it always has)
+_EXPLAINED = ("tanh", "sigmoid", "identity")
+_ACT = {name: NUMPY_ACTIVATIONS[name] for name in _EXPLAINED}
 
 
 @dataclasses.dataclass(frozen=True)
-class Candidate:
+class OutputCandidate:
     """One mechanism put into the model: its class, what it is, its layers, its parameters
     (``k``, the noise level included), its lack of fit (``q``, its ``z`` and one-sided ``p``)."""
 
@@ -319,7 +318,7 @@ def _accumulate(cols, c0, c, n, params, act, rec, y0, scales, deform, want):
 
 def _slope(act, z):
     f, df = _ACT[act]
-    return df(f(z))
+    return df(z, f(z))
 
 
 @dataclasses.dataclass
@@ -423,161 +422,212 @@ def _null_spread(Y, kappa):
     return float(np.sqrt(2.0 * kappa ** 2 * tr.sum()))
 
 
-def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
-    """Each candidate mechanism with its lack of fit of the output's per-input mean (no taps),
-    sorted by lack of fit."""
+@dataclasses.dataclass(frozen=True)
+class _Output:
+    """The output's means and what every candidate is fitted against: the network (``x``,
+    ``params``, ``act``, ``s``), one set of Monte Carlo draws (``seed``) with the columns and scales
+    of the programmed model's propagation, the per-input means ``ybar`` (n o,), their weights and
+    the programmed model's residual ``e0``."""
+
+    x: np.ndarray
+    params: list
+    act: str
+    s: float
+    seed: object
+    scales: object
+    cols: dict
+    hidden: list
+    o: int
+    ybar: np.ndarray
+    var_y: np.ndarray
+    w: np.ndarray
+    sw: np.ndarray
+    kappa: float
+    sd: float
+    e0: np.ndarray
+    ds: np.ndarray
+
+    @property
+    def N(self) -> int:
+        return self.ybar.size
+
+    def zval(self, q, k):
+        """A lack of fit ``q`` on ``k`` parameters in standard deviations of its null spread."""
+        return (q - (self.N * self.kappa - k)) / max(self.sd, 1e-300)
+
+    def propagate(self, deform=None, **kw):
+        return _propagate(self.x, self.params, self.act, self.s, self.seed, self.scales, deform, **kw)
+
+    def through_model(self, deform):
+        """The lack of fit of the model with ``deform`` in place, weighed by its own Monte Carlo
+        variance, and its residual."""
+        m_t, v_t = self.propagate(deform)[:2]
+        e_t = self.ybar - m_t.ravel()
+        return float(np.sum(e_t * e_t / (self.var_y + v_t / DRAWS).ravel())), e_t
+
+
+#: the step in relative s of the noise level's column (a central difference)
+_H = 0.02
+
+
+def _output(meas: Measurement, s: float, seed) -> _Output:
     act = meas.activation if meas.activation in _ACT else "tanh"
     x = np.asarray(meas.x, np.float64)
     params = [(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in meas.params]
-    L = len(params)
-    hidden = list(range(1, L))
     Y = np.asarray(meas.y, np.float64)
     n, r, o = Y.shape
     seed = _draws_for(x, params, seed)  # one set of draws for every propagation below
     mu, vmc, cols, scales = _propagate(x, params, act, s, seed, columns=True)
-    h = 0.02
-    mu_p = _propagate(x, params, act, s, seed, scales, {("s", 0): h})[0]
-    mu_m = _propagate(x, params, act, s, seed, scales, {("s", 0): -h})[0]
-    ds = ((mu_p - mu_m) / (2 * h)).reshape(-1, 1)  # per unit of relative s
+    mu_p = _propagate(x, params, act, s, seed, scales, {("s", 0): _H})[0]
+    mu_m = _propagate(x, params, act, s, seed, scales, {("s", 0): -_H})[0]
+    ds = ((mu_p - mu_m) / (2 * _H)).reshape(-1, 1)  # per unit of relative s
     ybar = Y.mean(1).ravel()
     w = (Y.var(1, ddof=1) / r + vmc / DRAWS).ravel()
-    sw = 1.0 / np.sqrt(w)
     kappa = (r - 1) / (r - 3) if r > 3 else 3.0
-    N = n * o
-    sd = _null_spread(Y, kappa)
-    e0 = ybar - mu.ravel()
+    return _Output(x, params, act, s, seed, scales, cols, list(range(1, len(params))), o, ybar,
+                   Y.var(1, ddof=1) / r, w, 1.0 / np.sqrt(w), kappa, _null_spread(Y, kappa), ybar - mu.ravel(), ds)
 
+
+def _linear_fits(out: _Output) -> list:
+    """Each candidate's linearised fit: [spec, weighted design, theta, lack of fit]."""
+    N = out.N
     fits = []
-    for spec in _specs(L, cols):
-        J = np.concatenate([ds] + [_block(cols, *b, hidden).reshape(N, -1) for b in spec.blocks], axis=1)
+    for spec in _specs(len(out.params), out.cols):
+        J = np.concatenate([out.ds] + [_block(out.cols, *b, out.hidden).reshape(N, -1) for b in spec.blocks], axis=1)
         if J.shape[1] > MAX_SHARE * N:
             continue
-        A = J * sw[:, None]
-        theta, *_ = np.linalg.lstsq(A, e0 * sw, rcond=None)
-        res = e0 - J @ theta
-        fits.append([spec, A, theta, float(np.sum(res * res / w))])
+        A = J * out.sw[:, None]
+        theta, *_ = np.linalg.lstsq(A, out.e0 * out.sw, rcond=None)
+        res = out.e0 - J @ theta
+        fits.append([spec, A, theta, float(np.sum(res * res / out.w))])
+    return fits
 
-    def zval(q, k):
-        return (q - (N * kappa - k)) / max(sd, 1e-300)
 
-    # the candidates that could pass, checked through the model itself: the lack of fit above
-    # is the linearised one, and a dead neuron is not a small deformation (nor do the
-    # deformations of several layers add up linearly): Levenberg-Marquardt through propagations
-    # with the deformation in place (same draws)
-    lin = {id(f_): zval(f_[3], f_[1].shape[1]) for f_ in fits}
+def _refine(out: _Output, spec, A, theta_lin, want, s_free):
+    """Levenberg-Marquardt from the programmed model (theta = 0, where the columns are): the
+    first trial is the linear fit; a trial that does not lower the lack of fit is refused
+    and the damping raised (a detector's gain and offset on 57 parameters: the linear fit's
+    lack of fit z = 1 was z = 906 through the model, and plain Gauss-Newton went on to
+    984). With ``s_free`` False the noise level stays where it is (its column zero). Each
+    trial's lack of fit weighs by the deformed model's own Monte Carlo variance (a curve
+    that bends the noise -- a square law's -- makes its draws' mean noisier than the
+    programmed model's)."""
+    N, sw, hidden, h = out.N, out.sw, out.hidden, _H
+    theta, q, e, J = np.zeros_like(theta_lin), float(np.sum(out.e0 * out.e0 / out.w)), out.e0, A / sw[:, None]
+    if not s_free:
+        J = J.copy()
+        J[:, 0] = 0.0
+    mu, trials = 1e-6, 0
+    while trials < LM_TRIALS:
+        trials += 1
+        Aw = J * sw[:, None]
+        F = Aw.T @ Aw
+        delta = np.linalg.solve(F + mu * np.diag(np.maximum(np.diag(F), 1e-12)) + 1e-12 * np.eye(len(F)),
+                                Aw.T @ (e * sw))
+        trial = theta + delta
+        deform = _deform(spec, trial, out.cols, hidden, out.o)
+        q_t, e_t = out.through_model(deform)
+        if TRACE:
+            print("   levenberg-marquardt", spec.name, "s free" if s_free else "s fixed", "trial z",
+                  round(out.zval(q_t, A.shape[1]), 1), "mu", mu, file=sys.stderr)
+        if q_t >= q:
+            mu *= 10.0
+            continue
+        gain = q - q_t
+        theta, q, e, mu = trial, q_t, e_t, mu / 10.0
+        # done: the candidate clearly explains, or the step moved its lack of fit by less
+        # than a quarter of a standard deviation
+        if out.zval(q, A.shape[1]) < Z_PASS - 1.0 or gain < 0.25 * out.sd:
+            break
+        cols_t = out.propagate(deform, columns=True, want=want)[2]
+        # the noise level's column at the new point too (a readout's curve bends the noise
+        # into the mean: a square-law detector's E y^2 moves with s^2)
+        ds_t = ((out.propagate({**deform, ("s", 0): deform[("s", 0)] + h})[0]
+                 - out.propagate({**deform, ("s", 0): deform[("s", 0)] - h})[0]
+                 ).reshape(-1, 1) / (2 * h) if s_free else np.zeros((N, 1)))
+        J = np.concatenate([ds_t] + [_block(cols_t, *b, hidden).reshape(N, -1) for b in spec.blocks], axis=1)
+    return theta, q
+
+
+def _refined(out: _Output, f_) -> None:
+    """A candidate that could pass, checked through the model itself (its fit and lack of fit set
+    in place): the level's linearisation can send a trial far (a square law's mean moved by the
+    noise level: its linear fit passed, the trials through the model did not), so a failing one
+    is refined again at the level found."""
+    spec, A, theta_lin, _ = f_
+    hidden = out.hidden
+    want = {(kind, l) for kind, l, _ in spec.blocks if kind not in ("shape*", "const")}
+    want |= {("shape", h) for kind, _, _ in spec.blocks if kind == "shape*" for h in hidden}
+    want |= {("beta", l) if l in hidden else ("bias", l) for kind, l, _ in spec.blocks if kind == "const"}
+    theta, q = _refine(out, spec, A, theta_lin, want, True)
+    if out.zval(q, A.shape[1]) >= Z_PASS:
+        theta2, q2 = _refine(out, spec, A, theta_lin, want, False)
+        if q2 < q:
+            theta, q = theta2, q2
+    f_[2], f_[3] = theta, q
+
+
+def _curve_over_levels(out: _Output, f_) -> None:
+    """The output's curve over a few noise levels (it is linear in its coefficients at any level:
+    nothing nonlinear follows it; the level a square law leaves in the output's spread is not the
+    chip's: 0.05 against 0.14), its best fit set in place when better."""
+    L, N, hidden = len(out.params), out.N, out.hidden
+
+    def at_level(k_s):
+        m_k, _, cols_k, _ = _propagate(out.x, out.params, out.act, out.s * k_s, out.seed, out.scales, columns=True,
+                                       want={("shape", L), ("bias", L)})
+        e_k = out.ybar - m_k.ravel()
+        J_k = np.concatenate([_block(cols_k, *b, hidden).reshape(N, -1) for b in f_[0].blocks], axis=1)
+        th = np.r_[k_s - 1.0, np.linalg.lstsq(J_k * out.sw[:, None], e_k * out.sw, rcond=None)[0]]
+        return out.through_model(_deform(f_[0], th, cols_k, hidden, out.o))[0], th
+
+    tried = {k_s: at_level(k_s) for k_s in LEVELS}
+    k_best = min(tried, key=lambda k_: tried[k_][0])
+    for k_s in (k_best / 1.2, k_best * 1.2):  # one step finer around the grid's best
+        tried[k_s] = at_level(k_s)
+    k_best = min(tried, key=lambda k_: tried[k_][0])
+    if tried[k_best][0] < f_[3]:
+        f_[3], f_[2] = tried[k_best]
+
+
+def explain(meas: Measurement, s: float, seed: int = 20261127) -> list:
+    """Each candidate mechanism with its lack of fit of the output's per-input mean (no taps),
+    sorted by lack of fit: every candidate's linearised fit; those that could pass checked
+    through the model itself (a dead neuron is not a small deformation, nor do the deformations
+    of several layers add up linearly: Levenberg-Marquardt through propagations with the
+    deformation in place, the same draws); the output's curve, when it is the closest and still
+    fails, over a few noise levels."""
+    out = _output(meas, s, seed)
+    fits = _linear_fits(out)
+    lin = {id(f_): out.zval(f_[3], f_[1].shape[1]) for f_ in fits}
     cand = sorted((f_ for f_ in fits if f_[0].blocks and lin[id(f_)] < REFINE_Z), key=lambda f_: lin[id(f_)])
     neurons = [f_ for f_ in cand if f_[0].blocks[0][2] is not None][:2]
     cand = [f_ for f_ in cand if f_[0].blocks[0][2] is None][:REFINE] + neurons
     refined = set()
-    q_prog = float(np.sum(e0 * e0 / w))
-    var_y = Y.var(1, ddof=1) / r
-
-    def through_model(deform):
-        """The lack of fit of the model with ``deform`` in place, weighed by its own Monte Carlo
-        variance, and its residual."""
-        m_t, v_t = _propagate(x, params, act, s, seed, scales, deform)[:2]
-        e_t = ybar - m_t.ravel()
-        return float(np.sum(e_t * e_t / (var_y + v_t / DRAWS).ravel())), e_t
-
-    def refine(spec, A, theta_lin, want, s_free):
-        """Levenberg-Marquardt from the programmed model (theta = 0, where the columns are): the
-        first trial is the linear fit; a trial that does not lower the lack of fit is refused
-        and the damping raised (a detector's gain and offset on 57 parameters: the linear fit's
-        lack of fit z = 1 was z = 906 through the model, and plain Gauss-Newton went on to
-        984). With ``s_free`` False the noise level stays where it is (its column zero). Each
-        trial's lack of fit weighs by the deformed model's own Monte Carlo variance (a curve
-        that bends the noise -- a square law's -- makes its draws' mean noisier than the
-        programmed model's)."""
-        theta, q, e, J = np.zeros_like(theta_lin), q_prog, e0, A / sw[:, None]
-        if not s_free:
-            J = J.copy()
-            J[:, 0] = 0.0
-        mu, trials = 1e-6, 0
-        while trials < LM_TRIALS:
-            trials += 1
-            Aw = J * sw[:, None]
-            F = Aw.T @ Aw
-            delta = np.linalg.solve(F + mu * np.diag(np.maximum(np.diag(F), 1e-12)) + 1e-12 * np.eye(len(F)),
-                                    Aw.T @ (e * sw))
-            trial = theta + delta
-            deform = _deform(spec, trial, cols, hidden, o)
-            q_t, e_t = through_model(deform)
-            if TRACE:
-                print("   levenberg-marquardt", spec.name, "s free" if s_free else "s fixed", "trial z",
-                      round(zval(q_t, A.shape[1]), 1), "mu", mu, file=sys.stderr)
-            if q_t >= q:
-                mu *= 10.0
-                continue
-            gain = q - q_t
-            theta, q, e, mu = trial, q_t, e_t, mu / 10.0
-            # done: the candidate clearly explains, or the step moved its lack of fit by less
-            # than a quarter of a standard deviation
-            if zval(q, A.shape[1]) < Z_PASS - 1.0 or gain < 0.25 * sd:
-                break
-            cols_t = _propagate(x, params, act, s, seed, scales, deform, columns=True, want=want)[2]
-            # the noise level's column at the new point too (a readout's curve bends the noise
-            # into the mean: a square-law detector's E y^2 moves with s^2)
-            ds_t = ((_propagate(x, params, act, s, seed, scales, {**deform, ("s", 0): deform[("s", 0)] + h})[0]
-                     - _propagate(x, params, act, s, seed, scales, {**deform, ("s", 0): deform[("s", 0)] - h})[0]
-                     ).reshape(-1, 1) / (2 * h) if s_free else np.zeros((N, 1)))
-            J = np.concatenate([ds_t] + [_block(cols_t, *b, hidden).reshape(N, -1) for b in spec.blocks], axis=1)
-        return theta, q
-
     for f_ in cand:
-        spec, A, theta_lin, _ = f_
-        want = {(kind, l) for kind, l, _ in spec.blocks if kind not in ("shape*", "const")}
-        want |= {("shape", h) for kind, _, _ in spec.blocks if kind == "shape*" for h in hidden}
-        want |= {("beta", l) if l in hidden else ("bias", l) for kind, l, _ in spec.blocks if kind == "const"}
-        theta, q = refine(spec, A, theta_lin, want, True)
-        if zval(q, A.shape[1]) >= Z_PASS:
-            # the level's linearisation can send a trial far (a square law's mean moved by the
-            # noise level: its linear fit passed, the trials through the model did not): the
-            # deformation again at the level found
-            theta2, q2 = refine(spec, A, theta_lin, want, False)
-            if q2 < q:
-                theta, q = theta2, q2
-        f_[2], f_[3] = theta, q
+        _refined(out, f_)
         refined.add(id(f_))
-    # the output's curve is linear in its coefficients at any noise level (nothing nonlinear
-    # follows it): when it is the closest candidate and still fails, its fit over a few levels
-    # (the level a square law leaves in the output's spread is not the chip's: 0.05 against 0.14)
     done = [f_ for f_ in fits if id(f_) in refined]
     curve = [f_ for f_ in done if f_[0].name == CURVE]
-    if curve and min(done, key=lambda f_: zval(f_[3], f_[1].shape[1])) is curve[0] \
-            and zval(curve[0][3], curve[0][1].shape[1]) >= Z_PASS:
-        f_ = curve[0]
-
-        def at_level(k_s):
-            m_k, _, cols_k, _ = _propagate(x, params, act, s * k_s, seed, scales, columns=True,
-                                           want={("shape", L), ("bias", L)})
-            e_k = ybar - m_k.ravel()
-            J_k = np.concatenate([_block(cols_k, *b, hidden).reshape(N, -1) for b in f_[0].blocks], axis=1)
-            th = np.r_[k_s - 1.0, np.linalg.lstsq(J_k * sw[:, None], e_k * sw, rcond=None)[0]]
-            return through_model(_deform(f_[0], th, cols_k, hidden, o))[0], th
-
-        tried = {k_s: at_level(k_s) for k_s in LEVELS}
-        k_best = min(tried, key=lambda k_: tried[k_][0])
-        for k_s in (k_best / 1.2, k_best * 1.2):  # one step finer around the grid's best
-            tried[k_s] = at_level(k_s)
-        k_best = min(tried, key=lambda k_: tried[k_][0])
-        if tried[k_best][0] < f_[3]:
-            f_[3], f_[2] = tried[k_best]
-    out = []
+    if curve and min(done, key=lambda f_: out.zval(f_[3], f_[1].shape[1])) is curve[0] \
+            and out.zval(curve[0][3], curve[0][1].shape[1]) >= Z_PASS:
+        _curve_over_levels(out, curve[0])
+    found = []
     for f_ in fits:
         spec, A, theta, q = f_
         k = A.shape[1]
         if spec.blocks and id(f_) not in refined and lin[id(f_)] < REFINE_Z:
             continue  # could pass on its linearisation alone, but was not checked: not reported
-        z = zval(q, k)
-        out.append(Candidate(spec.mechanism, spec.name, spec.layers, int(k), q, float(z), float(stats.norm.sf(z)),
-                             float(q + k * np.log(N))))
-    return sorted(out, key=lambda c: c.z)
+        z = out.zval(q, k)
+        found.append(OutputCandidate(spec.mechanism, spec.name, spec.layers, int(k), q, float(z),
+                                     float(stats.norm.sf(z)), float(q + k * np.log(out.N))))
+    return sorted(found, key=lambda c: c.z)
 
 
 def order_map_classes(mechs: list, candidates) -> list:
     """The mechanism list with the output's explanations applied (no taps): when the programmed
     model does not reproduce the output's mean but a candidate mechanism does, its class leads
-    (by the information criterion :attr:`Candidate.bic`: the fewest parameters unless more of
+    (by the information criterion :attr:`OutputCandidate.bic`: the fewest parameters unless more of
     them fit clearly better), scored at
     least by how far it lowers the lack of fit, with the candidate named in its evidence; a map
     class no candidate of which explains the mean follows them. A class that explains but was

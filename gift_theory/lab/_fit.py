@@ -113,7 +113,7 @@ def fit_uncertainty(key, meas: Measurement, after: Model, *, shots: int | None =
     """
     import jax
 
-    from ._diagnose import split_inputs
+    from ._session import split_inputs
     from ._intervals import REPLICATES, moment_intervals, per_neuron_json
 
     k_split, k_fit = jax.random.split(key, 5)[:2]

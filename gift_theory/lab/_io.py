@@ -30,151 +30,28 @@ from __future__ import annotations
 import gc
 import os
 import re
-import stat
 import sys
-import zipfile
 
 import numpy as np
 
-from .._arch import ACTIVATIONS
 from .._errors import GiftInputError, require
 from .._io import atomic_write
-from .._measurement import Measurement
-from .._params import Layer
-
-
-#: the largest magnitude a float32 holds: gift computes in float32 (:func:`gift_theory.to32`), so a
-#: value beyond it is an infinity there, whatever the file's dtype
-FLOAT32_MAX = float(np.finfo(np.float32).max)
-
-
-def _float_array(arrays, key, where):
-    a = arrays[key]
-    require(a.dtype.kind in "fiu", f"{where}: {key} has dtype {a.dtype}, expected float")
-    a = np.asarray(a, dtype=np.float64)
-    bad = ~np.isfinite(a)
-    if bad.any():
-        i = np.unravel_index(int(np.argmax(bad)), a.shape)
-        raise GiftInputError(f"{where}: {key} contains NaN or Inf ({float(a[i])!r} at index {list(map(int, i))})")
-    with np.errstate(over="ignore"):
-        big = ~np.isfinite(a.astype(np.float32))
-    if big.any():
-        i = np.unravel_index(int(np.argmax(big)), a.shape)
-        raise GiftInputError(f"{where}: {key} holds {a[i]:.4g} at index {list(map(int, i))}, beyond float32's range "
-                             f"(|v| <= {FLOAT32_MAX:.4g}), the precision gift computes in")
-    return a
-
-
-def _layer_keys(keys, where):
-    """L from the keys W1..WL, b1..bL, refusing a gap or an unpaired key (naming the missing one)."""
-    num = {c: sorted(int(k[1:]) for k in keys if re.fullmatch(c + r"[1-9]\d*", k)) for c in "Wb"}
-    L = max(num["W"] + num["b"], default=0)
-    for l in range(1, L + 1):
-        for c, other in (("W", "b"), ("b", "W")):
-            if l not in num[c]:
-                have = [f"{k}{m}" for k in (other, c) for m in num[k] if m >= l and f"{k}{m}" != f"{c}{l}"]
-                raise GiftInputError(f"{where}: has {have[0]} but no {c}{l} (a network needs W1..W{L} and "
-                                     f"b1..b{L})")
-    return L
-
-
-def validate_arrays(arrays, where: str = "measurement") -> Measurement:
-    """Build a :class:`Measurement` from a mapping of arrays, checking every reference §3 rule.
-
-    Raises
-    ------
-    GiftInputError
-        One line naming ``where`` and the first problem found.
-    """
-    keys = set(arrays.keys())
-    for k in ("x", "y", "W1", "b1"):
-        require(k in keys, f"{where}: missing key {k!r} (a measurement needs x, y, W1..WL, b1..bL)")
-    x = _float_array(arrays, "x", where)
-    y = _float_array(arrays, "y", where)
-    require(x.ndim == 2, f"{where}: x has shape {x.shape}, expected (n, d_0)")
-    require(y.ndim == 3, f"{where}: y has shape {y.shape}, expected (n, r, d_L)")
-    n, d0 = x.shape
-    require(n >= 1 and d0 >= 1, f"{where}: x has shape {x.shape}, needs at least one input of one feature")
-    require(y.shape[0] == n, f"{where}: y has {y.shape[0]} inputs, x has {n}")
-    r = y.shape[1]
-    require(r >= 2, f"{where}: y has {r} shot(s) per input; comparing distributions needs at least 2")
-    L = _layer_keys(keys, where)
-    params = []
-    for l in range(1, L + 1):
-        W = _float_array(arrays, f"W{l}", where)
-        b = _float_array(arrays, f"b{l}", where)
-        require(W.ndim == 2, f"{where}: W{l} has shape {W.shape}, expected a matrix (d_{l}, d_{l - 1})")
-        d_in = d0 if l == 1 else params[-1].W.shape[0]
-        require(W.shape[1] == d_in, f"{where}: W{l} has shape {W.shape} but its input width is {d_in}"
-                + (" (the width of x)" if l == 1 else f" (the rows of W{l - 1})"))
-        require(b.shape == (W.shape[0],), f"{where}: b{l} has shape {b.shape}, W{l} needs ({W.shape[0]},)")
-        params.append(Layer(W, b))
-    require(y.shape[2] == params[-1].W.shape[0],
-            f"{where}: y has {y.shape[2]} outputs per shot, W{L} has {params[-1].W.shape[0]} rows")
-    tap_keys = sorted((k for k in keys if k.startswith("a") and k[1:].isdigit()), key=lambda k: int(k[1:]))
-    taps = None
-    if tap_keys:
-        want = [f"a{l}" for l in range(1, L)]
-        require(L >= 2, f"{where}: has taps {tap_keys[0]} but the network has a single layer")
-        bad = [k for k in tap_keys if k not in want]
-        if bad:
-            raise GiftInputError(f"{where}: tap {bad[0]} does not name a hidden layer (the network has a1..a{L - 1})")
-        missing = [k for k in want if k not in keys]
-        if missing:
-            raise GiftInputError(f"{where}: taps are partial: has {tap_keys[0]} but not {missing[0]} "
-                                 f"(give all of a1..a{L - 1} or none)")
-        taps = []
-        for l in range(1, L):
-            a = _float_array(arrays, f"a{l}", where)
-            want_shape = (n, r, params[l - 1].W.shape[0])
-            require(a.shape == want_shape, f"{where}: tap a{l} has shape {a.shape}, expected {want_shape} "
-                                           f"(inputs, shots of y, rows of W{l})")
-            taps.append(a)
-        taps = tuple(taps)
-    t = None
-    if "t" in keys:
-        t = _float_array(arrays, "t", where)
-        require(t.shape == (n, r), f"{where}: t has shape {t.shape}, expected (n, r) = {(n, r)}")
-        require(bool(np.all((t >= 0) & (t <= 1))), f"{where}: t has values outside [0, 1]")
-    activation = "tanh"
-    if "activation" in keys:
-        act = np.asarray(arrays["activation"])
-        activation = act.item() if act.dtype.kind in "USO" and act.size == 1 else None
-        if isinstance(activation, bytes):  # a string stored as bytes (numpy's "S" dtype, h5py)
-            try:
-                activation = activation.decode("utf-8")
-            except UnicodeDecodeError:
-                activation = None
-        require(isinstance(activation, str), f"{where}: activation must be a string, got {act!r}")
-        require(activation in ACTIVATIONS, f"{where}: unknown activation {activation!r}; known: {', '.join(ACTIVATIONS)}")
-    return Measurement(x=x, y=y, params=tuple(params), taps=taps, t=t, activation=activation)
+from .._measurement import (
+    Measurement,
+    _layer_keys,
+    _npz_arrays,
+    dataset_arrays,
+    load_weight_arrays,
+    read_head,
+    validate_arrays,
+    weights_arrays,
+)
 
 
 #: extensions of netCDF / HDF5 files (read and written through xarray's h5netcdf engine)
 NETCDF_EXTENSIONS = (".nc", ".nc4", ".cdf", ".h5", ".hdf5", ".he5")
 _MAGIC = {b"PK\x03\x04": "npz", b"\x89HDF\r\n\x1a\n": "netcdf", b"CDF\x01": "netcdf3", b"CDF\x02": "netcdf3",
           b"CDF\x05": "netcdf3"}
-
-
-def read_head(path, size: int = 8) -> bytes:
-    """The first ``size`` bytes of the regular file ``path``; anything else -- no file, a folder, a
-    FIFO or a device (which would block or never end), an unreadable file -- is a bad input."""
-    path = os.fspath(path)
-    try:
-        st = os.stat(path)
-    except OSError as exc:
-        raise GiftInputError(f"{path}: no such file" if isinstance(exc, FileNotFoundError)
-                             else f"{path}: cannot be read ({exc.strerror})") from None
-    if not stat.S_ISREG(st.st_mode):
-        kind = ("a folder" if stat.S_ISDIR(st.st_mode) else "a pipe (FIFO)" if stat.S_ISFIFO(st.st_mode) else
-                "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "not a plain file")
-        raise GiftInputError(f"{path}: is {kind}, not a file to read" if kind != "not a plain file"
-                             else f"{path}: not a regular file")
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(size)
-    except OSError as exc:
-        raise GiftInputError(f"{path}: cannot be read ({exc.strerror})") from None
 
 
 def detect_format(path) -> str:
@@ -235,56 +112,11 @@ def load_measurement(path, *, weights=None) -> Measurement:
     return validate_arrays(arrays, where=path)
 
 
-def _npz_arrays(path, what: str, keep=None) -> dict:
-    """The arrays of an .npz (those ``keep`` accepts), never unpickled; a damaged archive or an array
-    too large to hold is a bad input."""
-    try:
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as f:  # our handle: closed on a bad file
-            return {k: f[k] for k in f.files if keep is None or keep(k)}
-    except MemoryError:
-        raise GiftInputError(f"{path}: an array in this .npz is too large to load into memory") from None
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else ""
-        raise GiftInputError(f"{path}: not a readable .npz {what}file ({type(exc).__name__}"
-                             f"{': ' + msg if msg else ''})") from None
-
-
-def weights_arrays(weights) -> dict:
-    """W1..WL, b1..bL (and ``activation``) from a ``.npz`` path or a mapping of arrays."""
-    if isinstance(weights, (str, os.PathLike)):
-        return load_weight_arrays(weights)
-    return {k: np.asarray(v) for k, v in dict(weights).items() if (k[:1] in "Wb" and k[1:].isdigit()) or k == "activation"}
-
-
 def _needs_weights(path, arrays, weights):
     if "W1" in arrays:
         return arrays
     require(weights is not None, f"{path}: holds no weights (W1, b1, ...): give --weights FILE.npz")
     return {**weights_arrays(weights), **arrays}
-
-
-def dataset_arrays(ds, where: str = "dataset") -> dict:
-    """The reference §3 arrays of an ``xarray.Dataset``: x as (input, ·), y, taps as (input, shot, ·),
-    t as (input, shot) -- dimensions named ``input`` and ``shot`` moved into place -- the weights
-    as stored, and the attribute (or variable) ``activation``."""
-    out = {}
-    want = {"x": ("input",), "y": ("input", "shot"), "t": ("input", "shot")}
-    for name in ds.data_vars:
-        name = str(name)
-        if not (name in ("x", "y", "t", "activation") or re.fullmatch(r"[Wba]\d+", name)):
-            continue  # anything else is kept in the file and ignored
-        v = ds[name]
-        lead = want.get(name, ("input", "shot") if name[0] == "a" else ())
-        if lead and all(d in v.dims for d in lead):
-            v = v.transpose(*lead, ...)
-        elif lead and any(d in v.dims for d in lead):
-            missing = [d for d in lead if d not in v.dims]
-            raise GiftInputError(f"{where}: variable {name} has dimensions {tuple(map(str, v.dims))}, "
-                                 f"no {missing[0]!r} (expected {name} ({', '.join(lead)}, ...))")
-        out[name] = np.asarray(v.values)
-    if "activation" not in out and "activation" in ds.attrs:
-        out["activation"] = np.asarray(ds.attrs["activation"])
-    return out
 
 
 def load_netcdf(path, *, weights=None) -> Measurement:
@@ -566,19 +398,6 @@ def save_file(path, meas: Measurement, *, csv: str = "wide") -> str | None:
     (save_wide_csv if csv == "wide" else save_csv)(path, meas)
     save_weights(wpath, meas)
     return wpath
-
-
-def load_weight_arrays(path) -> dict:
-    """The raw arrays W1..WL, b1..bL (and ``activation``) of a measurement's weights ``.npz``,
-    checked to exist -- what the CSV and table readers pair with their values.
-    (:func:`gift_theory.training.load_weights` reads a trained network: ``(params, meta)``.)"""
-    path = os.fspath(path)
-    head = read_head(path)
-    require(head.startswith(b"PK"), f"{path}: not an .npz weights file (an .npz is a zip archive; this file "
-                                    f"starts with {head[:8]!r})")
-    arrays = _npz_arrays(path, "weights ", keep=lambda k: (k[:1] in "Wb" and k[1:].isdigit()) or k == "activation")
-    require("W1" in arrays, f"{path}: no weights (expected keys W1, b1, ...)")
-    return arrays
 
 
 def load_csv(path, *, weights=None) -> Measurement:

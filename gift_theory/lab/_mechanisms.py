@@ -1,6 +1,6 @@
 """Stage 7 of the lab: from what is measured to which mechanism (reference §6).
 
-The backbone is the layer-wise identification (:func:`~gift_theory.lab._identify.identify`):
+The backbone is the layer-wise identification (:func:`~gift_theory.lab.identification.identify`):
 per layer, the effective mean map, the activation's shape and the noise read off the shots,
 each reference §6 class a test on these estimates with its own p-value (Holm-adjusted over
 classes x layers), an effect size and its layers. A class is listed when a test of it names it
@@ -12,7 +12,7 @@ held-out discrepancy to the evidence line (it never lists a class by itself).
 
 **This is the one place where a mechanism rule lives.** Each rule is a function
 ``(ctx) -> (score, layers, evidence, p_value) | None`` registered in :data:`RULES` under its
-class; to teach the lab a new mechanism, add a rule here (and a test in ``_identify``).
+class; to teach the lab a new mechanism, add a rule here (and a test in ``identification``).
 Without an identification (a caller that passes none) the rules fall back on the localised
 evidence of :func:`~gift_theory.lab._localise.layer_evidence` (each departure a z; listed
 beyond :data:`THRESHOLD`, p-value the normal tail of the score).
@@ -34,12 +34,11 @@ from scipy import stats
 
 from ..effects import MECHANISMS, REGISTRY
 from ._explain_output import order_map_classes
-from ._identify import TREND_SHARE
+from ._level import ALPHA
+from .identification._trend import TREND_SHARE
 
 #: without an identification, a class is listed when its evidence stands this many standard deviations out
 THRESHOLD = 4.0
-#: with an identification, a class is listed when its Holm-adjusted p-value is below this
-ALPHA = 0.01
 
 
 @dataclasses.dataclass
@@ -53,7 +52,7 @@ class Context:
     fit_gain : {class: z} the best moment-fitted candidate of each class: how many baseline
         standard deviations its held-out discrepancy fell below the baseline's
     levels : {layer: (s_layer, level_z)} per-layer noise levels of the one-step check
-    ident : the layer-wise :class:`~gift_theory.lab._identify.Identification`, or None (the
+    ident : the layer-wise :class:`~gift_theory.lab.identification.Identification`, or None (the
         rules then read ``evidence`` only)
     """
 

@@ -244,7 +244,7 @@ def estimate_offsets(key, meas: Measurement, physics, params, kinds, scales, sta
 
 def identified_start(meas: Measurement, params, physics, kinds):
     """With taps and weight offsets: the offsets where the layer-wise identification puts them
-    (:func:`~gift_theory.lab._identify.identify`: ``W_eff - W``, ``b_eff - b``; per-neuron
+    (:func:`~gift_theory.lab.identification.identify`: ``W_eff - W``, ``b_eff - b``; per-neuron
     parameters at 0), ``{kind: [array per layer]}`` -- a start from which L-BFGS has only the
     prior's shrinkage left to do, so weight errors as large as W itself are fitted and the
     noise level is not inflated to absorb a misfit mean -- and the noise level the
@@ -252,7 +252,7 @@ def identified_start(meas: Measurement, params, physics, kinds):
     ``(None, None)`` otherwise (the fit starts at 0)."""
     if not meas.has_taps or not any(k.target == "W" for k in kinds):
         return None, None
-    from ._identify import identify
+    from .identification import identify
 
     s = physics.params().get("s")
     ident = identify(meas, s=None if s is None else float(np.ravel(np.asarray(s))[0])).by_layer()

@@ -1,6 +1,6 @@
 """The activation smoothed by Gaussian noise: E sigma(z + sqrt(v) xi), its slope and variance.
 
-The identification (:mod:`._identify`) reads every layer's mean map through this smoothing, so
+The identification (:mod:`.identification`) reads every layer's mean map through this smoothing, so
 its error is a bias of the model's mean at every cell. Six-point Gauss-Hermite in xi, enough at a
 chip's usual levels (sd = sqrt(v) << 1: error below 1e-9 at sd 0.1), is far off once the noise
 is as wide as the activation's bend: 4e-3 at sd = 1 and 0.08-0.23 at sd = 10 for tanh --

@@ -1,6 +1,6 @@
 """Maps and gains that change over the acquisition: a slow wander of a gain, a drifting map.
 
-The identification (:mod:`._identify`) already reads a straight-line trend of each layer's
+The identification (:mod:`.identification`) already reads a straight-line trend of each layer's
 map (additive per neuron, a gain) across the inputs' mean times and within the inputs' shots.
 A laser whose intensity wanders over the campaign, or weights that drift (W + t D), do more:
 
@@ -24,7 +24,7 @@ Each is read twice, where each acquisition order shows it:
   own columns projected out, neuron by neuron (the map can take any fixed part of them). Each
   input's contribution to the score is one draw, and Hotelling's T^2 over the inputs tests their
   mean -- valid for any misfit of the mean that does not go with the acquisition order (a
-  saturating readout's curve enters at random), as ``_identify._robust_trend_p`` does for the
+  saturating readout's curve enters at random), as ``identification._trend._robust_trend_p`` does for the
   straight line.
 
 The two p-values are combined by Bonferroni (the smaller, doubled). The map drift is tested
@@ -41,7 +41,7 @@ weight_error first, a wandering laser weight_error or gain_error).
 **Slow, or shot to shot.** A gain that fluctuates on a time scale shorter than the campaign has
 a realised path with slow components too. The wander's row carries ``share``: the variance of
 its fitted path within the inputs' shots over the gain's variance the shared-gain covariance
-measures (``_identify._noise_rows``); below ``_identify.TREND_SHARE`` the mechanisms list puts
+measures (``identification._noise``); below ``identification._trend.TREND_SHARE`` the mechanisms list puts
 gain_fluctuation before time_drift (:func:`~gift_theory.lab._mechanisms._fluctuation_before_trend`).
 """
 
@@ -198,55 +198,52 @@ def _solve(B, S):
     return np.linalg.pinv(B, rcond=RCOND) @ S
 
 
-def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
-    """The wander and map-drift tests of one layer (see the module) and, for a test below
-    :data:`PUT_P`, the known term to put into its map.
+@dataclasses.dataclass(frozen=True)
+class _Reads:
+    """What the wander and the map drift of one layer are read from (see :func:`slow_terms`):
+    the within-input residuals ``e`` (n, r, d) less their input's mean, the inputs' mean residuals
+    ``ebar``, each cell's variance ``obs``, the slope ``g``, the shot's own input ``G`` (taps) or
+    None, the map's design ``X``, the times ``t`` and which readings are taken (``use_w`` within
+    the inputs' shots, ``use_a`` across their means)."""
 
-    lay : the identification's ``_Layer`` (A the regressor of each shot, Y, W, offset)
-    E : (n, r, d) each shot's residual at the map fitted without these terms; g (n, r, d) the
-        slope of the layer's mean at each shot; X (n, d, k) the map's design per input
-    t : (n, r) acquisition times
-    within : ``_identify._within`` (a residual less its regression on the shot's own input)
-    row_of : ``_identify._row``
-    """
-    n, r, d = E.shape
-    A = np.broadcast_to(lay.A, (n, r, lay.A.shape[2]))
-    p = A.shape[2]
-    t = np.asarray(t, np.float64)
-    G = A if lay.A.shape[1] > 1 else None  # with taps: the shot's own input varies within an input
-    Ew = within(E, g, lay.A)
-    e = Ew - Ew.mean(1, keepdims=True)
-    obs = np.maximum(np.var(Ew, axis=1, ddof=1), 1e-300) if r > 1 else np.ones((n, d))
-    ebar = E.mean(1)
-    tbar = t.mean(1)
-    use_w = r > 2 and float(np.std(t - tbar[:, None])) >= SPREAD
-    use_a = float(np.std(tbar)) >= SPREAD
-    u = np.broadcast_to(lay.A @ lay.W.T, (n, r, d))
+    e: np.ndarray
+    ebar: np.ndarray
+    obs: np.ndarray
+    g: np.ndarray
+    G: np.ndarray | None
+    X: np.ndarray
+    t: np.ndarray
+    use_w: bool
+    use_a: bool
+
+
+def _wander(rd: _Reads, u, layer: int, row_of):
+    """The gain's wander: one path shared by the neurons, beyond a straight line. Returns (row,
+    the known term to put into the map or None, the residuals ``e`` and ``ebar`` beyond it)."""
+    n, r, d = rd.e.shape
+    e, ebar, g, G, X = rd.e, rd.ebar, rd.g, rd.G, rd.X
     wdir = g * u  # how the layer's shots move with a gain on its weighted sum
-    rows = []
-    offset = None
-    wts = np.broadcast_to((1.0 / obs)[:, None, :], (n, r, d)).reshape(n, r * d)
+    wts = np.broadcast_to((1.0 / rd.obs)[:, None, :], (n, r, d)).reshape(n, r * d)
 
-    # ---- wander: one path shared by the neurons, beyond a straight line
     def wander(Phi):
         q = Phi.shape[-1]
         rw = ra = None
-        if use_w:
+        if rd.use_w:
             C = _within_fw(Phi[:, :, None, :] * wdir[..., None], g, G)
             rw = _wald(C.reshape(n, r * d, q), e.reshape(n, r * d), wts) if n >= 3 * q + 3 else None
-        if use_a and n >= 3 * q + 3:
+        if rd.use_a and n >= 3 * q + 3:
             Tt = _project_off(np.einsum("nrm,nrd->ndm", Phi, wdir) / r, X)
-            ra = _wald(Tt, ebar, r / obs, X.shape[2])
+            ra = _wald(Tt, ebar, r / rd.obs, X.shape[2])
         return rw, ra
 
-    Phi = basis(t)
+    Phi = basis(rd.t)
     rw, ra = wander(Phi)
     p_wander, Bw, Sw, _ = _combine([rw, ra])
     kappa = np.zeros(MODES) if Bw is None else _solve(Bw, Sw)
     path = Phi @ kappa  # (n, r): the gain's path beyond its mean and its straight line
     # slow or fast: the share of a wider band's fitted path that the slow modes carry (a gain
     # fluctuating within a few per cent of the campaign spreads over the band, a wander does not)
-    Phi_f = basis(t, 3 * MODES, first=MODES + 1)
+    Phi_f = basis(rd.t, 3 * MODES, first=MODES + 1)
     _, Bf, Sf, _ = _combine(wander(np.concatenate([Phi, Phi_f], axis=-1)))
     slow_share = 1.0
     if Bf is not None:
@@ -254,15 +251,16 @@ def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
         slow_share = float(np.var(path) / max(np.var(both), 1e-300))
     amp = float(np.sqrt(np.mean((path - path.mean()) ** 2)))
     pw, pa = (rw[0] if rw else 1.0), (ra[0] if ra else 1.0)
-    rows.append(dict(row_of("time_drift", "wander", p_wander, _z(p_wander), amp,
-                            f"the gain of layer {layer} wanders over acquisition time beyond a straight line (a path "
-                            f"in {MODES} cosines of t, rms {amp:.3g}; p = {pw:.2g} within the inputs' shots, "
-                            f"{pa:.2g} across their means; the slow modes carry {slow_share:.0%} of a band three "
-                            f"times wider)"),
-                     path_variance=float(np.mean((path - path.mean(1, keepdims=True)) ** 2)),
-                     path_rms=amp, slow_share=slow_share))
+    row = dict(row_of("time_drift", "wander", p_wander, _z(p_wander), amp,
+                      f"the gain of layer {layer} wanders over acquisition time beyond a straight line (a path "
+                      f"in {MODES} cosines of t, rms {amp:.3g}; p = {pw:.2g} within the inputs' shots, "
+                      f"{pa:.2g} across their means; the slow modes carry {slow_share:.0%} of a band three "
+                      f"times wider)"),
+               path_variance=float(np.mean((path - path.mean(1, keepdims=True)) ** 2)),
+               path_rms=amp, slow_share=slow_share)
+    offset = None
     if p_wander < PUT_P and slow_share >= SLOW_SHARE:
-        if use_a and not use_w:
+        if rd.use_a and not rd.use_w:
             # the inputs acquired one after the other: the path at the resolution the acquisition
             # gives, one gain per input (its mean residual along its gain direction, beyond the
             # path's mean: a fixed gain stays the map's) -- six cosines leave a wandering laser's
@@ -271,62 +269,102 @@ def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
             gam = np.sum(ebar * wbar, 1) / np.maximum(np.sum(wbar * wbar, 1), 1e-300)
             path = np.broadcast_to((gam - gam.mean())[:, None], (n, r))
         offset = path[:, :, None] * u
-        # the map drift below is read beyond the wander's fit
+        # the map drift is read beyond the wander's fit
         e = e - _within_fw((path[:, :, None] * wdir)[..., None], g, G)[..., 0]
         ebar = ebar - np.mean(path[:, :, None] * wdir, axis=1)
+    return row, offset, e, ebar
 
-    # ---- map drift: each neuron's row and bias, linear in t, beyond its own gain and additive trend
+
+def _neuron_drift(rd: _Reads, A1, u1, i: int):
+    """Neuron ``i``'s map drift (its row and bias linear in t) beyond its own gain and additive
+    trend: (p, the estimate (p + 1,), its covariance)."""
+    n, r, _ = rd.e.shape
+    g, G, t, obs = rd.g, rd.G, rd.t, rd.obs
+    k1 = A1.shape[2]
+    p = k1 - 1
+    tc = t - t.mean(1)[:, None]
+    cols = g[:, :, i, None] * A1 * t[:, :, None]  # (n, r, k1): how the mean moves with D_i, c_i
+    rw_i = ra_i = full_w = None
+    if rd.use_w:
+        # t less its input's mean time: the columns then have no part along the shot's own
+        # slope and input that an input's mean time carries (the pooled regression on the
+        # shot's own input leaves each input's part; where the map misfits a saturated
+        # neuron that part correlates with the residual, and a null file's neuron read a
+        # drift at p = 1e-32). Shots of one input are exchangeable in time without a drift:
+        # these columns' score has mean 0 whatever the map's misfit.
+        colc = g[:, :, i, None] * A1 * tc[:, :, None]
+        Ci = _within_fw(colc[:, :, None, :], g[:, :, i:i + 1], G)[:, :, 0, :]
+        # beyond this neuron's own gain and additive trends (the map's straight lines)
+        Li = _within_fw(np.stack([g[:, :, i] * tc, g[:, :, i] * u1[:, :, i] * tc], -1)[:, :, None, :],
+                        g[:, :, i:i + 1], G)[:, :, 0, :].reshape(n * r, 2)
+        Cf = Ci.reshape(n * r, k1)
+        Cb = Cf - Li @ np.linalg.lstsq(Li, Cf, rcond=None)[0]
+        wi = np.broadcast_to(1.0 / obs[:, i, None], (n, r)).ravel()
+        used = n + (p if G is not None else 0)  # the inputs' means, the shot's own input
+        rw_i = _ftest(Cb, rd.e[:, :, i].ravel(), wi, used + 2, robust=True)
+        full_w = _ftest(Cf, rd.e[:, :, i].ravel(), wi, used)
+    if rd.use_a:
+        Tt = _project_off((cols.mean(1))[:, None, :], rd.X[:, i:i + 1, :])[:, 0, :]
+        ra_i = _ftest(Tt, rd.ebar[:, i], r / obs[:, i], rd.X.shape[2])
+    _, Bi, Si, Mi = _combine([full_w if rd.use_w else None, ra_i])
+    Binv = np.linalg.pinv(Bi, rcond=RCOND)
+    return _combine([rw_i, ra_i])[0], Binv @ Si, Binv @ Mi @ Binv
+
+
+def _map_drift(rd: _Reads, lay, A, layer: int, row_of):
+    """The map's drift: each neuron's row and bias, linear in t, beyond its own gain and additive
+    trend. Returns (row, the known term to put into the map or None, its error's covariance at
+    t = 0 or None)."""
+    n, r, d = rd.e.shape
+    p = A.shape[2]
     k1 = p + 1
     A1 = np.concatenate([A, np.ones((n, r, 1))], axis=2)  # (n, r, p + 1)
     u1 = np.broadcast_to(lay.A @ lay.W.T, (n, r, d))
     p_n = np.ones(d)
     Dm = np.zeros((d, k1))
     Dcov = np.zeros((d, k1, k1))
-    tc = t - tbar[:, None]
-    if k1 <= MAP_MAX and (use_w or use_a) and n >= 3 * k1 + 3:
+    if k1 <= MAP_MAX and (rd.use_w or rd.use_a) and n >= 3 * k1 + 3:
         for i in range(d):  # neuron by neuron: (n, r, p + 1) columns at a time
-            cols = g[:, :, i, None] * A1 * t[:, :, None]  # (n, r, k1): how the mean moves with D_i, c_i
-            rw_i = ra_i = None
-            if use_w:
-                # t less its input's mean time: the columns then have no part along the shot's own
-                # slope and input that an input's mean time carries (the pooled regression on the
-                # shot's own input leaves each input's part; where the map misfits a saturated
-                # neuron that part correlates with the residual, and a null file's neuron read a
-                # drift at p = 1e-32). Shots of one input are exchangeable in time without a drift:
-                # these columns' score has mean 0 whatever the map's misfit.
-                colc = g[:, :, i, None] * A1 * tc[:, :, None]
-                Ci = _within_fw(colc[:, :, None, :], g[:, :, i:i + 1], G)[:, :, 0, :]
-                # beyond this neuron's own gain and additive trends (the map's straight lines)
-                Li = _within_fw(np.stack([g[:, :, i] * tc, g[:, :, i] * u1[:, :, i] * tc], -1)[:, :, None, :],
-                                g[:, :, i:i + 1], G)[:, :, 0, :].reshape(n * r, 2)
-                Cf = Ci.reshape(n * r, k1)
-                Cb = Cf - Li @ np.linalg.lstsq(Li, Cf, rcond=None)[0]
-                wi = np.broadcast_to(1.0 / obs[:, i, None], (n, r)).ravel()
-                used = n + (p if G is not None else 0)  # the inputs' means, the shot's own input
-                rw_i = _ftest(Cb, e[:, :, i].ravel(), wi, used + 2, robust=True)
-                full_w = _ftest(Cf, e[:, :, i].ravel(), wi, used)
-            if use_a:
-                Tt = _project_off((cols.mean(1))[:, None, :], X[:, i:i + 1, :])[:, 0, :]
-                ra_i = _ftest(Tt, ebar[:, i], r / obs[:, i], X.shape[2])
-            p_n[i] = _combine([rw_i, ra_i])[0]
-            _, Bi, Si, Mi = _combine([full_w if use_w else None, ra_i])
-            Binv = np.linalg.pinv(Bi, rcond=RCOND)
-            Dm[i] = Binv @ Si
-            Dcov[i] = Binv @ Mi @ Binv
+            p_n[i], Dm[i], Dcov[i] = _neuron_drift(rd, A1, u1, i)
     p_map = float(min(1.0, d * p_n.min()))
     worst = int(np.argmin(p_n))
     rel = float(np.sqrt(np.mean(Dm[:, :p] ** 2)) / max(np.sqrt(np.mean(lay.W ** 2)), 1e-300))
-    rows.append(row_of("time_drift", "map_drift", p_map, _z(p_map), rel,
-                       f"the map of layer {layer} drifts over acquisition time beyond a gain and a shift of each "
-                       f"neuron (W + t D, b + t c): rms D {rel:.2g} of rms W, most at {layer}:{worst} (p = "
-                       f"{min(1.0, p_n[worst] * d):.2g}, Bonferroni over {d} neurons)", [worst]))
-    cov = None
-    if p_map < PUT_P:
-        drift = t[:, :, None] * np.einsum("nrk,dk->nrd", A1, Dm)
+    row = row_of("time_drift", "map_drift", p_map, _z(p_map), rel,
+                 f"the map of layer {layer} drifts over acquisition time beyond a gain and a shift of each "
+                 f"neuron (W + t D, b + t c): rms D {rel:.2g} of rms W, most at {layer}:{worst} (p = "
+                 f"{min(1.0, p_n[worst] * d):.2g}, Bonferroni over {d} neurons)", [worst])
+    if p_map >= PUT_P:
+        return row, None, None
+    # the map at t = 0 carries the drift's error times the campaign's mean time
+    return row, rd.t[:, :, None] * np.einsum("nrk,dk->nrd", A1, Dm), float(np.mean(rd.t)) ** 2 * Dcov
+
+
+def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
+    """The wander and map-drift tests of one layer (see the module) and, for a test below
+    :data:`PUT_P`, the known term to put into its map.
+
+    lay : the identification's ``_Layer`` (A the regressor of each shot, Y, W, offset)
+    E : (n, r, d) each shot's residual at the map fitted without these terms; g (n, r, d) the
+        slope of the layer's mean at each shot; X (n, d, k) the map's design per input
+    t : (n, r) acquisition times
+    within : ``identification._stats._within`` (a residual less its regression on the shot's own input)
+    row_of : ``identification._stats._row``
+    """
+    n, r, d = E.shape
+    A = np.broadcast_to(lay.A, (n, r, lay.A.shape[2]))
+    t = np.asarray(t, np.float64)
+    G = A if lay.A.shape[1] > 1 else None  # with taps: the shot's own input varies within an input
+    Ew = within(E, g, lay.A)
+    obs = np.maximum(np.var(Ew, axis=1, ddof=1), 1e-300) if r > 1 else np.ones((n, d))
+    tbar = t.mean(1)
+    rd = _Reads(Ew - Ew.mean(1, keepdims=True), E.mean(1), obs, g, G, X, t,
+                r > 2 and float(np.std(t - tbar[:, None])) >= SPREAD, float(np.std(tbar)) >= SPREAD)
+    u = np.broadcast_to(lay.A @ lay.W.T, (n, r, d))
+    wander_row, offset, e, ebar = _wander(rd, u, layer, row_of)
+    drift_row, drift, cov = _map_drift(dataclasses.replace(rd, e=e, ebar=ebar), lay, A, layer, row_of)
+    if drift is not None:
         offset = drift if offset is None else offset + drift
-        # the map at t = 0 carries the drift's error times the campaign's mean time
-        cov = float(np.mean(t)) ** 2 * Dcov
-    return Slow(tuple(rows), offset, cov)
+    return Slow((wander_row, drift_row), offset, cov)
 
 
 def add_cov(S, full: bool, cov, k: int) -> None:

@@ -45,8 +45,23 @@ def test_protocol_shapes_taps_and_fresh_noise():
     m2 = chip.measure(_params(), x, 3)
     assert m1.y.shape == (6, 3, 2) and [a.shape for a in m1.taps] == [(6, 3, 3)] and m1.t.shape == (6, 3)
     assert 0.0 <= m1.t.min() and m1.t.max() <= 1.0
-    assert not np.allclose(m1.y, m2.y)  # a device cannot repeat its noise
+    assert not np.allclose(m1.y, m2.y)  # two campaigns, independent noise
     assert chip.ledger.shots == 36
+
+
+def test_a_campaign_s_shots_do_not_depend_on_what_was_measured_before():
+    """Same seed, same numbers in any order: the noise is keyed by the chip's key and the campaign
+    (weights, inputs, shots, taps, times), with no count of the calls made before it."""
+    x = np.random.default_rng(0).random((6, 4)).astype(np.float32)
+    first, second = (SimulatedChip(ARCH, gt.Physics.create(s=0.2, drift=0.1), key=jax.random.PRNGKey(3))
+                     for _ in range(2))
+    a1, b1 = first.measure(_params(), x, 3, taps=True), first.measure(_params(), x[:4], 5)
+    b2, a2 = second.measure(_params(), x[:4], 5), second.measure(_params(), x, 3, taps=True)
+    np.testing.assert_array_equal(a1.y, a2.y)
+    np.testing.assert_array_equal(a1.taps[0], a2.taps[0])
+    np.testing.assert_array_equal(b1.y, b2.y)
+    other = SimulatedChip(ARCH, gt.Physics.create(s=0.2, drift=0.1), key=jax.random.PRNGKey(4))
+    assert not np.allclose(other.measure(_params(), x, 3, taps=True).y, a1.y)  # another chip, other noise
 
 
 def test_simulated_chip_has_the_models_law():

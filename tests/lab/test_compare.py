@@ -464,7 +464,7 @@ def test_the_fitted_awgn_level_of_a_wide_layer_is_the_true_one():
     data sets: the mean relative error of the fitted s (on each set's fitting half) is within
     Z of its standard error of 0 (measured: +0.8 +- 0.5 %; before the log-variance correction
     -3.2 +- 0.5 %, which fails here)."""
-    from gift_theory.lab._diagnose import Session
+    from gift_theory.lab import Session
 
     arch = gt.Architecture((32, 256, 10))
     params = gt.init_params(jax.random.PRNGKey(11), arch)
@@ -473,7 +473,7 @@ def test_the_fitted_awgn_level_of_a_wide_layer_is_the_true_one():
     for k in range(16):
         meas = simulate_measurement(jax.random.PRNGKey(100 + k), params, x, gt.Physics.create(s=0.1), shots=8,
                                     taps=True)
-        err.append(float(Session(jax.random.PRNGKey(200 + k), meas).baseline.physics.s) / 0.1 - 1)
+        err.append(float(Session.create(jax.random.PRNGKey(200 + k), meas).baseline.physics.s) / 0.1 - 1)
     err = np.array(err)
     se = err.std(ddof=1) / np.sqrt(err.size)
     assert abs(err.mean()) <= 4.5 * se, (err.mean(), se)

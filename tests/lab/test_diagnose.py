@@ -99,7 +99,7 @@ def test_weight_error_is_named_first_and_passes_against_its_refit_null():
 def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     """Rule b' of the verdict: drift explains a drifting chip only because its trend in time
     does -- the same model with every time at the mean fails the held-out test."""
-    from gift_theory.lab._diagnose import Session
+    from gift_theory.lab import Session
     from gift_theory.lab._verdict import time_free
 
     meas = _chip(HIDDEN["drift"])
@@ -108,7 +108,7 @@ def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
                  progress=lambda i, n, label: calls.append((i, n, label)))
     assert d.ranking[0].effects == ("drift",) and d.explained, d.reasons
     assert calls == [(0, 1, "drift: passes")]  # one progress line per candidate, as it is done
-    session = Session(jax.random.PRNGKey(11), meas)
+    session = Session.create(jax.random.PRNGKey(11), meas)
     twin = session.score(d.ranking[0].model, held_out=time_free(session.test_meas))
     assert twin.p_value < 0.01 < d.ranking[0].comparison.p_value
 
@@ -267,7 +267,7 @@ def test_candidates_the_identification_clears_are_not_fitted_and_change_nothing(
     check, so the candidates of the classes no test flags are not fitted (listed with the
     reason). Every candidate that is fitted has the numbers it has when all are (a candidate is
     a pure function of its own request), and the verdict is the same."""
-    from gift_theory.lab import _diagnose
+    from gift_theory.lab import _ranking  # the staging's switch: which classes are flagged
 
     meas = _chip(HIDDEN["shot"], seed=4, n=80, r=24)
     cands = ["shot", "multiplicative", "crosstalk", "layer_gain", "bias_offset"]
@@ -276,7 +276,7 @@ def test_candidates_the_identification_clears_are_not_fitted_and_change_nothing(
     assert staged.not_fitted and all("identification clears" in r["reason"] for r in staged.not_fitted)
     fitted = {c.name for c in staged.ranking}
     assert fitted | {r["effect"] for r in staged.not_fitted} == set(cands)
-    monkeypatch.setattr(_diagnose, "flagged_classes", lambda ident: {})
+    monkeypatch.setattr(_ranking, "flagged_classes", lambda ident: {})
     full = diagnose(jax.random.PRNGKey(8), meas, candidates=cands)
     assert not full.not_fitted and {c.name for c in full.ranking} == set(cands)
     by_name = {c.name: c.as_json() for c in full.ranking}
@@ -288,7 +288,7 @@ def test_candidates_the_identification_clears_are_not_fitted_and_change_nothing(
 # ---- the ranking's order and the verdict (CONTRACTS §6, 2026-11-25) ----------------------------
 
 def _stand_in(rng, i):
-    from gift_theory.lab._diagnose import Candidate
+    from gift_theory.lab import Candidate
 
     class Cmp:
         def __init__(self, p, q):
@@ -305,7 +305,7 @@ def test_ranking_order_rule_on_random_candidate_lists(seed):
     """Those that pass first (by penalised score), then the refused, then those the data reject
     (each by held-out discrepancy); a rejected one never first while another passes or is
     refused; the same order from any order of the input."""
-    from gift_theory.lab._diagnose import STATUSES, ranked
+    from gift_theory.lab import STATUSES, ranked
 
     rng = np.random.default_rng(seed)
     cands = [_stand_in(rng, i) for i in range(int(rng.integers(1, 12)))]
@@ -354,7 +354,7 @@ def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
     save_measurement(path, meas)
     assert main(["diagnose", str(path), "--json", "--quiet", "--candidates", "shot,drift,crosstalk,layer_gain"]) == 0
     out = json.loads(capsys.readouterr().out)
-    from gift_theory.lab._diagnose import STATUSES
+    from gift_theory.lab import STATUSES
 
     ranking = out["ranking"]
     for r in ranking:
@@ -478,19 +478,20 @@ def test_a_law_with_the_wrong_tails_is_refused_and_the_right_law_is_not():
     reproduce the shots' tails (a two-sample test against its own shots). On a Laplace chip
     (heavy tails in every layer) uniform noise (light tails) is refused by it, Laplace is not;
     on an awgn chip the kurtosis names nothing and the rule has nothing to read."""
-    from gift_theory.lab._diagnose import Session, _law_check, _single
-    from gift_theory.lab._identify import identify
+    # the rule read on its own (its contract: which candidate it refuses), not through a diagnosis
+    from gift_theory.lab import Session, identify
+    from gift_theory.lab._verdict import unmoved_tails_rule
 
     meas = _chip(HIDDEN["laplace"], seed=2, n=60, r=24)
-    session = Session(jax.random.PRNGKey(5), meas)
-    check = _law_check(session, identify(meas))
+    session = Session.create(jax.random.PRNGKey(5), meas)
+    check = unmoved_tails_rule(session, identify(meas))
     assert check is not None
-    lap, uni = session.candidates([_single("laplace"), _single("uniform")])
+    lap, uni = session.candidates([(("laplace",), None, ("laplace",), ("laplace",)), (("uniform",), None, ("uniform",), ("uniform",))])
     why = check(uni)
     assert why and "does not move the shots' tails towards the measured ones" in why and "measured" in why
     assert check(lap) is None
     null = _chip({}, seed=2, n=60, r=24)
-    assert _law_check(types.SimpleNamespace(meas=null), identify(null)) is None
+    assert unmoved_tails_rule(types.SimpleNamespace(meas=null), identify(null)) is None
 
 
 @pytest.mark.slow
@@ -500,21 +501,24 @@ def test_a_model_without_the_measured_correlation_is_refused_and_one_with_it_is_
     correlations (a two-sample test against its own shots). On a chip with per-neuron and
     shared gain noise (multiplicative + common_mode) the per-neuron noise alone is refused by it,
     the pair is not; on an awgn chip the rule has nothing to read."""
-    from gift_theory.lab._diagnose import Session, _cov_check, _single
-    from gift_theory.lab._identify import identify
+    # the rule read on its own (its contract: which candidate it refuses), not through a diagnosis
+    from gift_theory.lab import Session, identify
+    from gift_theory.lab._verdict import unreproduced_correlations_rule
 
     meas = _chip({"multiplicative": 0.3, "common_mode": 0.3}, seed=2, n=60, r=24)
-    session = Session(jax.random.PRNGKey(5), meas)
+    session = Session.create(jax.random.PRNGKey(5), meas)
     ident = identify(meas)
     assert "gain_fluctuation" in {r["class"] for r in ident.rows() if r["p_adj"] < 0.01}
-    check = _cov_check(session, ident)
+    check = unreproduced_correlations_rule(session, ident)
     assert check is not None
-    mult, pair = session.candidates([_single("multiplicative"), _single("multiplicative+common_mode")])
+    mult, pair = session.candidates([(("multiplicative",), None, ("multiplicative",), ("multiplicative",)),
+                                     (("multiplicative", "common_mode"), None, ("multiplicative", "common_mode"),
+                                      ("multiplicative", "common_mode"))])
     why = check(mult)
     assert why and "does not reproduce the correlations between the neurons" in why
     assert check(pair) is None
     null = _chip({}, seed=2, n=60, r=24)
-    assert _cov_check(types.SimpleNamespace(meas=null), identify(null)) is None
+    assert unreproduced_correlations_rule(types.SimpleNamespace(meas=null), identify(null)) is None
 
 
 @pytest.mark.parametrize("spec, trend", [(HIDDEN["saturation"], False), ({"drift": 0.05}, True)])
@@ -523,7 +527,7 @@ def test_a_misfit_of_the_mean_is_no_trend_in_time_and_a_small_drift_is_one(spec,
     (a misfit of the mean the shape's bins do not absorb) had been read as a trend at layer 1
     with p = 1e-65 against the noise's covariance alone; a gain drift of 5 % over the campaign
     is still found."""
-    from gift_theory.lab._identify import identify
+    from gift_theory.lab import identify
 
     rows = [r for r in identify(_chip(spec)).rows() if r["class"] == "time_drift" and r["p_adj"] < 0.01]
     assert bool(rows) == trend, [(r["layer"], r["test"], r["p_adj"]) for r in rows]
@@ -532,7 +536,7 @@ def test_a_misfit_of_the_mean_is_no_trend_in_time_and_a_small_drift_is_one(spec,
 def test_rule_g_reads_each_pair_s_correlation_sample_by_sample():
     """_corr_z: per input and sample of r consecutive shots, Fisher's z of numpy's correlation
     of each pair of neurons (upper triangle, row by row)."""
-    from gift_theory.lab._diagnose import _corr_z
+    from gift_theory.lab._verdict import _corr_z
 
     rng = np.random.default_rng(0)
     x = rng.normal(size=(5, 32, 6))

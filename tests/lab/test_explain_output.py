@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from gift_theory.lab._explain_output import Z_PASS, _propagate, explain, order_map_classes
-from gift_theory.lab._identify import identify
+from gift_theory.lab import identify
 
 from .test_identify import _first, _net, sim
 
@@ -131,10 +131,10 @@ def test_a_class_whose_candidates_fail_the_mean_is_refused_when_another_class_re
     the output's mean unexplained while another class reproduces it is no explanation; a
     transfer's two classes are one group there (an activation's shape and a readout's curve
     cannot be told apart without taps); noise classes and unchecked classes are not judged."""
-    from gift_theory.lab._explain_output import Candidate, mean_refusal
+    from gift_theory.lab._explain_output import OutputCandidate, mean_refusal
 
     def c(mech, name, z):
-        return Candidate(mech, name, (1,), 4, 100.0, z, 0.5, 100.0 + z)
+        return OutputCandidate(mech, name, (1,), 4, 100.0, z, 0.5, 100.0 + z)
 
     cands = [c("none", "programmed", 14.0), c("gain_error", "a gain on every layer", 6.0),
              c("readout_nonlinearity", "each output neuron's gain and offset", 0.5)]
@@ -150,10 +150,10 @@ def test_a_class_whose_candidates_fail_the_mean_is_refused_when_another_class_re
 def test_an_explanation_names_the_other_classes_that_reproduce_the_mean_as_well():
     """Without taps several classes can reproduce the output's mean; an explanation by one of
     them says which others do as well (a transfer's two classes are one group)."""
-    from gift_theory.lab._explain_output import Candidate, also_explaining
+    from gift_theory.lab._explain_output import OutputCandidate, also_explaining
 
     def c(mech, name, z, k=4):
-        return Candidate(mech, name, (1,), k, 100.0, z, 0.5, 100.0 + z + k)
+        return OutputCandidate(mech, name, (1,), k, 100.0, z, 0.5, 100.0 + z + k)
 
     cands = [c("none", "programmed", 14.0), c("gain_error", "a gain on every layer", 1.8),
              c("readout_nonlinearity", "each output neuron's gain and offset", 0.5, 7),

@@ -11,8 +11,8 @@ from scipy import integrate
 import gift_theory as gt
 from gift_theory.lab import identify, simulate_measurement
 from gift_theory.lab._compare import layer_level
-from gift_theory.lab._shots import Model
-from gift_theory.lab._smoothing import smoothed
+from gift_theory.lab import Model
+from gift_theory.lab.identification import smoothed
 
 
 def _exact(f, z, sd):

@@ -18,7 +18,8 @@ import gift_theory as gt
 from gift_theory._finite import NotFinite
 from gift_theory.cli import main
 from gift_theory.lab import Model, compare, load_measurement, save_measurement, simulate_measurement
-from gift_theory.lab._io import save_csv, save_netcdf, save_weights, save_wide_csv
+from gift_theory.lab import save_csv, save_netcdf, save_wide_csv
+from gift_theory.lab._io import save_weights  # the weights file beside a CSV: no public writer of its own
 from gift_theory.lab._qtest import over_inputs, q_test
 
 F32 = float(np.finfo(np.float32).max)

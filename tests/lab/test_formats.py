@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 import gift_theory as gt
 from gift_theory.cli import main
 from gift_theory.lab import Measurement, load_measurement, save_measurement, simulate_measurement
-from gift_theory.lab._io import detect_format, save_file, save_netcdf, save_wide_csv, save_weights
+from gift_theory.lab import detect_format, save_file, save_netcdf, save_wide_csv
+from gift_theory.lab._io import save_weights  # the weights file beside a CSV: no public writer of its own
 
 #: every float64 that float32 -- the precision gift computes in -- holds as a finite number
 finite = st.floats(-float(np.finfo(np.float32).max), float(np.finfo(np.float32).max), width=64)

@@ -14,7 +14,7 @@ import pytest
 
 import gift_theory as gt
 from gift_theory.lab import fit_effects, simulate_measurement
-from gift_theory.lab._fit import fit_uncertainty
+from gift_theory.lab import fit_uncertainty
 from gift_theory.lab._intervals import scale_interval
 
 Z = 4.5

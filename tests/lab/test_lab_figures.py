@@ -13,9 +13,8 @@ from matplotlib.figure import Figure
 
 import gift_theory as gt
 from gift_theory.lab import Model, simulate_measurement
-from gift_theory.lab._compare import predictive_moments
-from gift_theory.lab._figures import (diagnosis_figures, error_ladder, fit_figures, moments_figure, save_figures,
-                                      where_figure)
+from gift_theory.lab import predictive_moments
+from gift_theory.lab import diagnosis_figures, error_ladder, fit_figures, moments_figure, save_figures, where_figure
 
 
 @pytest.fixture(autouse=True)
@@ -154,7 +153,7 @@ def test_savers_write_atomically_where_told(meas, tmp_path):
 
 def test_the_law_panels_numbers_are_calibrated_under_the_true_model_and_see_a_wrong_spread(meas):
     from gift_theory.lab import where_it_fails
-    from gift_theory.lab._figures import correlation_figure, law_figure, pit_figure
+    from gift_theory.lab import correlation_figure, law_figure, pit_figure
     from scipy import stats as st
 
     truth = Model(gt.Physics.parse(["awgn=0.05", "shot=0.02"]))
@@ -204,7 +203,8 @@ def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error()
 
 
 def test_the_pair_plot_draws_the_intervals_gift_fit_reports():
-    from gift_theory.lab._figures import pairs_data, pairs_figure
+    from gift_theory.lab import pairs_figure
+    from gift_theory.lab._figure_sets import pairs_data  # the numbers a figure draws: not public API
     from scipy import stats as st
 
     cov = np.array([[0.01, -0.008], [-0.008, 0.02]])
@@ -222,7 +222,7 @@ def test_the_pair_plot_draws_the_intervals_gift_fit_reports():
 
 
 def test_the_demo_s_bars_say_what_their_colours_mean():
-    from gift_theory._demo import plot_finetune
+    from gift_theory.cli._demo_parts import plot_finetune
 
     rows = [{"method": m, "loss_before": 1.0, "loss_after": v} for m, v in (("gift", 0.9), ("spsa", 1.1), ("ift", 1.0))]
     curve = {k: [0.0, 1.0] for k in ("alpha", "truth", "truth_se", "predicted", "predicted_model_C2", "chip_alpha",

@@ -329,7 +329,7 @@ def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_une
     signed tests reject it (a law change in one layer); then nothing is "missing" by the
     held-out test, but the data are not explained, and a passing candidate counts only with an
     effect of the class the identification flags."""
-    from gift_theory.lab._diagnose import _identification_refusals
+    from gift_theory.lab._verdict import identification_refusals
 
     base_passes = _Cmp(0.3)
     flagged = {"noise_law": 1e-3}
@@ -354,13 +354,13 @@ def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_une
                     {"class": "weight_error", "test": "map", "layer": 1, "p": 0.2, "p_adj": 1.0, "z": 1.3}]
 
     cands = [C(("laplace",)), C(("bias_offset",)), C(("uniform",), status="fails")]
-    out = _identification_refusals(cands, Ident(), base_passes)
+    out = identification_refusals(cands, Ident(), base_passes)
     assert [c.status for c in out] == ["passes", "refused", "fails"]
     assert [c.lacks for c in out] == [False, True, False]  # refused for what it lacks: the second step builds on it
     assert "noise_law at layer(s) 2, p = 0.001" in out[1].refused_because[0]
     # when the baseline fails its held-out test, only a time trend refuses (rule b'')
-    assert [c.status for c in _identification_refusals(cands, Ident(), _Cmp(1e-6))] == ["passes", "passes", "fails"]
-    assert _identification_refusals(cands, None, base_passes) == cands
+    assert [c.status for c in identification_refusals(cands, Ident(), _Cmp(1e-6))] == ["passes", "passes", "fails"]
+    assert identification_refusals(cands, None, base_passes) == cands
     # without taps the same rule: the adjusted p alone names a class (z = 3.9 refuses as well)
     Ident.taps = False
-    assert [c.status for c in _identification_refusals(cands, Ident(), base_passes)] == ["passes", "refused", "fails"]
+    assert [c.status for c in identification_refusals(cands, Ident(), base_passes)] == ["passes", "refused", "fails"]

@@ -22,7 +22,7 @@ from gift_theory._measurement import Measurement
 from gift_theory._params import Layer
 from gift_theory.effects import REGISTRY
 from gift_theory.effects.memory import previous_shot, with_memory
-from gift_theory.lab._identify import identify
+from gift_theory.lab import identify
 from gift_theory.lab._mechanisms import Context, mechanisms
 
 

@@ -38,21 +38,9 @@ import time
 
 import numpy as np
 
+from ..profiling import _timed, matmul_gflops
+
 DEEP = (784, 500, 250, 250, 100, 50, 10)
-
-
-def matmul_gflops(n: int = 2048, repeats: int = 10) -> float:
-    a = np.random.default_rng(0).standard_normal((n, n)).astype(np.float32)
-    b = np.random.default_rng(1).standard_normal((n, n)).astype(np.float32)
-    a @ b
-    best = min(_timed(lambda: a @ b) for _ in range(repeats))
-    return 2.0 * n ** 3 / best / 1e9
-
-
-def _timed(f):
-    t = time.perf_counter()
-    f()
-    return time.perf_counter() - t
 
 
 def _log(msg):
@@ -82,8 +70,8 @@ def run_benchmarks(*, repeats: int = 5, eff_K1: int = 256, ref_K2: int = 64, qui
     import jax.numpy as jnp
 
     import gift_theory as gt
-    from ._errors import GiftInputError
-    from .estimators import d_ds_grad
+    from .. import GiftInputError
+    from ..estimators import d_ds_grad
 
     if repeats < 1 or eff_K1 < 2 or ref_K2 < 1:
         raise GiftInputError("gift bench: --repeats must be >= 1, --eff-K1 >= 2, --ref-K2 >= 1")
@@ -132,7 +120,7 @@ def _referee(arch, params, roof: float, repeats: int) -> dict:
     import jax.numpy as jnp
 
     import gift_theory as gt
-    from .finetune._problem import referee_scores
+    from ..finetune._problem import referee_scores
 
     n, K2 = 5000, 32
     x = jax.random.uniform(jax.random.PRNGKey(3), (n, DEEP[0]))
@@ -200,7 +188,7 @@ def _million(roof: float) -> dict:
     import subprocess
 
     _log("d0_deep_million: K1 K2 = 10^6 on the deep net in a fresh process (about a minute) ...")
-    proc = subprocess.run([sys.executable, "-m", "gift_theory._bench", "million"], capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "gift_theory.cli._bench_runs", "million"], capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"d0_deep_million failed: {proc.stderr.strip().splitlines()[-1:]}")
     r = json.loads(proc.stdout)
@@ -216,7 +204,7 @@ def _million_child() -> dict:
     import jax.numpy as jnp
 
     import gift_theory as gt
-    from .estimators import d_ds_grad
+    from ..estimators import d_ds_grad
 
     arch = gt.Architecture(DEEP)
     params = gt.init_params(jax.random.PRNGKey(0), arch)
@@ -237,7 +225,7 @@ def _million_child() -> dict:
 def _efficiency(eff_K1, ref_K2, arch, params, x, y, phys, roof) -> dict:
     import jax
 
-    from .estimators import d_ds_grad, paper_constant
+    from ..estimators import d_ds_grad, paper_constant
 
     def flat(tree):
         return np.concatenate([np.asarray(a, np.float64).ravel() for a in jax.tree_util.tree_leaves(tree)])

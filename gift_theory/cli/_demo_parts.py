@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from ._errors import GiftInputError
+from .. import GiftInputError
 
 #: the parts of the demo, in order
 PARTS = ("finetune", "theory", "lab")
@@ -37,11 +37,11 @@ def load_demo_setting(dataset: str, arch, s0: float, seed: int = 0, data_folder:
     """
     import jax.numpy as jnp
 
-    from ._arch import Architecture
-    from ._errors import require
-    from ._params import cast
-    from .data import load_dataset
-    from .training import load_or_train
+    from .. import Architecture
+    from .._errors import require
+    from .. import cast_params as cast
+    from ..data import load_dataset
+    from ..training import load_or_train
 
     arch = Architecture.parse(arch) if isinstance(arch, str) else arch
     require(s0 > 0, f"--s0 {s0}: the assumed noise level must be positive")
@@ -105,7 +105,7 @@ def finetune_part(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.05,
     dict ``rows`` (one per method, reference §4 keys plus ``oracle_fraction``, ``why`` and a
     JSON-ready ``info``) and ``curve`` (arrays, or None when no line-search method ran).
     """
-    from .finetune import METHODS, finetune_on, true_physics
+    from ..finetune import METHODS, finetune_on, true_physics
 
     methods = tuple(METHODS if methods is None else methods)
     if "retrain" not in methods:
@@ -170,8 +170,8 @@ def gift_line(ds, arch, w0, physics, direction, info: dict, *, method: str = "gi
     J(w0) - J(w0 + a u), ``predicted`` and ``predicted_model_C2`` (points,), ``chip_alpha``,
     ``chip_dJ``, ``chip_se`` (measured points), ``C1``, ``C2``, ``method``.
     """
-    from .finetune import referee_losses
-    from .finetune._tree import axpy, unit
+    from ..finetune import referee_losses
+    from ..finetune._tree import axpy, unit
 
     u, _ = unit(direction)
     span = 1.5 * max(abs(a) for a in info["alphas"])
@@ -245,7 +245,7 @@ def plot_finetune(rows, curve, *, s0: float, st: float, ax=None):
 
 def parse_hidden(spec: str):
     """The lab part's hidden effect from ``NAME=VALUE`` (awgn is the baseline, not hidden)."""
-    from .effects import parse_effect
+    from ..effects import parse_effect
 
     e = parse_effect(spec, where="--hidden")
     if e.name == "awgn":
@@ -262,9 +262,9 @@ def lab_chip(hidden, seed: int = 0):
     """
     import jax
 
-    from . import _params
-    from ._arch import Architecture
-    from .effects import Physics, make_effect
+    from .. import _params
+    from .. import Architecture
+    from ..effects import Physics, make_effect
 
     arch = Architecture((8, 16, 8, 4))
     key = jax.random.PRNGKey(seed)
@@ -293,7 +293,7 @@ def lab_part(hidden, seed: int = 0, *, save_to: str | None = None, progress=None
     """
     import jax
 
-    from .lab import diagnose, save_measurement, simulate_measurement
+    from ..lab import diagnose, save_measurement, simulate_measurement
 
     t0 = time.perf_counter()
     key = jax.random.PRNGKey(seed)
@@ -328,8 +328,8 @@ def calibrate_part(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.05
     errors, ``recovered`` (the share of the lost accuracy won back), ``evaluations``, ``accepted``,
     ``identified`` (per layer, what calibrate read), ``seconds``.
     """
-    from .effects import Physics, awgn
-    from .finetune import finetune_on, referee
+    from ..effects import Physics, awgn
+    from ..finetune import finetune_on, referee
 
     t0 = time.perf_counter()
     physics = Physics.parse(list(faults), s=s0, where="calibration chip")

@@ -1,0 +1,308 @@
+"""The figures of ``gift compare``, ``gift fit`` and ``gift diagnose`` as sets, each written beside
+its numbers: :func:`save_figures` writes PNGs atomically and, beside each, the ``xarray.Dataset``
+it draws as netCDF (the ``*_data`` functions); the drawing itself is :mod:`._figures`."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .._io import save_figure
+from ._figures import (
+    comparison_figure,
+    comparison_table,
+    correlation_figure,
+    error_ladder,
+    law_figure,
+    moments_figure,
+    pairs_figure,
+    pit_figure,
+    ppc_figure,
+    time_figure,
+    where_figure,
+)
+
+
+def save_figures(figures: dict, folder: str, data: dict | None = None) -> list[str]:
+    """Write ``{file name: Figure}`` into ``folder`` (created), each atomically; beside each PNG
+    whose name ``data`` holds, its numbers as netCDF (same stem, ``.nc``: an ``xarray.Dataset``
+    other tools can redraw). The PNG paths written."""
+    out = []
+    for name, f in figures.items():
+        out.append(save_figure(f, os.path.join(folder, name), bbox_inches="tight"))
+        ds = (data or {}).get(name)
+        if ds is not None:
+            save_dataset(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc"))
+    return out
+
+
+def save_dataset(ds, path: str) -> str:
+    """An ``xarray.Dataset`` written atomically as netCDF (h5netcdf)."""
+    from .._io import atomic_path
+
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="h5netcdf")
+    return path
+
+
+# ---- the numbers behind each figure, as xarray Datasets ----------------------------------------
+
+def _xr():
+    import xarray as xr
+
+    return xr
+
+
+def where_data(stats: dict):
+    """The where-figure's maps (row, bin) with the bins' edges."""
+    xr = _xr()
+    v = {name: (("row", "bin"), np.asarray(M, float)) for name, M in stats["maps"].items()}
+    if stats.get("edges") is not None:
+        v["edges"] = (("edge",), np.asarray(stats["edges"], float))
+    return xr.Dataset(v, coords={"row": list(stats["rows"])}, attrs={
+        "description": "per cell z (N(0, 1) under the model) summed over the inputs of each bin of the model's "
+                       "pre-activation, divided by sqrt(count); gift_theory.lab.where_it_fails"})
+
+
+def pit_data(stats: dict):
+    """The PIT histograms: counts per layer (pit_bin), the cells behind them in the attributes."""
+    xr = _xr()
+    return xr.Dataset({f"pit_layer{l}": (("pit_bin",), np.asarray(c, float)) for l, c in stats["pit"].items()},
+                      attrs={f"pit_cells_layer{l}": int(c) for l, c in stats["pit_cells"].items()})
+
+
+def correlation_data(stats: dict):
+    """The correlation z per layer (neuron, neuron)."""
+    xr = _xr()
+    return xr.Dataset({f"correlation_z_layer{l}": ((f"neuron_l{l}", f"neuron_l{l}_other"), np.asarray(C, float))
+                       for l, C in stats["correlation"].items()})
+
+
+def law_data(stats: dict):
+    """The quantiles of the standardised shots per layer (probability), both kurtoses in the attributes."""
+    from ._localise import QQ_PROBS
+
+    xr = _xr()
+    v = {}
+    for l, q in stats["qq"].items():
+        v[f"qq_measured_layer{l}"] = (("probability",), np.asarray(q["measured"], float))
+        v[f"qq_model_layer{l}"] = (("probability",), np.asarray(q["model"], float))
+    return xr.Dataset(v, coords={"probability": QQ_PROBS},
+                      attrs={f"kurtosis_{w}_layer{l}": float(q[f"kurtosis_{w}"]) for l, q in stats["qq"].items()
+                             for w in ("measured", "model")})
+
+
+def moments_data(moments, layer: int):
+    """One layer's measured and model means and variances (model, input, neuron)."""
+    xr = _xr()
+    mlist = [moments] if hasattr(moments, "layer_ids") else list(moments)
+    li = list(mlist[0].layer_ids).index(layer)
+    return xr.Dataset({"measured_mean": (("input", "neuron"), np.asarray(mlist[0].mean[li], float)),
+                       "measured_var": (("input", "neuron"), np.asarray(mlist[0].var[li], float)),
+                       "model_mean": (("model", "input", "neuron"), np.stack([m.model_mean[li] for m in mlist])),
+                       "model_var": (("model", "input", "neuron"), np.stack([m.model_var[li] for m in mlist]))},
+                      coords={"model": [m.label for m in mlist]},
+                      attrs={"layer": int(layer), "r": int(mlist[0].r), "K": int(mlist[0].K)})
+
+
+def ppc_data(pred, layer: int):
+    """One layer's measured shots (input, shot, neuron) and each model's (model, input, model_shot,
+    neuron): ArviZ's observed and posterior-predictive groups."""
+    xr = _xr()
+    plist = [pred] if hasattr(pred, "layer_ids") else list(pred)
+    li = list(plist[0].layer_ids).index(layer)
+    return xr.Dataset({"measured": (("input", "shot", "neuron"), np.asarray(plist[0].measured[li], float)),
+                       "model_shots": (("model", "input", "model_shot", "neuron"),
+                                 np.stack([np.asarray(p.model[li], float) for p in plist]))},
+                      coords={"model": [p.label for p in plist]}, attrs={"layer": int(layer)})
+
+
+def time_data(data: dict):
+    """The time figure's numbers: per layer, the residual's mean, se and count in each bin of
+    acquisition time (bin), the bins' centres, and the acquisition order in the attributes."""
+    xr = _xr()
+    layers = [l for l in data if isinstance(l, int)]
+    v = {}
+    for l in layers:
+        for k in ("mean", "se", "count"):
+            v[f"{k}_layer{l}"] = (("bin",), np.asarray(data[l][k], float))
+    centres = np.asarray(data[layers[0]]["t"], float) if layers else np.zeros(0)
+    return xr.Dataset(v, coords={"t": (("bin",), centres)}, attrs={"order": str(data.get("order", ""))})
+
+
+def ladder_data(rungs, noise_floor: float, floor_se: float):
+    xr = _xr()
+    return xr.Dataset({"discrepancy": (("model",), np.array([r[1] for r in rungs], float)),
+                       "sd": (("model",), np.array([r[2] for r in rungs], float)),
+                       "p_value": (("model",), np.array([r[3] for r in rungs], float))},
+                      coords={"model": [r[0] for r in rungs]},
+                      attrs={"noise_floor": float(noise_floor), "floor_se": float(floor_se)})
+
+
+def comparison_data(table: list, noise_floor: float, floor_se: float):
+    xr = _xr()
+    cols = ("discrepancy", "sd", "delta", "delta_se", "p_value")
+    return xr.Dataset({c: (("model",), np.array([t[c] for t in table], float)) for c in cols}
+                      | {"status": (("model",), np.array([t["status"] or "" for t in table], dtype=str))},
+                      coords={"model": [t["model"] for t in table]},
+                      attrs={"noise_floor": float(noise_floor), "floor_se": float(floor_se),
+                             "difference_to": table[0]["model"]})
+
+
+def pairs_data(joint: dict):
+    xr = _xr()
+    names = list(joint["params"])
+    return xr.Dataset({"estimate": (("param",), np.asarray(joint["estimate"], float)),
+                       "centre_fit_scale": (("param",), np.asarray(joint["centre"], float)),
+                       "cov_fit_scale": (("param", "param_other"), np.asarray(joint["cov"], float)),
+                       "fit_scale": (("param",), np.array(joint["scale"], dtype=str))},
+                      coords={"param": names, "param_other": names},
+                      attrs={"level": float(joint.get("level", 0.95))})
+
+
+# ---- the figure sets of the commands -----------------------------------------------------------
+
+def where_figures(stats: dict, model: str) -> tuple[dict, dict]:
+    """The where-figure and the law of the shots (PIT, correlations, quantiles) of one
+    :func:`~gift_theory.lab.where_it_fails` result, ``model`` its model's name in the titles:
+    ``(figures, data)``."""
+    title = model
+    figs = {"where.png": where_figure(stats, title=f"{model}: where it fails")}
+    data = {"where.png": where_data(stats)}
+    if stats.get("pit"):
+        figs["pit.png"] = pit_figure(stats, title=f"{title}: PIT of the measured shots among the model's own")
+        data["pit.png"] = pit_data(stats)
+        figs["correlation.png"] = correlation_figure(stats, title=f"{title}: correlation between neurons")
+        data["correlation.png"] = correlation_data(stats)
+        figs["law.png"] = law_figure(stats, title=f"{title}: quantiles of the standardised shots")
+        data["law.png"] = law_data(stats)
+    return figs, data
+
+
+def predictive_figures(key, models, meas) -> tuple[dict, dict]:
+    """Each measured layer's moments and posterior-predictive overlay under each of ``models``
+    ((label, Model), common random numbers), ``(figures, data)``."""
+    from .._model import named_subkey
+    from ._compare import predictive_shots
+
+    k = named_subkey(key, "figure_moments")  # common random numbers: every model the same draws
+    preds = [predictive_shots(k, m, meas, label=lab) for lab, m in models]
+    mom = [p.moments() for p in preds]
+    figs, data = {}, {}
+    for l in meas.layer_ids():
+        figs[f"moments_layer{l}.png"] = moments_figure(mom, l)
+        data[f"moments_layer{l}.png"] = moments_data(mom, l)
+        figs[f"ppc_layer{l}.png"] = ppc_figure(preds, l)
+        data[f"ppc_layer{l}.png"] = ppc_data(preds, l)
+    return figs, data
+
+
+def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
+    """The figures of a :class:`~gift_theory.lab.Diagnosis`, written to ``folder`` (each PNG with
+    its numbers as netCDF beside it): the error ladder of the baseline and the three best
+    candidates; the model comparison of the baseline and every ranked candidate (differences to
+    ranking[0] with their paired standard errors); where the baseline fails and its law of the
+    shots (PIT, correlations, quantiles); given the measurement, each measured layer's moments
+    and posterior-predictive overlay under the baseline and the top-ranked model on the
+    held-out inputs, and with acquisition times each layer's residual against them
+    (:func:`time_figure`)."""
+    c = diagnosis.baseline_comparison
+    rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
+        ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
+        for cand in diagnosis.ranking[:3]]
+    figs = {"ladder.png": error_ladder(rungs, c.noise_floor, c.floor_se, title="baseline and best candidates")}
+    data = {"ladder.png": ladder_data(rungs, c.noise_floor, c.floor_se)}
+    table = diagnosis_comparison(diagnosis)
+    if table:
+        figs["comparison.png"] = comparison_figure(table, c.noise_floor, c.floor_se,
+                                                   title="model comparison on the held-out inputs")
+        data["comparison.png"] = comparison_data(table, c.noise_floor, c.floor_se)
+    if diagnosis.where is not None:
+        f, d = where_figures(diagnosis.where, "the baseline (awgn)")
+        figs.update(f)
+        data.update(d)
+    if meas is not None:
+        import jax
+
+        key = jax.random.PRNGKey(0) if key is None else key
+        models = [("before: " + " + ".join(diagnosis.baseline.effects), diagnosis.baseline)]
+        if diagnosis.ranking:
+            top = diagnosis.ranking[0]
+            models.append(("first ranked: " + " + ".join(top.model.effects), top.model))
+        f, d = predictive_figures(key, models, meas.subset(diagnosis.held_out))
+        figs.update(f)
+        data.update(d)
+        if meas.t is not None:  # the residual against acquisition time, per layer (reference §8)
+            from .._model import named_subkey
+            from ._time import residual_in_time
+
+            td = residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas)
+            figs["time.png"] = time_figure(td, title="baseline: residual along the signal against acquisition time")
+            data["time.png"] = time_data(td)
+    return save_figures(figs, folder, data)
+
+
+def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:
+    """The model comparison rows (:func:`comparison_table`) of a diagnosis: the model its verdict
+    names first (ranking[0], or the baseline when the verdict names it), then the baseline and the
+    next candidates, each against the first on the held-out inputs."""
+    named = [(" + ".join(["awgn"] + list(cand.effects)), cand.comparison, getattr(cand, "status", ""))
+             for cand in diagnosis.ranking[:limit] if getattr(cand, "comparison", None) is not None]
+    base = ("awgn (baseline)", diagnosis.baseline_comparison, "passes" if getattr(diagnosis, "names_baseline", False)
+            else "")
+    named = [base] + named if getattr(diagnosis, "names_baseline", False) or not named else named[:1] + [base] + named[1:]
+    return comparison_table(named)
+
+
+def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | None = None,
+                where: dict | None = None) -> list[str]:
+    """The figures of a :class:`~gift_theory.lab.FitResult`, written to ``folder`` (each PNG with its
+    numbers as netCDF beside it): the error ladder and the model comparison of its rungs (each
+    against the fitted model, paired standard errors); given ``uncertainty``
+    (:func:`~gift_theory.lab._fit.fit_uncertainty` with a ``joint``), the pair plot of the fitted
+    parameters; given ``where`` (:func:`~gift_theory.lab.where_it_fails` of the fitted model on the
+    held-out inputs), where it fails and its law of the shots; given the measurement, each
+    measured layer's moments and posterior-predictive overlay before and after the fit."""
+    a = result.comparison_after
+    rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in result.ladder]
+    figs = {"ladder.png": error_ladder(rungs, a.noise_floor, a.floor_se)}
+    data = {"ladder.png": ladder_data(rungs, a.noise_floor, a.floor_se)}
+    if len(result.ladder) > 1 and all(getattr(c, "channel_values", None) is not None for _, c in result.ladder):
+        named = [(lab, c, "") for lab, c in result.ladder][::-1]  # the fitted model first
+        table = comparison_table(named)
+        figs["comparison.png"] = comparison_figure(table, a.noise_floor, a.floor_se,
+                                                   title="the ladder compared on the held-out inputs")
+        data["comparison.png"] = comparison_data(table, a.noise_floor, a.floor_se)
+    if uncertainty and uncertainty.get("joint"):
+        figs["pairs.png"] = pairs_figure(uncertainty["joint"])
+        data["pairs.png"] = pairs_data(uncertainty["joint"])
+    if where is not None:
+        f, d = where_figures(where, "the fitted model")
+        figs.update(f)
+        data.update(d)
+    if meas is not None:
+        import jax
+
+        key = jax.random.PRNGKey(0) if key is None else key
+        f, d = predictive_figures(key, [("before: " + " + ".join(result.before.effects), result.before),
+                                        ("after: " + " + ".join(result.after.effects), result.after)], meas)
+        figs.update(f)
+        data.update(d)
+    return save_figures(figs, folder, data)
+
+
+def compare_figures(key, model, scored, where: dict, label: str, folder: str) -> list[str]:
+    """The figures of ``gift compare``: where ``model`` fails on the scored inputs and its law of
+    the shots, each measured layer's moments and posterior-predictive overlay, written to
+    ``folder`` (each PNG with its numbers as netCDF beside it)."""
+    figs, data = where_figures(where, " + ".join(model.effects))
+    f, d = predictive_figures(key, [(label, model)], scored)
+    figs.update(f)
+    data.update(d)
+    return save_figures(figs, folder, data)
+
+
+def heatmaps(stats: dict, path: str, title: str = "where the model fails") -> str:
+    """:func:`where_figure` written to ``path`` (atomically); the path."""
+    return save_figure(where_figure(stats, title=title), path, bbox_inches="tight")

@@ -210,6 +210,6 @@ def kushner_verification(key=None, precise: bool = False) -> dict:
         "grad_w J_s and beta_n = 0 (eq. Identification-of-gbar-and-beta)",
         verdict, evidence, correction,
         counterexample=None if verdict != "fails" else {
-            "point": np.asarray(flat0).tolist(), "E_Y_given_F": ym.tolist(), "grad_J": gJ.tolist(),
-            "max_z_against_printed": float(np.max(z_plus))},
+            "point": np.asarray(flat0).tolist(), "E_Y_given_F": ym.tolist(), "E_Y_given_F_se": yse.tolist(),
+            "grad_J": gJ.tolist(), "max_z_against_printed": float(np.max(z_plus))},
         hypotheses=hyps)

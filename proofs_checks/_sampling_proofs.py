@@ -8,6 +8,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import mpmath
 import numpy as np
 import sympy as sp
@@ -28,6 +30,7 @@ SCHEDULES = {
 }
 
 
+@functools.lru_cache(maxsize=1)
 def schedule_table():
     """For each schedule: is the proof's step valid (sum 1/(K1 K2) < inf, Chebyshev + Borel-
     Cantelli), and with fresh draws for every n, does the Gaussian toy (A ~ N(0,1), B|A ~ N(A,1),

@@ -61,24 +61,26 @@ TARGETS = {
         tests=[f"{T}::test_hierarchical_sampling"]),
     "sgd_limit_points": dict(
         code=[("_sgd", "steps_hypothesis"), ("_sgd", "exact_grad"), ("_sgd", "sgd_limit_points")],
-        tests=[f"{T}::test_sgd_limit_points", "tests/proofs/test_sgd.py"]),
+        tests=["tests/proofs/test_sgd.py::test_step_size_hypothesis_decided_by_sympy",
+               "tests/proofs/test_sgd.py::test_exact_gradient_vanishes_at_the_interior_minimiser",
+               f"{T}::test_sgd_limit_points"]),
     "square_integrability": dict(
         code=[("_sampling", "fourth_moments"), ("_sampling", "stabilises"), ("_sampling", "square_integrability")],
         tests=[f"{T}::test_square_integrability", "tests/proofs/test_sampling.py::test_fourth_moment_stabiliser_known_cases"]),
     "theorem1_condition": dict(
         code=[("_theorem1", "family_quantities"), ("_theorem1", "nearest_zero_of_C1"), ("_theorem1", "search_families"),
               ("_theorem1", "taylor_steps"), ("_theorem1", "theorem1_condition")],
-        tests=[f"{T}::test_theorem1_condition", "tests/proofs/test_theorem1.py"]),
+        tests=[f"{T}::test_theorem1_condition"] + [f"tests/proofs/test_theorem1.py::{t}" for t in (
+            "test_wrong_sign_gives_a_zero_of_C1_inside_the_printed_condition", "test_search_counts",
+            "test_corrected_condition_implies_descent", "test_condition_record")]),
     "theorem1_conclusion": dict(
-        code=[("_theorem1", "theorem1_conclusion"), ("_theorem1", "descent_confirmation"),
-              ("_family", "critical_certificate"), ("_family", "_theorem1_numeric"), ("_family", "_theorem1_sympy"),
-              ("_family", "_critical_points"), ("_family", "_conditions_exact"), ("_family", "exact_sup_abs"),
-              ("_interval", "krawczyk"), ("_mc", "trivial_point_certificate")],
-        tests=[f"{T}::test_theorem1_conclusion", "tests/proofs/test_family.py", "tests/proofs/test_interval.py"]),
+        code=[("_theorem1", "theorem1_conclusion"), ("_theorem1", "descent_confirmation")],
+        tests=[f"{T}::test_theorem1_conclusion"]),
     "theorem2_guarantee": dict(
         code=[("_gift", "global_minimiser_1d"), ("_gift", "algorithm1_exact"), ("_gift", "theorem2_printed"),
               ("_gift", "theorem2_guarantee")],
-        tests=[f"{T}::test_theorem2_guarantee"]),
+        tests=["tests/proofs/test_hypotheses.py::test_theorem2_as_printed_is_refuted_inside_its_hypotheses",
+               f"{T}::test_theorem2_guarantee"]),
     "linear_example_bound": dict(
         code=[("_linear", "mc_cross_check"), ("_linear", "c1_closed_form"), ("_linear", "_example_hypotheses"),
               ("_linear", "linear_example_bound")],
@@ -86,7 +88,7 @@ TARGETS = {
     "gift_never_worse": dict(
         code=[("_gift", "algorithm1"), ("_gift", "_clopper_pearson"), ("_gift", "_corrected_runs"),
               ("_gift", "gift_never_worse")],
-        tests=[f"{T}::test_gift_never_worse", "tests/proofs/test_gift_alg.py"]),
+        tests=["tests/proofs/test_gift_alg.py", f"{T}::test_gift_never_worse"]),
     "algorithm1_stopping_rule": dict(
         code=[("_gift", "stopping_rule_exact"), ("_gift", "algorithm1_stopping_rule")],
         tests=[f"{T}::test_algorithm1_stopping_rule"]),
@@ -114,7 +116,25 @@ TARGETS = {
         tests=[f"{T}::test_kushner_verification"]),
     "linear_example_v_scaling": dict(
         code=[("_linear", "vector_example"), ("_linear", "linear_example_v_scaling")],
-        tests=[f"{T}::test_linear_example_v_scaling"]),
+        tests=["tests/proofs/test_hypotheses.py::test_vector_linear_example_corrected_bound_is_free_of_V",
+               f"{T}::test_linear_example_v_scaling"]),
+    "(shared) Theorem-1 checker": dict(
+        code=[("_family", "critical_certificate"), ("_family", "_theorem1_numeric"), ("_family", "_theorem1_sympy"),
+              ("_family", "_critical_points"), ("_family", "_conditions_exact"), ("_family", "exact_sup_abs"),
+              ("_family", "_zero_proven"), ("_interval", "krawczyk"), ("_mc", "trivial_point_certificate"),
+              ("_mc", "symmetric_draws")],
+        tests=["tests/proofs/test_family.py::test_quartic_exact",
+               "tests/proofs/test_interval.py::test_krawczyk_certifies_a_simple_zero_and_refuses_a_degenerate_one",
+               "tests/proofs/test_family.py::test_per_sample_non_critical_family_is_outside_never_a_counterexample",
+               "tests/proofs/test_hypotheses.py::test_non_critical_w0_is_outside_never_a_counterexample",
+               "tests/proofs/test_hypotheses.py::test_rounded_critical_points_are_certified_by_krawczyk",
+               "tests/proofs/test_hypotheses.py::test_st_equal_s0_is_outside",
+               "tests/proofs/test_family.py::test_linear_chains_against_closed_forms",
+               "tests/proofs/test_family.py::test_numeric_copy_matches_sympy",
+               "tests/proofs/test_family.py::test_trivial_point_certificate",
+               "tests/proofs/test_hypotheses.py::test_theorem2_as_printed_is_refuted_inside_its_hypotheses",
+               "tests/proofs/test_cli.py::test_theorem1_subcommand_quartic_json",
+               f"{T}::test_theorem1_condition"]),
     "(shared) verdict rules": dict(
         code=[("_record", "record"), ("_record", "decide"), ("_record", "equality_verdict"), ("_record", "sign_verdict"),
               ("_record", "combine"), ("_record", "symbolic_verdict")],
@@ -148,15 +168,80 @@ def _find_function(tree, name):
     raise KeyError(name)
 
 
+#: calls whose integer arguments are PRNG seeds or keys (not mutated: another seed is another instance)
+_SEED_CALLS = {"PRNGKey", "fold_in", "split", "default_rng", "randint", "key"}
+#: names that hold sample sizes, step counts, precision or the size of a search (not mutated: a verdict
+#: must not hinge on their exact value, and n -> n + 1 is no slip)
+_SIZE_NAMES = {"R", "Rm", "n", "N", "K1", "K2", "K2e", "K2m", "steps", "n_laws", "max_L", "dps", "blocks", "windows",
+               "max_iter", "max_pieces", "substeps", "order", "tries", "groups", "n_int"}
+
+
+def _evidence_only_names(fn):
+    """Names assigned in ``fn`` whose every use is inside an f-string (evidence text), directly or through
+    other such names: what they hold decides nothing."""
+    in_text = set()
+    for node in ast.walk(fn):
+        if isinstance(node, ast.JoinedStr):
+            in_text.update(id(n) for n in ast.walk(node))
+    assigned = {}
+    for node in ast.walk(fn):
+        if isinstance(node, ast.Assign) and all(isinstance(t, ast.Name) for t in node.targets):
+            for t in node.targets:
+                assigned.setdefault(t.id, []).append(node)
+    loads = {}
+    for stmt in ast.walk(fn):
+        for n in ast.walk(stmt):
+            if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load):
+                loads.setdefault(n.id, set()).add(id(n))
+    owner = {}                                     # load id -> the names whose assignment contains it
+    for name, stmts in assigned.items():
+        for st in stmts:
+            for n in ast.walk(st.value):
+                if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load):
+                    owner.setdefault(id(n), set()).add(name)
+    evidence = set()
+    changed = True
+    while changed:
+        changed = False
+        for name in assigned:
+            if name in evidence or name not in loads:
+                continue
+            if all(i in in_text or (owner.get(i) and owner[i] <= evidence) for i in loads[name]):
+                evidence.add(name)
+                changed = True
+    return evidence
+
+
 def _skipped(fn):
-    """Node ids not to mutate: the docstring and everything inside strings and f-strings."""
+    """Node ids not to mutate: the docstring, strings and f-strings (evidence text), values assigned to
+    names used only in evidence text, argument defaults, the arguments of seed calls, the values assigned
+    to size names (``_SIZE_NAMES``) and size keywords (``K2=...``)."""
     skip = set()
     body = fn.body
     if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
         skip.update(id(n) for n in ast.walk(body[0]))
+    skip.update(id(n) for d in fn.args.defaults + fn.args.kw_defaults if d is not None for n in ast.walk(d))
+    text_only = _evidence_only_names(fn)
+    for node in ast.walk(fn):
+        if isinstance(node, ast.Assign) and all(isinstance(t, ast.Name) and t.id in text_only for t in node.targets):
+            skip.update(id(n) for n in ast.walk(node.value))
     for node in ast.walk(fn):
         if isinstance(node, ast.JoinedStr):
             skip.update(id(n) for n in ast.walk(node))
+        elif isinstance(node, ast.Call):
+            name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+            if name in _SEED_CALLS:
+                skip.update(id(n) for a in node.args for n in ast.walk(a) if isinstance(n, ast.Constant))
+            for kw in node.keywords:
+                if kw.arg in _SIZE_NAMES:
+                    skip.update(id(n) for n in ast.walk(kw.value))
+        elif isinstance(node, ast.Assign) and all(isinstance(t, ast.Name) and t.id in _SIZE_NAMES
+                                                  for t in node.targets):
+            skip.update(id(n) for n in ast.walk(node.value))
+        elif isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Tuple):
+            for t, v in zip(node.targets[0].elts, getattr(node.value, "elts", [])):
+                if isinstance(t, ast.Name) and t.id in _SIZE_NAMES:
+                    skip.update(id(n) for n in ast.walk(v))
     return skip
 
 

@@ -487,7 +487,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | Non
             w_b, ib = algorithm1(make_eval(jax.random.fold_in(kr, 1), p.x, p.y, phys, p.arch, K2=K2e), st_.w0, Dm, eta,
                                  stop="both")
         stops.append((ip["iterations"], ib["iterations"], ib["chosen"][0]))
-        diffs.append(_true_difference(jax.random.fold_in(kr, 2), w_b, w_p, p, st_.st, K2=64)[0])
+        diffs.append(_true_difference(jax.random.fold_in(kr, 2), w_b, w_p, p, st_.st, K2=256)[0])
         # the standard error of Eval's difference at the first stopping comparison (each side against w0)
         for cand in ip["candidates"][:2]:
             e_d = np.asarray(cand[3]) - np.asarray(ip["L0"])

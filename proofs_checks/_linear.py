@@ -10,7 +10,7 @@ import sympy as sp
 import gift_theory as gt
 import linear_case as lc
 
-from ._record import fmt, hypothesis, level, record, symbolic_verdict
+from ._record import decide, fmt, hypothesis, level, record, symbolic_verdict
 
 
 def mc_cross_check(key, L: int = 2, s0: float = 0.3, K1: int = 4096, K2: int = 4):
@@ -149,7 +149,7 @@ def linear_example_text_claim(key=None, precise: bool = False) -> dict:
         c10 = sp.simplify(e["C1"].subs(sub).subs(e["s0"], s0_text))
         rows.append((L, v0, c10))
     v_zero = all(all(x == 0 for x in v0) and c10 == 0 for _, v0, c10 in rows)
-    verdict = symbolic_verdict(not v_zero)
+    verdict = decide(fails=v_zero)              # no refutation at s0 = 0 would decide nothing
     # the text's numbers, read back from each instance's J_0(W) = m2 (V - W)^2 (coefficients of W^2 and W)
     Wsym = sp.Symbol("W_")
     got = []
@@ -243,7 +243,7 @@ def linear_example_v_scaling(key=None, precise: bool = False) -> dict:
     pr = [num(r, r["printed_rhs"]) for r in rows]
     cr = [num(r, r["corrected_rhs"]) for r in rows]
     tightens_printed = all(sp.simplify(a - b) > 0 for a, b in zip(pr, pr[1:]))
-    verdict = symbolic_verdict(not corr_free)
+    verdict = decide(fails=corr_free)           # a V-dependent corrected bound would not show the tightening
     setting_ok = all(r["setting"] == 0 for r in rows)
     crit_ok = all(all(c == 0 for c in r["critical"]) for r in rows)
     hyps = [hypothesis("example", "depth-1 linear network, AWGN on the input only, uncorrelated inputs of equal "

@@ -15,7 +15,7 @@ executed into the live module object, every reference to its old functions elsew
 proofs_checks (re-exports, the registry, ``from ... import``) is rebound, the shared ONN setup is
 rebuilt only when the mutated module can change it, and pytest runs in-process.
 
-    python tools/mutation_pass.py                       # every check, 2 jobs
+    python tools/mutation_pass.py                       # every check, 24 mutants each, 2 jobs
     python tools/mutation_pass.py --check hierarchical_sampling --check linear_example_bound
     python tools/mutation_pass.py --list                # the mutants, without running them
 
@@ -173,7 +173,7 @@ _SEED_CALLS = {"PRNGKey", "fold_in", "split", "default_rng", "randint", "key"}
 #: names that hold sample sizes, step counts, precision or the size of a search (not mutated: a verdict
 #: must not hinge on their exact value, and n -> n + 1 is no slip)
 _SIZE_NAMES = {"R", "Rm", "n", "N", "K1", "K2", "K2e", "K2m", "steps", "n_laws", "max_L", "dps", "blocks", "windows",
-               "max_iter", "max_pieces", "substeps", "order", "tries", "groups", "n_int"}
+               "max_iter", "max_pieces", "substeps", "order", "tries", "groups", "n_int", "configs"}
 
 
 def _evidence_only_names(fn):
@@ -428,11 +428,27 @@ def run_check(check, mutants, timeout, log):
     return results
 
 
-def _worker(check, timeout, out_path):
-    muts = [m for mod, fn in TARGETS[check]["code"] for m in mutants_of(mod, fn)] + slip_mutants(check)
+def all_mutants(check):
+    return [m for mod, fn in TARGETS[check]["code"] for m in mutants_of(mod, fn)]
+
+
+def sample_mutants(check, n):
+    """A seeded sample of ``n`` mutants of ``check`` (all when n is 0 or there are fewer), then its slips."""
+    import random
+    import zlib
+
+    muts = all_mutants(check)
+    if n and len(muts) > n:
+        rng = random.Random(zlib.crc32(check.encode()))
+        muts = [muts[i] for i in sorted(rng.sample(range(len(muts)), n))]
+    return muts + slip_mutants(check)
+
+
+def _worker(check, timeout, out_path, sample):
+    muts = sample_mutants(check, sample)
     res = run_check(check, muts, timeout, lambda s: print(s, file=sys.stderr, flush=True))
     with open(out_path, "w") as fh:
-        json.dump(res, fh)
+        json.dump(dict(results=res, population=len(all_mutants(check))), fh)
 
 
 def main(argv=None):
@@ -442,11 +458,13 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=600.0, help="seconds per mutant before it counts as killed")
     ap.add_argument("--out", default=os.path.join("gift-out", "mutation_pass.json"))
     ap.add_argument("--list", action="store_true", help="list the mutants and exit")
+    ap.add_argument("--sample", type=int, default=24,
+                    help="mutants per check, a seeded random sample (0: every mutant); the slips always run")
     ap.add_argument("--_worker", help=argparse.SUPPRESS)
     ap.add_argument("--_result", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a._worker:
-        _worker(a._worker, a.timeout, a._result)
+        _worker(a._worker, a.timeout, a._result, a.sample)
         return 0
     checks = a.check or list(TARGETS)
     unknown = [c for c in checks if c not in TARGETS]
@@ -455,8 +473,8 @@ def main(argv=None):
         return 2
     if a.list:
         for c in checks:
-            ms = [m for mod, fn in TARGETS[c]["code"] for m in mutants_of(mod, fn)] + slip_mutants(c)
-            print(f"{c}: {len(ms)} mutant(s)")
+            ms = sample_mutants(c, a.sample)
+            print(f"{c}: {len(ms)} mutant(s) of {len(all_mutants(c))}")
             for m in ms:
                 print(f"  {m['module']}.{m['function']}:{m['line']} {m['what']}")
         return 0
@@ -471,7 +489,7 @@ def main(argv=None):
             c = pending.pop(0)
             part = os.path.join(tmp, f"{c.replace(' ', '_').replace('(', '').replace(')', '')}.json")
             p = subprocess.Popen([sys.executable, os.path.abspath(__file__), "--_worker", c, "--_result", part,
-                                  "--timeout", str(a.timeout)], env=env, cwd=ROOT)
+                                  "--timeout", str(a.timeout), "--sample", str(a.sample)], env=env, cwd=ROOT)
             running.append((c, p, part))
         time.sleep(2)
         for c, p, part in list(running):
@@ -480,18 +498,19 @@ def main(argv=None):
                 results[c] = json.load(open(part)) if p.returncode == 0 and os.path.exists(part) else None
     rows, table = {}, []
     width = max(len(c) for c in checks)
-    table.append(f"{'check':<{width}}  killed/tried  survivors")
+    table.append(f"{'check':<{width}}  killed/tried (of)  survivors")
     for c in checks:
-        r = results.get(c)
-        if r is None:
+        got = results.get(c)
+        if got is None:
             table.append(f"{c:<{width}}  (worker failed)")
             continue
+        r = got["results"]
         killed = sum(x["status"] != "survived" for x in r)
         surv = [f"{x['module']}.{x['function']}:{x['line']} {x['what']}" for x in r if x["status"] == "survived"]
         slips = [x for x in r if x.get("slip")]
-        rows[c] = dict(killed=killed, tried=len(r), survivors=surv,
+        rows[c] = dict(killed=killed, tried=len(r), population=got["population"], survivors=surv,
                        slips=[dict(what=x["what"], status=x["status"]) for x in slips])
-        table.append(f"{c:<{width}}  {killed:>4}/{len(r):<6}  " + ("; ".join(surv) if surv else "-"))
+        table.append(f"{c:<{width}}  {killed:>4}/{len(r):<4} ({got['population']})  " + ("; ".join(surv) if surv else "-"))
     with open(a.out, "w") as fh:
         json.dump(rows, fh, indent=1)
     print("\n".join(table))

@@ -81,6 +81,10 @@ def test_hierarchical_sampling(monkeypatch):
     assert (m["E_f"], m["var_g"], m["E_var"], m["var_f"]) == (2, 2, 6, 8)
     a = m["a"]
     assert sp.expand(m["g"] - (a ** 2 + 1)) == 0                     # the g the toy's deviation part uses
+    # the toy's two outputs: S_hi has mean E f = 2, the deviation part (1/K1) sum (Y_i - g(A_i)) mean 0
+    S, dev = _sampling.hierarchical_toy(jax.random.PRNGKey(0), 4, 4, 20000)
+    for x, want in ((S, 2.0), (dev, 0.0)):
+        assert abs(x.mean() - want) < 5 * x.std(ddof=1) / math.sqrt(x.size)
     r = _sampling.hierarchical_sampling(jax.random.PRNGKey(5))
     assert r["verdict"] == "holds" and ALL_VERIFIED(r)
     assert "a.s." in r["claim"] and "hierarchical_borel_cantelli" in r["claim"]     # the a.s. part split off
@@ -141,7 +145,19 @@ def test_linear_example_bound(x64):
     assert ce["printed_theorem_rhs"] == pytest.approx(1 / (2 * math.sqrt(2) * W ** 1.5), rel=1e-12)
     assert ce["example_rhs"] == pytest.approx(1.25, rel=1e-12)
     assert ce["printed_theorem_rhs"] != pytest.approx(ce["example_rhs"])
+    lo, hi = sorted((ce["printed_theorem_rhs"], ce["example_rhs"]))
+    assert lo < ce["st_between"] - ce["s0"] < hi                     # an st where the two conditions disagree
     assert _hyp(r, "s_positive")["detail"].startswith("on the refuting instance")
+
+
+def test_linear_example_bound_can_hold(monkeypatch):
+    """The aggregation is "every depth agrees": with the example's equation made equal to the printed condition at
+    every depth the verdict is "holds" (the Monte-Carlo part, tested above, is stubbed: it decides nothing here)."""
+    orig = _linear.lc.symbolic_example
+    monkeypatch.setattr(_linear.lc, "symbolic_example", lambda L: dict(orig(L), example_rhs=orig(L)["printed_rhs"]))
+    monkeypatch.setattr(_linear, "mc_cross_check", lambda key, **kw: (0.0, 1))
+    r = _linear.linear_example_bound(jax.random.PRNGKey(9))
+    assert r["verdict"] == "holds" and r["counterexample"] is None
 
 
 def test_linear_example_text_claim():

@@ -91,45 +91,23 @@ def test_trivial_point_certificate(x64):
     assert _mc.trivial_point_certificate(arch, draws, prob.y, unravel)(np.asarray(wt) + 0.1, 0.25) is None
 
 
-#: the audit's per-sample family (issue 44): K = 100 values, mean(a) = 0, w0 = (-0.05, 1): the objective's
-#: gradient at w0 is (-0.05, 0) exactly -- w0 is not critical; wt = (-0.175, 0) is a saddle of J_1.5, worse than w0
-PER_SAMPLE = """import numpy as np
-
-_a = np.random.default_rng(0).normal(size=100)
-_a = _a - _a.mean()
-
-
-def J(w, s):
-    return (w[0] - _a) ** 2 / 2 + 0.35 * (s - 1) * w[0] + w[1] ** 4 / 4 - w[1] ** 2 / 2
-
-
-w0 = {w0}
-wt = [-0.175, 0.0]
-"""
-
-
-def test_per_sample_non_critical_family_is_outside_never_a_counterexample(tmp_path, x64):
+def test_per_sample_non_critical_family_is_outside_never_a_counterexample(x64):
     """The per-sample family's objective is the mean of its K values: its gradient at w0 is computed
     (-0.05 in w1), so w0 is not critical -- reported outside the hypotheses, never a counterexample
     (before, a z-test that failed to reject made it "verified"). The same family at the critical
     w0 = (0, 1) is a counterexample to Theorem 1 as printed (the saddle at w2 = 0)."""
-    f = tmp_path / "per_sample.py"
-    f.write_text(PER_SAMPLE.format(w0="[-0.05, 1.0]"))
-    r = theorem1(load_family(str(f)), 1.0, 1.5)
+    fam = load_family(path("per_sample"))
+    r = theorem1(fam, 1.0, 1.5)
     j = contract_json(r)
     crit = next(h for h in r["hypotheses"] if h["name"] == "w0_critical")
     assert crit["verified"] is False and "-0.05" in crit["detail"]
     assert r["conclusion"] == "fails" and j["inside_hypotheses"] is False and j["counterexample"] is False
     assert "no counterexample" in r["evidence"] and "a counterexample to Theorem 1 as printed" not in r["evidence"]
     # the objective's gradient, computed independently: d/dw1 mean_i J_i = w1 - mean(a) = -0.05 at w0
-    ns = {}
-    exec(PER_SAMPLE.format(w0="[-0.05, 1.0]"), ns)
-    g = jax.grad(lambda w: jnp.mean(ns["J"](w, 1.0)))(jnp.array([-0.05, 1.0]))
+    g = jax.grad(lambda w: jnp.mean(fam.J(w, 1.0)))(jnp.array([-0.05, 1.0]))
     assert np.allclose(g, [-0.05, 0.0], atol=1e-15)
     # at the critical point (0, 1): inside every hypothesis, and the saddle refutes the conclusion
-    f2 = tmp_path / "per_sample_critical.py"
-    f2.write_text(PER_SAMPLE.format(w0="[0.0, 1.0]"))
-    r2 = theorem1(load_family(str(f2)), 1.0, 1.5)
+    r2 = theorem1(family(fam.J, [0.0, 1.0], wt=[-0.175, 0.0]), 1.0, 1.5)
     assert contract_json(r2)["inside_hypotheses"] is True and contract_json(r2)["counterexample"] is True
     dj = r2["wt"][0]["J_st_wt_minus_J_st_w0"]            # independent: 0.25 - 0.175^2/2 + (0 - 0) at w1* = -0.175
     assert dj["lo"] <= 0.25 - 0.175 ** 2 / 2 <= dj["hi"]

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The commands of docs/lab.md, in order (run in an empty folder; writes chip.npz, law.npz, we.npz and *_gift/ figures).
+# The commands of docs/lab.md, in order (run in an empty folder; writes chip.npz, law.npz, we.npz and each command's figures in *_gift/COMMAND/).
 set -eux
 gift simulate --arch 8-16-8-4 --inputs 160 --shots 48 --effect awgn=0.1 --effect shot=0.03 --taps --times --seed 2 --out chip.npz
 gift compare chip.npz

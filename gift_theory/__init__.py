@@ -1,6 +1,6 @@
 """gift_theory: the core of gift.
 
-The paper's ONN model M_s with the physical effects of CONTRACTS §2, Monte-Carlo
+The paper's ONN model M_s with the physical effects of reference §2, Monte-Carlo
 objectives with standard errors, in-silico training and data sets. Subpackages hold the
 larger parts: :mod:`gift_theory.effects`, :mod:`gift_theory.data`,
 :mod:`gift_theory.training`.

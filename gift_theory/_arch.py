@@ -1,6 +1,6 @@
 """The architecture of an ONN: widths, activation and where additive noise enters.
 
-Paper, Section "Modeling ONNs" (eqs. def:matrices-Ai, def:matrix-AL); CONTRACTS §1.
+Paper, Section "Modeling ONNs" (eqs. def:matrices-Ai, def:matrix-AL); reference §1.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Benchmarks: estimator speed and efficiency against the machine's own matmul rate (the work of
-``gift bench``, CONTRACTS §4; :func:`run_benchmarks`).
+``gift bench``, reference §4; :func:`run_benchmarks`).
 
 * ``matmul_gflops``: numpy float32 2048 x 2048 matmul, best of 10, in this run (on a shared
   machine both this rate and the timings below are best-of, so that a busy neighbour lowers
@@ -65,7 +65,7 @@ _LOG = [None]
 
 
 def run_benchmarks(*, repeats: int = 5, eff_K1: int = 256, ref_K2: int = 64, quick: bool = False, log=None) -> dict:
-    """Every benchmark of the module docstring; the CONTRACTS §4 ``gift bench`` object.
+    """Every benchmark of the module docstring; the reference §4 ``gift bench`` object.
 
     Parameters
     ----------

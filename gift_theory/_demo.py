@@ -9,7 +9,9 @@ arguments, calls them and prints):
   line (predicted against true) and :func:`plot_finetune` draws it with every method's loss;
 * the theory part -- some of the paper's claims as computed verdicts -- belongs to the
   checks (``proofs_checks._cli.demo_part``, found through the ``check`` command's registration);
-* :func:`lab_part` -- a chip with a hidden physical effect, measured with taps, diagnosed.
+* :func:`lab_part` -- a chip with a hidden physical effect, measured with taps, diagnosed;
+* :func:`calibrate_part` -- the trained network on a chip with fixed per-device errors, calibrated
+  (``calibrate``), its test accuracy on the chip before and after, and on an ideal chip.
 
 Progress: every function takes ``progress(i, n, label)``, called before item ``i`` (0-based)
 of ``n`` starts; None is silent.
@@ -91,7 +93,7 @@ def finetune_part(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.05,
 
     Parameters
     ----------
-    dataset, arch, s0, st, true_effects : the setting (CONTRACTS §4 finetune)
+    dataset, arch, s0, st, true_effects : the setting (reference §4 finetune)
     methods : names of :data:`gift_theory.finetune.METHODS` (default all)
     seed, budget : the chip's seed and its budget in chip evaluations per method
     data_folder : the MNIST IDX folder for ``dataset="mnist"``
@@ -100,7 +102,7 @@ def finetune_part(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.05,
 
     Returns
     -------
-    dict ``rows`` (one per method, CONTRACTS §4 keys plus ``oracle_fraction``, ``why`` and a
+    dict ``rows`` (one per method, reference §4 keys plus ``oracle_fraction``, ``why`` and a
     JSON-ready ``info``) and ``curve`` (arrays, or None when no line-search method ran).
     """
     from .finetune import METHODS, finetune_on, true_physics
@@ -225,11 +227,15 @@ def plot_finetune(rows, curve, *, s0: float, st: float, ax=None):
     before = rows[0]["loss_before"]
     after = [r["loss_after"] for r in rows]
     colours = ["C2" if v < before - 1e-9 else ("C3" if v > before + 1e-9 else "0.6") for v in after]
+    from matplotlib.patches import Patch
+
     ax2.barh(names, after, color=colours)
-    ax2.axvline(before, color="k", lw=1, label="w0 (no fine-tuning)")
+    line = ax2.axvline(before, color="k", lw=1, label="w0 (no fine-tuning)")
     ax2.set_xlabel("true loss after fine-tuning (train)")
     ax2.invert_yaxis()
-    ax2.legend(fontsize=7)
+    # what each bar's colour says (the bars carry no label of their own)
+    ax2.legend(handles=[line, Patch(color="C2", label="lower loss than w0"), Patch(color="C3", label="higher loss than w0"),
+                        Patch(color="0.6", label="w0 returned (the same loss)")], fontsize=7)
     lo, hi = min(after), max(after)
     ax2.set_xlim(max(0.0, lo - 0.1 * (hi - lo)), hi + 0.1 * (hi - lo) + 1e-12)
     if ax is None:
@@ -277,7 +283,7 @@ def lab_part(hidden, seed: int = 0, *, save_to: str | None = None, progress=None
     Parameters
     ----------
     hidden : an Effect (:func:`parse_hidden`); seed : names the chip and its shots
-    save_to : also write the measurement there (.npz, CONTRACTS §3)
+    save_to : also write the measurement there (.npz, reference §3)
     progress : ``progress(i, n, label)`` before each of the two steps (measure, diagnose)
 
     Returns
@@ -304,3 +310,38 @@ def lab_part(hidden, seed: int = 0, *, save_to: str | None = None, progress=None
             "missing_effect_detected": out["missing_effect_detected"], "ranking": out["ranking"][:3],
             "explained": out["explained"], "verdict": out["verdict"], "failing_layers": out["failing_layers"],
             "mechanisms": out["mechanisms"][:2], "seconds": time.perf_counter() - t0}
+
+
+#: the calibration part's chip: fixed per-device errors (docs/reference.md §2) on top of the noise
+CALIBRATION_CHIP = ("layer_gain=0.7", "bias_offset=0.3", "weight_error=0.03")
+
+
+def calibrate_part(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.05, *, faults=CALIBRATION_CHIP,
+                   seed: int = 0, budget: float = 20, data_folder: str | None = None) -> dict:
+    """The network trained at ``s0`` on a simulated chip with noise s0 and the fixed per-device
+    errors ``faults`` (with taps), calibrated with ``budget`` chip evaluations.
+
+    Returns
+    -------
+    dict: ``chip`` (its physics), ``accuracy_before`` / ``accuracy_after`` (test set, the referee:
+    the simulator's truth), ``accuracy_ideal`` (w0 on a chip with the noise alone), their standard
+    errors, ``recovered`` (the share of the lost accuracy won back), ``evaluations``, ``accepted``,
+    ``identified`` (per layer, what calibrate read), ``seconds``.
+    """
+    from .effects import Physics, awgn
+    from .finetune import finetune_on, referee
+
+    t0 = time.perf_counter()
+    physics = Physics.parse(list(faults), s=s0, where="calibration chip")
+    ds, arch_, w0 = load_demo_setting(dataset, arch, s0, seed, data_folder)
+    r = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method="calibrate", seed=seed, budget=budget)
+    ideal = referee(w0, ds.x_test, ds.y_test, ds.labels_test, awgn(s0), arch_)
+    before, after = r["test_accuracy_before"], r["test_accuracy_after"]
+    lost = ideal["accuracy"] - before
+    info = r["info"]
+    return {"chip": physics.describe(), "accuracy_before": before, "accuracy_after": after,
+            "accuracy_ideal": ideal["accuracy"], "accuracy_se": info["referee"]["test_accuracy_change_se"],
+            "recovered": (after - before) / lost if lost > 0 else float("nan"),
+            "evaluations": r["in_situ_evaluations"], "accepted": bool(info.get("accepted")),
+            "reason": info.get("reason", ""), "identified": _plain(info.get("identified", {})),
+            "seconds": time.perf_counter() - t0}

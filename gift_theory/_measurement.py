@@ -1,9 +1,9 @@
-"""One measurement campaign (CONTRACTS §3): what a chip returns and what a measurement file holds.
+"""One measurement campaign (reference §3): what a chip returns and what a measurement file holds.
 
 The one type for both: :meth:`gift_theory.chips.Chip.measure` returns it (``params`` are the
 weights the chip was programmed with), :mod:`gift_theory.lab` reads it from and writes it to
 ``.npz``, long or wide ``.csv`` and netCDF / HDF5 files; :meth:`Measurement.to_xarray` and
-:meth:`Measurement.from_xarray` convert it to and from an ``xarray.Dataset`` (CONTRACTS §3).
+:meth:`Measurement.from_xarray` convert it to and from an ``xarray.Dataset`` (reference §3).
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ class Measurement:
             t=None if self.t is None else self.t[idx])
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The CONTRACTS §3 dictionary of this measurement."""
+        """The reference §3 dictionary of this measurement."""
         out = {"x": self.x, "y": self.y, "activation": np.array(self.activation)}
         for l, (W, b) in enumerate(self.params, start=1):
             out[f"W{l}"] = np.asarray(W)
@@ -84,7 +84,7 @@ class Measurement:
         return out
 
     def to_xarray(self):
-        """This campaign as an ``xarray.Dataset`` with the CONTRACTS §3 names.
+        """This campaign as an ``xarray.Dataset`` with the reference §3 names.
 
         Variables ``x (input, d0)``, ``y (input, shot, d{L})``, taps ``a{l} (input, shot, d{l})``,
         ``t (input, shot)``, weights ``W{l} (d{l}, d{l-1})`` and ``b{l} (d{l})``; the attribute

@@ -1,6 +1,6 @@
 """The ONN model M_s and its generalisation with physical effects.
 
-Paper eqs. def:matrices-Ai and def:matrix-AL; CONTRACTS §1-2, §2b::
+Paper eqs. def:matrices-Ai and def:matrix-AL; reference §1-2, §2b::
 
     a_0 = x + n_a0
     u_l = W_l^eff a_{l-1}

@@ -109,7 +109,7 @@ def flatten(params: Params):
 
 
 def params_to_arrays(params: Params) -> dict[str, np.ndarray]:
-    """``{"W1": ..., "b1": ..., ...}`` as in measurement and weight files (CONTRACTS §3)."""
+    """``{"W1": ..., "b1": ..., ...}`` as in measurement and weight files (reference §3)."""
     out = {}
     for l, (W, b) in enumerate(params, start=1):
         out[f"W{l}"] = np.asarray(W)

@@ -4,7 +4,7 @@ linear net).
 
 Weights w = (W_1, ..., W_L), W_l of shape (d_l, d_{l-1}), no biases, product
 W = W_L ... W_1. Data: y = V x with E[x x^T] = Sigma (x zero-mean), V of shape (d_L, d_0).
-Two noise placements (CONTRACTS §1 with identity activation):
+Two noise placements (reference §1 with identity activation):
 
 * ``"input"`` -- the paper's example: a_0 = x + n_a0 only, so
   J_s(w) = tr((V - W) Sigma (V - W)^T) + s^2 ||W||_F^2.

@@ -42,6 +42,7 @@ FIGURES = (
     "gain_vs_baseline",
     "ceiling",
     "undertrained",
+    "extended",
 )
 
 
@@ -246,7 +247,7 @@ def add_arguments(parser) -> None:
                         help="Dask scheduler address (tcp://host:8786) to spread the sweeps over a cluster; "
                              "'synchronous' runs in this process; default: a local pool of --workers processes")
     parser.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
-    parser.add_argument("--mnist-folder", default=None, metavar="DIR",
+    parser.add_argument("--data-folder", "--mnist-folder", dest="mnist_folder", default=None, metavar="DIR",
                         help="folder with the MNIST IDX files: fine-tune on full MNIST instead of mnist5k")
     parser.add_argument("--data-dir", default=None, metavar="DIR", help="where the sweep data go")
     parser.add_argument("--figure-dir", default=None, metavar="DIR", help="where the PNGs go")
@@ -257,13 +258,13 @@ def add_arguments(parser) -> None:
 
 
 def check_arguments(args) -> None:
-    """Bad input -> one-line GiftInputError (CONTRACTS §4)."""
+    """Bad input -> one-line GiftInputError (reference §4)."""
     from gift_theory import GiftInputError
 
     if args.workers < 1:
         raise GiftInputError(f"--workers {args.workers}: must be at least 1")
     if args.mnist_folder is not None and not os.path.isdir(args.mnist_folder):
-        raise GiftInputError(f"--mnist-folder {args.mnist_folder}: no such folder")
+        raise GiftInputError(f"--data-folder {args.mnist_folder}: no such folder")
     for flag, d in (("--data-dir", args.data_dir), ("--figure-dir", args.figure_dir)):
         if d is not None and os.path.exists(d) and not os.path.isdir(d):
             raise GiftInputError(f"{flag} {d}: exists and is not a folder")

@@ -1,4 +1,4 @@
-"""``gift figures`` (registered by paper_figures) ``[--scale quick|paper] [--only NAME] [--scheduler ADDRESS] [--mnist-folder DIR]``.
+"""``gift figures`` (registered by paper_figures) ``[--scale quick|paper] [--only NAME] [--scheduler ADDRESS] [--data-folder DIR]``.
 
 Runs the sweeps behind the paper's figures (resumable: a killed run continues where it
 stopped) and draws every figure from the saved data. The JSON object: ``scale``, ``seconds``,

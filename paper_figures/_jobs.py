@@ -3,7 +3,7 @@
 Each job is a module-level function (picklable, importable by Dask workers) that calls the
 library's public API; nothing here re-implements the science.
 
-* :func:`gift_job` -- one fine-tuning run, ``gift_theory.finetune.run_finetune`` (CONTRACTS §4
+* :func:`gift_job` -- one fine-tuning run, ``gift_theory.finetune.run_finetune`` (reference §4
   finetune keys), for GIFT or any rival method, with the true noise of the simulated chip
   given in the paper's parametrisation (:func:`true_noise`).
 * :func:`estimator_job` -- one estimate of d/ds grad J by ``gift_theory.estimators.d_ds_grad``
@@ -29,7 +29,7 @@ def needs(what: str, why: str) -> RuntimeError:
 
 
 def true_noise(noise_kind: str, st: float) -> tuple[float, tuple[str, ...]]:
-    """Map the paper's true-noise law with parameter ``st`` onto CONTRACTS §2 effects.
+    """Map the paper's true-noise law with parameter ``st`` onto reference §2 effects.
 
     The paper (Section "GIFT's performance when the noise is not AWGN") uses
     a) U(-st, st), b) multiplicative Gaussian with standard deviation st, c) Laplace(0, st).
@@ -110,14 +110,14 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     s0 : training noise level; st : true noise parameter in the paper's parametrisation
     seed : names the in-silico training run and the fine-tuning randomness
     noise_kind : see :func:`true_noise`
-    method : a CONTRACTS §4 finetune method
+    method : a reference §4 finetune method, or a name of :data:`VARIANTS` (as ``variant``)
     options : extra keyword arguments for ``run_finetune`` (K1, K2, eta, mnist folder, ...)
     train_epochs : train w0 for this many epochs instead of the default recipe's
     variant : a name of :data:`VARIANTS` (replaces ``method`` and adds its options)
 
     Returns
     -------
-    dict : the numeric CONTRACTS §4 keys (loss/accuracy before/after on train and test,
+    dict : the numeric reference §4 keys (loss/accuracy before/after on train and test,
     in_situ_evaluations, seconds), ``s_true`` (the chip's awgn level after the mapping), the
     referee's standard errors (``loss_before_se``, ..., ``loss_change_se``), whether the line
     search's confirmation ``accepted``, for line-search methods Theorem 1's prediction
@@ -130,6 +130,8 @@ def gift_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_kind
     s_true, effects = true_noise(noise_kind, st)
     run_finetune = _run_finetune()
     opts = dict(options or {})
+    if variant is None and method in VARIANTS:  # e.g. gift-noconfirm in a sweep's method dim
+        variant = method
     if variant is not None:
         if variant not in VARIANTS:
             raise ValueError(f"variant {variant!r} unknown; known: {', '.join(VARIANTS)}")
@@ -184,7 +186,7 @@ def ceiling_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_k
     lowest training loss and the one with the highest training accuracy, scored on training
     and test data, and w0's numbers on the same draws.
 
-    ``options`` are the fine-tuning sweeps' (only ``referee_K2``, ``K1``, ``K2`` and ``folder``
+    ``options`` are the fine-tuning sweeps' (only ``referee_K2``, ``K1``, ``K2`` and ``data_folder``
     matter here: the same w0, the same problem key, so the same memoized directions);
     ``train_epochs`` as in :func:`gift_job`.
 
@@ -201,7 +203,7 @@ def ceiling_job(net: str, s0: float, st: float, seed: int, *, arch: str, noise_k
 
     run_ceiling = _run_ceiling()
     s_true, effects = true_noise(noise_kind, st)
-    opts = {k: v for k, v in (options or {}).items() if k in ("referee_K2", "K1", "K2")}
+    opts = {k: v for k, v in (options or {}).items() if k in ("referee_K2", "K1", "K2", "data_folder")}
     if _memo.folder() is None:
         from gift_theory.training import cache_dir
 
@@ -294,14 +296,15 @@ def unavailable(job: str, fixed: dict | None = None) -> str | None:
             from gift_theory.finetune import run_finetune  # noqa: F401
         except ImportError:
             return "needs gift_theory.finetune.run_finetune (the GIFT issue's job function)"
-        if "folder" in (fixed or {}).get("options", {}):
+        if "data_folder" in (fixed or {}).get("options", {}):
             import inspect
 
-            from gift_theory.finetune import _run
+            from gift_theory.finetune import run_ceiling, run_finetune
 
-            if "folder" not in inspect.signature(_run.load_setting).parameters:
-                return ("needs run_finetune(folder=...) for an MNIST IDX folder (its load_setting takes no "
-                        "folder); use mnist5k (the default of --scale paper) meanwhile")
+            fn = run_ceiling if job.endswith(":ceiling_job") else run_finetune
+            if "data_folder" not in inspect.signature(fn).parameters:
+                return (f"needs {fn.__name__}(data_folder=...) for an MNIST IDX folder; use mnist5k (the default "
+                        f"of --scale paper) meanwhile")
     if job.endswith(":estimator_job"):
         try:
             from gift_theory.estimators import d_ds_grad  # noqa: F401

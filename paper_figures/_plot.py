@@ -21,7 +21,7 @@ def improvements(ds: xr.Dataset, split: str = "train") -> xr.Dataset:
 
     Parameters
     ----------
-    ds : a fine-tuning sweep (CONTRACTS §4 keys as data variables)
+    ds : a fine-tuning sweep (reference §4 keys as data variables)
     split : "train" (the in-situ Eval on training data) or "test"
 
     Returns

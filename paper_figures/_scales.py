@@ -4,8 +4,9 @@
   64-32-32-10 net, 2 seeds, s0, st in {0.05, 0.1, 0.2} (under-estimation s0 < st, over-
   estimation s0 > st and s0 = st): minutes on 2 cores.
 * ``paper`` -- the paper's 784-500-250-250-100-50-10 and 784-500-100-100-10 on mnist5k (or full
-  MNIST with an IDX folder), 10 seeds per s0 as in the paper, s0, st in {0.02, 0.05, 0.1,
-  0.15, 0.2}.
+  MNIST with an IDX folder), 10 seeds per s0 as in the paper, our grid s0, st in {0.02, 0.05,
+  0.1, 0.15, 0.2} (the paper names no noise values), extended on the deeper net to st up to
+  0.4 (issue 25) and to s0 = 0.01, st up to 0.8 (issue 47, 5 seeds).
 * ``paper-subset`` -- the paper's nets on mnist5k with 3 seeds, s0, st in {0.05, 0.1, 0.2};
   the violated-noise laws and the rivals (identify-retrain included) at the two misspecified
   pairs s0 = 0.1, st in {0.05, 0.2}: what this 2-core machine can run in hours.
@@ -77,6 +78,12 @@ class Scale:
     under_seeds: tuple = ()
     #: (s0, st) cells run first by ``--cells key`` (the most informative: where the baseline is lowest)
     key_cells: tuple = ()
+    # issue 47: our grid extended where relative gains inflate (smaller s0, larger st): the methods
+    # of ``extended`` (finetune methods or names of _jobs.VARIANTS) and ``ceiling_extended``
+    ext_methods: tuple = ()
+    ext_s0: tuple = ()
+    ext_st: tuple = ()
+    ext_seeds: tuple = ()
 
 
 SCALES = {
@@ -96,10 +103,13 @@ SCALES = {
         est_arch="784-500-250-250-100-50-10", est_K1=(64, 256, 1024, 4096), est_K2=(2, 8, 32), est_reps=5,
         regime_s0=(0.02, 0.05, 0.1, 0.2), regime_st=(0.25, 0.3, 0.4),
         regime_rival_methods=RIVALS, regime_rival_s0=(0.02,), regime_rival_seeds=(0, 1, 2),
-        regime_rival_st=(0.2, 0.25, 0.3, 0.4),  # 0.2: the 28 % claim's best cell on the paper's grid
+        regime_rival_st=(0.2, 0.25, 0.3, 0.4),  # 0.2: GIFT's best cell on our grid (s0, st <= 0.2)
         variants=VARIANT_NAMES, variant_s0=(0.02, 0.1), variant_st=(0.2, 0.3), variant_seeds=tuple(range(10)),
         under_epochs=(5, 30), under_s0=(0.02, 0.1), under_st=(0.1, 0.2), under_seeds=tuple(range(5)),
-        key_cells=((0.02, 0.2), (0.02, 0.25), (0.02, 0.3), (0.02, 0.4))),
+        key_cells=((0.02, 0.2), (0.02, 0.25), (0.02, 0.3), (0.02, 0.4)),
+        # identify-retrain last: it is most of the job time (~10 min a point)
+        ext_methods=("gift", "gift-noconfirm", "pathwise", "retrain", "identify-retrain"), ext_s0=(0.01, 0.02),
+        ext_st=(0.5, 0.6, 0.8), ext_seeds=tuple(range(5))),
     # the paper's nets and data at 3 seeds, the violated laws and the rivals at two misspecified
     # pairs (under- and over-estimation of the noise, one in-silico training per seed)
     "paper-subset": Scale(
@@ -122,7 +132,8 @@ SCALES = {
         regime_rival_seeds=(0,), variants=("gift-noconfirm", "printed-w0-eta0.1", "retrain", "retrain-s0"),
         variant_s0=(0.1,), variant_st=(0.2,), variant_seeds=(0, 1),
         under_epochs=(2, 30), under_s0=(0.1,), under_st=(0.2,), under_seeds=(0, 1),
-        key_cells=((0.1, 0.2),)),
+        key_cells=((0.1, 0.2),),
+        ext_methods=("gift", "gift-noconfirm"), ext_s0=(0.1,), ext_st=(0.35,), ext_seeds=(0,)),
 }
 
 
@@ -137,7 +148,7 @@ def _gift_fixed(scale: Scale, mnist_folder: str | None, options: dict | None) ->
     dataset = scale.dataset
     if mnist_folder:
         dataset = "mnist"
-        opts["folder"] = mnist_folder
+        opts["data_folder"] = mnist_folder  # run_finetune's name for the IDX folder
     return {"dataset": dataset, "options": opts}
 
 
@@ -154,13 +165,18 @@ def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict
 
     Issue 25 (when the scale defines them): ``gift_regime`` (GIFT on the deeper net at the
     extended st where its baseline collapses, dims s0, st, seed); ``rivals_regime`` (the
-    rivals on the deeper net there, and at st = 0.2 where the paper's grid ends); ``ceiling_deep`` / ``ceiling_shallow`` (the referee's best
+    rivals on the deeper net there, and at st = 0.2 where our grid ends); ``ceiling_deep`` / ``ceiling_shallow`` (the referee's best
     along the GIFT line, pathwise and printed direction, at every point of the GIFT grid and
     the extended st); ``variants`` (gift without confirmation or with a 5x budget,
     gift-printed with and without w0 at eta in {0.05, 0.1, 0.3, 1} % of |w0|, the retrain
     oracle and its control at s0; dims variant, s0, st, seed); ``undertrained`` and
     ``undertrained_ceiling`` (gift and the gradient line search, and their lines' ceilings
     with the cosine of the two directions, for w0 trained ``train_epochs``).
+
+    Issue 47: ``extended`` (the deeper net where relative gains inflate, s0 in {0.01, 0.02} x
+    st in {0.5, 0.6, 0.8}: gift, gift without confirmation, Algorithm 1 with the pathwise
+    direction, the retrain oracle and identify-retrain; dims method, s0, st, seed) and
+    ``ceiling_extended`` (the ceiling of GIFT's line there, pathwise direction only).
     """
     scale = get_scale(scale) if isinstance(scale, str) else scale
     fixed = _gift_fixed(scale, mnist_folder, options)
@@ -195,6 +211,13 @@ def sweeps(scale: Scale | str, *, mnist_folder: str | None = None, options: dict
     if scale.variants:
         out["variants"] = Sweep("variants", {"variant": scale.variants, "s0": scale.variant_s0, "st": scale.variant_st,
                                              "seed": scale.variant_seeds}, job, deep)
+    if scale.ext_methods:
+        # methods first in the dims: a single worker runs them in this order (identify-retrain last)
+        out["extended"] = Sweep("extended", {"method": scale.ext_methods, "s0": scale.ext_s0, "st": scale.ext_st,
+                                             "seed": scale.ext_seeds}, job, deep)
+        out["ceiling_extended"] = Sweep("ceiling_extended", {"s0": scale.ext_s0, "st": scale.ext_st,
+                                                             "seed": scale.ext_seeds}, ceil,
+                                        dict(deep, kinds=("pathwise",)))
     if scale.under_epochs:
         out["undertrained"] = Sweep(
             "undertrained", {"method": scale.under_methods, "train_epochs": scale.under_epochs, "s0": scale.under_s0,

@@ -2,7 +2,12 @@
 
 Claims (paper Sections "Simulation study on GIFT" and abstract):
 
-* ``accuracy_gain_up_to_28pct`` -- "GIFT achieves up to 28% relative accuracy improvement".
+* ``accuracy_gain_up_to_28pct`` -- "GIFT achieves up to 28% relative accuracy improvement",
+  judged over every cell of GIFT on the deeper net (our grid ``gift_awgn_deep``, its st to 0.4
+  ``gift_regime``, and ``extended``: s0 = 0.01, st to 0.8) under four readings -- the best cell's
+  mean over seeds and the best single run, each relative (%) and absolute (accuracy points);
+  ``readings`` holds them for GIFT and the methods beside it, ``holds_under`` / ``fails_under``
+  name the readings where 28 is reached and where not (:func:`readings_table` prints them).
 * ``deeper_benefits_more`` -- the shallower net's improvements are "generally lower".
 * ``robust_to_non_awgn`` -- meaningful gains under Laplace / multiplicative / uniform true noise.
 * ``test_resembles_train`` -- test-data gains "closely resemble" training-data gains.
@@ -22,7 +27,8 @@ method of ``rivals_regime`` there, ``regime["rivals"]``; at the best cell, ``riv
 every cell of the ceiling sweep (``ceiling_highest``: its best cell, the highest 95 % upper bound
 of any cell, and whether one reaches 28 %: the most a search along GIFT's line could give there).
 
-Every number is computed from the saved netCDF files; the verdicts are rules on those numbers
+Every accuracy claim reports the absolute gain (accuracy points) beside the relative one and the
+best single run beside the mean. Every number is computed from the saved netCDF files; the verdicts are rules on those numbers
 with 95 % Student-t intervals over seeds (or over grid points), stated in ``rule``.
 
 Every claim also carries ``instance``: what the sweeps ran (data, nets, seeds, grid, method)
@@ -39,6 +45,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import xarray as xr
 from scipy import stats
 
 from ._plot import improvements, mean_ci
@@ -133,22 +140,33 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
         raise FileNotFoundError(f"no gift_awgn_deep.nc in {data_dir}: run the GIFT sweeps first")
     imp_d = improvements(deep, "train")
 
-    # 1. up to 28 % relative accuracy gain
+    # 1. up to 28 % relative accuracy gain: judged over every cell of GIFT on the deeper net and
+    # under every reading (mean over seeds or single run; relative or absolute), see _readings
     mean, half = mean_ci(imp_d["acc_pct"])
     flat = mean.stack(cell=("s0", "st"))
     i = int(np.nanargmax(flat.values))
     best = flat.isel(cell=i)
     hbest = half.stack(cell=("s0", "st")).isel(cell=i)
     pmax = float(imp_d["acc_pct"].max())
+    rd = _readings(data_dir, loaded)
+    gift = rd["methods"]["gift"]
+    held = [r for r in READINGS if gift[r]["holds"]]
+    missed = [r for r in READINGS if not gift[r]["holds"]]
+    top = gift["mean_relative"]
+    verdict = ("reproduced" if not missed else "reproduced under some readings" if held else
+               "gains, smaller" if np.isfinite(top["ci95"]) and top["value"] - top["ci95"] > 0 else "not reproduced")
     out["accuracy_gain_up_to_28pct"] = {
         "best_cell_mean_pct": float(best), "best_cell_ci95": float(hbest), "best_cell": {
             "s0": float(best["s0"]), "st": float(best["st"])}, "best_single_run_pct": pmax,
-        "rule": "reproduced if the best cell's mean relative accuracy gain is >= 28 %; 'gains, smaller' if its "
-                "95 % CI lies above 0 but the mean is below 28 %; else 'not reproduced'",
-        "verdict": "reproduced" if float(best) >= 28 else (
-            "gains, smaller" if np.isfinite(float(hbest)) and float(best) - float(hbest) > 0 else "not reproduced"),
-        "summary": f"best mean gain {_fmt(float(best), float(hbest))} % at s0={float(best['s0']):g}, "
-                   f"st={float(best['st']):g} (best single run {pmax:.2f} %); paper: up to 28 %"}
+        "readings": rd, "holds_under": held, "fails_under": missed,
+        "rule": "judged on GIFT (deeper net, training data) over every cell of " + ", ".join(rd["sweeps"]) + " under "
+                "four readings of '28 %': the best cell's mean over seeds or the best single run, each as a "
+                "relative gain (%) and as an absolute one (accuracy points); a reading holds if its value is >= 28. "
+                "'reproduced' if every reading holds, 'reproduced under some readings' if some do; else 'gains, "
+                "smaller' if the best cell's mean relative gain has a 95 % CI above 0, else 'not reproduced'",
+        "verdict": verdict,
+        "summary": _readings_text(rd) + f"; on our grid (s0, st <= 0.2) GIFT's best cell {_fmt(float(best), float(hbest))} "
+                   f"% at s0={float(best['s0']):g}, st={float(best['st']):g}"}
     acc_claim = out["accuracy_gain_up_to_28pct"]
     acc_claim.update(_beside(data_dir, loaded, float(best["s0"]), float(best["st"])))
     acc_claim["rivals"] = _rivals_at(data_dir, loaded, float(best["s0"]), float(best["st"]))
@@ -167,7 +185,7 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                 "baseline_accuracy": float(regime["accuracy_before"].sel(s0=r0, st=r1).mean("seed")),
                 "grid": {"s0": [float(v) for v in regime["s0"].values], "st": [float(v) for v in regime["st"].values]},
                 **_beside(data_dir, loaded, r0, r1), "rivals": _rivals_at(data_dir, loaded, r0, r1)}
-            acc_claim["summary"] += (f"; extended st: best {_fmt(float(rc), acc_claim['regime']['best_cell_ci95'])} % "
+            acc_claim["summary"] += (f"; st 0.25-0.4 (gift_regime): best {_fmt(float(rc), acc_claim['regime']['best_cell_ci95'])} % "
                                      f"at s0={r0:g}, st={r1:g} (baseline "
                                      f"{acc_claim['regime']['baseline_accuracy']:.2f})"
                                      + _beside_text(acc_claim["regime"]) + _rivals_text(acc_claim["regime"]["rivals"]))
@@ -181,10 +199,11 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
     if shallow is not None:
         imp_s = improvements(shallow, "train")
         rows = {}
-        for var in ("acc_pct", "loss_pct"):
+        for var in ("acc_pct", "acc_abs", "loss_pct"):
             d = (imp_d[var] - imp_s[var]).values
             m, h, n = _ci(d)
             rows[var] = {"deep_mean": float(imp_d[var].mean()), "shallow_mean": float(imp_s[var].mean()),
+                         "deep_best_run": float(imp_d[var].max()), "shallow_best_run": float(imp_s[var].max()),
                          "paired_diff_mean": m, "paired_diff_ci95": h, "n": n}
         m, h = rows["acc_pct"]["paired_diff_mean"], rows["acc_pct"]["paired_diff_ci95"]
         ml, hl = rows["loss_pct"]["paired_diff_mean"], rows["loss_pct"]["paired_diff_ci95"]
@@ -196,7 +215,11 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
             "verdict": verdict,
             "summary": f"deep - shallow: accuracy gain {_fmt(m, h)} pp of %, loss gain {_fmt(ml, hl)} pp of % "
                        f"(deep {rows['acc_pct']['deep_mean']:.2f} % vs shallow {rows['acc_pct']['shallow_mean']:.2f} "
-                       f"% accuracy)"}
+                       f"% accuracy; absolute deep - shallow "
+                       f"{_fmt(rows['acc_abs']['paired_diff_mean'], rows['acc_abs']['paired_diff_ci95'])} points; "
+                       f"best run deep {rows['acc_pct']['deep_best_run']:.2f} % / "
+                       f"{rows['acc_abs']['deep_best_run']:+.2f} points, shallow {rows['acc_pct']['shallow_best_run']:.2f}"
+                       f" % / {rows['acc_abs']['shallow_best_run']:+.2f} points)"}
 
     # 3. robustness to non-AWGN true noise
     if viol is not None:
@@ -209,11 +232,12 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
             loss_m = sub["loss_pct"].mean("seed")
             a, ha, _ = _ci(sub["acc_pct"].values)
             lo, hl, _ = _ci(sub["loss_pct"].values)
+            extra, extra_text = _acc_extra(sub)
             per[str(kind)] = {"acc_pct_mean": a, "acc_pct_ci95": ha, "loss_pct_mean": lo, "loss_pct_ci95": hl,
                               "acc_cells_improved": int((acc_m > 0).sum()), "cells": int(acc_m.size),
                               "acc_pct_worst_cell": float(acc_m.min()), "acc_pct_best_cell": float(acc_m.max()),
-                              "loss_pct_worst_cell": float(loss_m.min())}
-            parts.append(f"{kind}: accuracy {_fmt(a, ha)} %, loss {_fmt(lo, hl)} %, "
+                              "loss_pct_worst_cell": float(loss_m.min()), **extra}
+            parts.append(f"{kind}: accuracy {_fmt(a, ha)} %{extra_text}, loss {_fmt(lo, hl)} %, "
                          f"{per[str(kind)]['acc_cells_improved']}/{per[str(kind)]['cells']} cells improve accuracy")
         ok = all(v["loss_pct_worst_cell"] >= 0 and v["acc_pct_mean"] - (v["acc_pct_ci95"] if np.isfinite(
             v["acc_pct_ci95"]) else 0) > 0 for v in per.values())
@@ -229,7 +253,7 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
     # 4. test-data gains resemble training-data gains
     imp_t = improvements(deep, "test")
     rows = {}
-    for var in ("acc_pct", "loss_pct"):
+    for var in ("acc_pct", "acc_abs", "loss_pct"):
         tr, te = imp_d[var].mean("seed").values.ravel(), imp_t[var].mean("seed").values.ravel()
         ok = np.isfinite(tr) & np.isfinite(te)
         r = float(np.corrcoef(tr[ok], te[ok])[0, 1]) if ok.sum() > 2 and np.std(tr[ok]) > 0 and np.std(
@@ -239,7 +263,7 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                      "cell_correlation": r, "test_minus_train_mean": m, "test_minus_train_ci95": h}
     close = {var: abs(v["test_mean"] - v["train_mean"]) <= 0.25 * max(abs(v["train_mean"]), abs(v["test_mean"]))
              + (v["test_minus_train_ci95"] if np.isfinite(v["test_minus_train_ci95"]) else 0.0)
-             for var, v in rows.items()}
+             for var, v in rows.items() if var != "acc_abs"}  # absolute: reported, the rule is unchanged
     out["test_resembles_train"] = {
         **rows, "close": close,
         "rule": "supported if, for accuracy and loss, |test - train| mean gain <= 25 % of the larger of the two plus "
@@ -247,7 +271,9 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
         "verdict": "supported" if all(close.values()) and rows["loss_pct"]["cell_correlation"] > 0.5
         else "not supported",
         "summary": f"accuracy gain train {rows['acc_pct']['train_mean']:.2f} % vs test "
-                   f"{rows['acc_pct']['test_mean']:.2f} % (cell corr {rows['acc_pct']['cell_correlation']:.2f}); "
+                   f"{rows['acc_pct']['test_mean']:.2f} % (cell corr {rows['acc_pct']['cell_correlation']:.2f}; "
+                   f"absolute {rows['acc_abs']['train_mean']:+.2f} vs {rows['acc_abs']['test_mean']:+.2f} points; best "
+                   f"run {float(imp_d['acc_pct'].max()):.2f} % vs {float(imp_t['acc_pct'].max()):.2f} %); "
                    f"loss gain train {rows['loss_pct']['train_mean']:.2f} % vs test "
                    f"{rows['loss_pct']['test_mean']:.2f} % (corr {rows['loss_pct']['cell_correlation']:.2f})"}
 
@@ -258,13 +284,15 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                 for var in ("loss_pct", "acc_pct")}
         lm, lh, n = _ci(vals["loss_pct"])
         am, ah, _ = _ci(vals["acc_pct"])
+        extra, extra_text = _acc_extra(xr.concat([imp_d.sel(s0=a, st=b, drop=True) for a, b in diag], "cell"))
         out["gains_at_s0_eq_st"] = {
-            "loss_pct_mean": lm, "loss_pct_ci95": lh, "acc_pct_mean": am, "acc_pct_ci95": ah, "n": n,
+            "loss_pct_mean": lm, "loss_pct_ci95": lh, "acc_pct_mean": am, "acc_pct_ci95": ah, "n": n, **extra,
             "cells": [float(a) for a, _ in diag],
             "rule": "supported if the mean relative loss gain over the s0 = st points has a 95 % CI above 0",
             "verdict": "supported" if np.isfinite(lh) and lm - lh > 0 else (
                 "inconclusive" if not np.isfinite(lh) or lm + lh > 0 else "contradicted"),
-            "summary": f"on s0 = st ({n} runs): loss gain {_fmt(lm, lh)} %, accuracy gain {_fmt(am, ah)} %"}
+            "summary": f"on s0 = st ({n} runs): loss gain {_fmt(lm, lh)} %, accuracy gain {_fmt(am, ah)} %"
+                       + extra_text}
 
     # 7. (ours) the under-trained w0
     under, under_c = _load(data_dir, "undertrained", loaded), _load(data_dir, "undertrained_ceiling", loaded)
@@ -293,6 +321,154 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                        f"{fo['median_realised_over_predicted']:.2f}, {fo['wrong']} wrong ({fo['sign_wrong']} of the "
                        f"wrong sign); with the curvature term r = {fo['correlation_2nd_order']:.2f}"}
     return out
+
+
+#: the readings of "up to 28 %" the claim is judged under: (what is maximised, which gain)
+READINGS = ("mean_relative", "mean_absolute", "single_relative", "single_absolute")
+READING_NAMES = {"mean_relative": "mean, relative", "mean_absolute": "mean, absolute",
+                 "single_relative": "single run, relative", "single_absolute": "single run, absolute"}
+
+#: method -> the (sweep, selection) that hold its runs on the deeper net; a cell is taken from the first
+#: sweep that has it. gift: our grid (gift_awgn_deep), its extension in st (gift_regime) and in s0 and st
+#: (extended); the others beside it.
+DEEP_SOURCES = {
+    "gift": (("gift_awgn_deep", None), ("gift_regime", None), ("extended", ("method", "gift"))),
+    "gift-noconfirm": (("variants", ("variant", "gift-noconfirm")), ("extended", ("method", "gift-noconfirm"))),
+    "gift-printed": (("rivals_regime", ("method", "gift-printed")),),
+    "pathwise": (("rivals_regime", ("method", "pathwise")), ("extended", ("method", "pathwise"))),
+    "ceiling": (("ceiling_deep", "ceiling"), ("ceiling_extended", "ceiling")),
+    "pat": (("rivals_regime", ("method", "pat")),),
+    "identify-retrain": (("rivals_regime", ("method", "identify-retrain")),
+                         ("extended", ("method", "identify-retrain"))),
+    "retrain": (("variants", ("variant", "retrain")), ("rivals_regime", ("method", "retrain")),
+                ("extended", ("method", "retrain"))),
+}
+METHOD_NAMES = {"gift": "GIFT", "gift-noconfirm": "GIFT without confirmation",
+                "gift-printed": "Algorithm 1 as printed (D^[0])", "pathwise": "Algorithm 1, pathwise direction",
+                "ceiling": "ceiling of GIFT's line", "pat": "physics-aware training (in situ)",
+                "identify-retrain": "identify-retrain (in situ)", "retrain": "retrain oracle (no chip)"}
+
+
+def _select(ds, sel):
+    """The fine-tuning runs of one method in a sweep (dims s0, st, seed), or None."""
+    if ds is None:
+        return None
+    if sel is None:
+        return ds
+    if sel == "ceiling":
+        from .gain_vs_baseline import ceiling_as_finetune
+
+        return ceiling_as_finetune(ds, "pathwise") if "pathwise_accuracy_best" in ds else None
+    dim, val = sel
+    if dim not in ds.dims or val not in [str(v) for v in ds[dim].values]:
+        return None
+    return ds.sel({dim: val}, drop=True)  # .sel(method=...) would be xarray's own keyword
+
+
+def method_cells(data_dir, loaded, method: str, split: str = "train") -> list[dict]:
+    """Every (s0, st) cell with runs of ``method`` on the deeper net: ``sweep``, ``s0``, ``st``,
+    ``baseline`` (mean accuracy of w0), per-seed ``rel`` (%) and ``abs`` (accuracy points)."""
+    out, seen = [], set()
+    for name, sel in DEEP_SOURCES[method]:
+        ds = _select(_load(data_dir, name, loaded), sel)
+        if ds is None:
+            continue
+        imp = improvements(ds, split)
+        p = "" if split == "train" else "test_"
+        for s0 in ds["s0"].values:
+            for st in ds["st"].values:
+                key = (round(float(s0), 12), round(float(st), 12))
+                rel = np.asarray(imp["acc_pct"].sel(s0=s0, st=st).values, float)
+                ok = np.isfinite(rel)
+                if key in seen or not ok.any():
+                    continue
+                seen.add(key)
+                seeds = np.asarray(ds["seed"].values)[ok]
+                out.append({"sweep": name, "s0": key[0], "st": key[1], "seeds": seeds,
+                            "baseline": float(np.nanmean(ds[f"{p}accuracy_before"].sel(s0=s0, st=st).values)),
+                            "rel": rel[ok], "abs": np.asarray(imp["acc_abs"].sel(s0=s0, st=st).values, float)[ok]})
+    return out
+
+
+def readings_of(cells: list[dict]) -> dict | None:
+    """The four readings of a method's cells: the largest cell mean (with its 95 % half-width and
+    upper bound) and the largest single run, relative (%) and absolute (accuracy points); each with
+    its cell, baseline, and ``holds`` (value >= 28)."""
+    if not cells:
+        return None
+    out = {"cells": len(cells), "runs": int(sum(c["rel"].size for c in cells)),
+           "grid": {"s0": sorted({c["s0"] for c in cells}), "st": sorted({c["st"] for c in cells})}}
+    for gain, unit in (("relative", "rel"), ("absolute", "abs")):
+        means = [(_ci(c[unit]), c) for c in cells]
+        (m, h, n), c = max(means, key=lambda t: t[0][0])
+        out[f"mean_{gain}"] = {"value": m, "ci95": h, "n": n, "upper95": m + h if np.isfinite(h) else None,
+                               "cell": {"s0": c["s0"], "st": c["st"]}, "sweep": c["sweep"], "baseline": c["baseline"],
+                               "holds": bool(m >= 28.0)}
+        j, c = max(((int(np.argmax(c[unit])), c) for c in cells), key=lambda t: t[1][unit][t[0]])
+        v = float(c[unit][j])
+        out[f"single_{gain}"] = {"value": v, "cell": {"s0": c["s0"], "st": c["st"]}, "seed": int(c["seeds"][j]),
+                                 "sweep": c["sweep"], "baseline": c["baseline"], "holds": bool(v >= 28.0)}
+    return out
+
+
+def _readings(data_dir, loaded) -> dict:
+    """The 28 % claim's readings for GIFT and every method beside it (None where no sweep has it)."""
+    methods = {m: readings_of(method_cells(data_dir, loaded, m)) for m in DEEP_SOURCES}
+    sweeps = [n for n, _ in DEEP_SOURCES["gift"] if _load(data_dir, n, loaded) is not None]
+    return {"readings": list(READINGS), "sweeps": sweeps, "methods": methods}
+
+
+def _reading_cell(r: dict, unit: str) -> str:
+    h = r.get("ci95")
+    v = (_fmt(r["value"], h) if h is not None else f"{r['value']:.2f}") + f" {unit}"
+    where = f"s0={r['cell']['s0']:g}, st={r['cell']['st']:g}" + (f", seed {r['seed']}" if "seed" in r else "")
+    return f"{v} ({where}; base {r['baseline']:.2f})"
+
+
+def _readings_text(rd: dict) -> str:
+    g = rd["methods"]["gift"]
+    held = [READING_NAMES[r] for r in READINGS if g[r]["holds"]]
+    parts = [f"{READING_NAMES[r]} {_reading_cell(g[r], '%' if r.endswith('relative') else 'points')}"
+             for r in READINGS]
+    text = (f"GIFT on the deeper net over {g['cells']} cells ({g['runs']} runs) of our grid and its extensions "
+            f"(s0 {', '.join(f'{v:g}' for v in g['grid']['s0'])}; st {', '.join(f'{v:g}' for v in g['grid']['st'])}): "
+            + "; ".join(parts) + "; 28 holds under " + (", ".join(held) if held else "none of the four readings"))
+    beside = []
+    for m in ("ceiling", "identify-retrain"):
+        r = rd["methods"].get(m)
+        if r is not None:
+            beside.append(f"{METHOD_NAMES[m]} {r['mean_relative']['value']:.1f} % / {r['mean_absolute']['value']:+.1f} "
+                          f"points (best cell mean), {r['single_relative']['value']:.1f} % / "
+                          f"{r['single_absolute']['value']:+.1f} points (best run)")
+    return text + (" [beside it: " + "; ".join(beside) + "]" if beside else "")
+
+
+def readings_table(claim: dict) -> str:
+    """A markdown table of the 28 % claim's readings: one row per method on the deeper net, the best
+    cell's mean and the best single run, relative (%) and absolute (accuracy points)."""
+    methods = claim["readings"]["methods"]
+    lines = ["| method | cells / runs | best cell mean, relative | best cell mean, absolute | best run, relative | "
+             "best run, absolute |", "|---|---|---|---|---|---|"]
+    for m, r in methods.items():
+        if r is None:
+            continue
+        row = [f"{r[k]['value']:+.2f}" + (f" ± {r[k]['ci95']:.2f}" if np.isfinite(r[k].get("ci95", np.nan)) else "")
+               + (" %" if k.endswith("relative") else " pts") + f" ({r[k]['cell']['s0']:g}, {r[k]['cell']['st']:g}; "
+               f"base {r[k]['baseline']:.2f})" + (" **>= 28**" if r[k]["holds"] else "") for k in READINGS]
+        lines.append(f"| {METHOD_NAMES.get(m, m)} | {r['cells']} / {r['runs']} | " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+def _acc_extra(imp) -> tuple[dict, str]:
+    """Absolute accuracy gain (points, mean and 95 % CI over the runs) and the best single run,
+    relative and absolute, of a set of fine-tuning runs: beside every relative accuracy gain."""
+    m, h, _ = _ci(imp["acc_abs"].values)
+    rel = np.asarray(imp["acc_pct"].values, float)
+    ab = np.asarray(imp["acc_abs"].values, float)
+    best_rel = float(np.nanmax(rel)) if np.isfinite(rel).any() else float("nan")
+    best_abs = float(np.nanmax(ab)) if np.isfinite(ab).any() else float("nan")
+    return ({"acc_abs_mean": m, "acc_abs_ci95": h, "acc_pct_best_run": best_rel, "acc_abs_best_run": best_abs},
+            f" ({_fmt(m, h)} points; best run {best_rel:.2f} %, {best_abs:+.2f} points)")
 
 
 def _cell_gain(ds, s0: float, st: float, split: str = "train"):
@@ -368,30 +544,42 @@ def _rivals_text(rivals: dict, k: int = 3) -> str:
 
 def _ceiling_highest(data_dir, loaded) -> dict | None:
     """The ceiling of the GIFT line (pathwise) over every (s0, st) cell of the deeper net's ceiling
-    sweep: the cell of the highest mean relative accuracy gain (train, where the referee chose the
-    step; and that cell on test), the highest 95 % upper bound of any cell, and whether any cell's
-    bound reaches 28 % (None when some cell has data but no interval, n < 2). The step is chosen on
-    the same training data it is scored on, so the train values lean high: a bound below 28 % is
-    the stronger for it."""
+    sweeps (``ceiling_deep``: our grid and its st up to 0.4; ``ceiling_extended``: s0 in {0.01,
+    0.02}, st up to 0.8): the cell of the highest mean relative accuracy gain (train, where the
+    referee chose the step; and that cell on test), the highest 95 % upper bound of any cell, and
+    whether any cell's bound reaches 28 % (None when some cell has data but no interval, n < 2). The
+    step is chosen on the same training data it is scored on, so the train values lean high: a
+    bound below 28 % is the stronger for it."""
     from .gain_vs_baseline import ceiling_as_finetune
 
-    ceil = _load(data_dir, "ceiling_deep", loaded)
-    if ceil is None or "pathwise_accuracy_best" not in ceil:
+    parts = []
+    for name in ("ceiling_deep", "ceiling_extended"):
+        ceil = _load(data_dir, name, loaded)
+        if ceil is not None and "pathwise_accuracy_best" in ceil:
+            parts.append((ceil, ceiling_as_finetune(ceil, "pathwise")))
+    if not parts:
         return None
-    ft = ceiling_as_finetune(ceil, "pathwise")
-    gain = improvements(ft, "train")["acc_pct"]
-    cells = [(float(s0), float(st)) + g for s0 in ft["s0"].values for st in ft["st"].values
-             if (g := _ci(gain.sel(s0=s0, st=st).values))[2] > 0]
+    cells, by_cell = [], {}
+    for ceil, ft in parts:
+        gain = improvements(ft, "train")["acc_pct"]
+        for s0 in ft["s0"].values:
+            for st in ft["st"].values:
+                key = (float(s0), float(st))
+                g = _ci(gain.sel(s0=s0, st=st).values)
+                if g[2] > 0 and key not in by_cell:
+                    by_cell[key] = (ceil, ft)
+                    cells.append(key + g)
     if not cells:
         return None
     s0, st, m, h, n = max(cells, key=lambda c: c[2])
     bounds = [(c[2] + c[3], c[0], c[1]) for c in cells if np.isfinite(c[3])]
     no_interval = sum(not np.isfinite(c[3]) for c in cells)
     top = max(bounds) if bounds else (float("nan"), None, None)
+    ceil, ft = by_cell[(s0, st)]
     test = _cell_gain(ft, s0, st, "test")
     return {
         "cells": len(cells), "cells_without_interval": no_interval,
-        "grid": {"s0": [float(v) for v in ft["s0"].values], "st": [float(v) for v in ft["st"].values]},
+        "grid": {"s0": sorted({c[0] for c in cells}), "st": sorted({c[1] for c in cells})},
         "best_cell": {"s0": s0, "st": st}, "mean_pct": m, "ci95": h, "n": n,
         "test_pct": None if test is None else test[0], "test_ci95": None if test is None else test[1],
         "baseline_accuracy": float(ceil["accuracy_before"].sel(s0=s0, st=st).mean("seed")),
@@ -460,6 +648,11 @@ def main(argv=None) -> int:
             results[d] = {"error": str(exc)}
     if args.table:
         sys.stdout.write(table(results) + "\n")
+        for d, r in results.items():  # the 28 % claim's readings, one table per folder
+            acc = r.get("accuracy_gain_up_to_28pct")
+            if acc is not None and "readings" in acc:
+                sys.stdout.write(f"\n28 % claim, {d}: verdict {acc['verdict']} (holds under: "
+                                 f"{', '.join(acc['holds_under']) or 'none'})\n\n" + readings_table(acc) + "\n")
     else:
         out = results[args.data_dirs[0]] if len(results) == 1 else results
         sys.stdout.write(json.dumps(out, indent=2, default=float) + "\n")

@@ -1,20 +1,25 @@
-"""Ours: relative accuracy gain against the baseline accuracy, one point per cell and method.
+"""Ours: accuracy gain against the baseline accuracy, one point per (s0, st) cell and method,
+relative (%) and absolute (accuracy points), one column per method family.
 
 Not a paper figure. The paper's "up to 28 % relative accuracy improvement" can only occur where
-the baseline (w0 on the chip) is low: a gain of 28 % needs a baseline below 1 / 1.28 = 0.78.
-Each point is one (s0, st) cell of one method: x the mean baseline accuracy over seeds, y the
-mean relative accuracy gain 100 (A_after - A_before) / A_before with its 95 % Student-t
-interval over seeds; the horizontal line is the paper's 28 %, the dotted curve the largest
-gain possible at each baseline (100 (1 / A - 1)). Left: training data; right: test data.
+the baseline (w0 on the chip) is low: a gain of 28 % needs a baseline below 1 / 1.28 = 0.78, and
+near a chance baseline (0.1) two accuracy points are already 20 % relative. So each gain is shown
+twice: top row relative, 100 (A_after - A_before) / A_before; bottom row absolute, 100 (A_after -
+A_before) accuracy points. x is the mean baseline accuracy over seeds, the marker the mean gain
+over seeds, the thin bar the seeds' range (its top is the best single run). The dashed line is
+28 (% or points), the dotted curve the largest gain possible at each baseline (100 (1/A - 1) and
+100 (1 - A)). Training data (where the claims are judged; the test data are in the heatmaps).
 
-Methods: GIFT on the deeper net (the paper grid and the extended st where the baseline
-collapses), the variants at the key cells (gift without confirmation or with a 5x budget,
-gift-printed with and without w0 at several eta, the retrain oracle and its s0 control), the
-rivals on the deeper net at the extended st; and, when saved, GIFT on the shallower net, the
-shallower net's rivals, and the ceiling of the GIFT line (the referee's best step along the
-pathwise and the printed direction, chosen on training data).
+Columns (deeper net filled, shallower net hollow): GIFT and the ceiling of its line (the
+referee's best step along it); Algorithm 1 as printed (the printed D^[0], the pathwise
+direction, the step eta, with and without w0 among its candidates, and the printed line's
+ceiling); the other in-situ methods (ift, gradient, random, spsa, physics-aware training,
+identify-retrain); retraining in silico without the chip (the oracle at st and its control at
+s0). Cells: our grid (s0, st in {0.02, ..., 0.2}), its extension to st = 0.4 and to s0 = 0.01,
+st = 0.8, wherever a sweep ran the method.
 Data: sweeps ``gift_awgn_deep``, ``gift_regime``, ``variants``, ``rivals_regime``
-(optional: ``gift_awgn_shallow``, ``rivals``, ``ceiling_deep``, ``ceiling_shallow``).
+(optional: ``gift_awgn_shallow``, ``rivals``, ``ceiling_deep``, ``ceiling_shallow``,
+``extended``, ``ceiling_extended``).
 Run: ``python -m paper_figures.gain_vs_baseline --scale paper``.
 """
 
@@ -29,8 +34,31 @@ from ._plot import improvements, mean_ci
 NAME = "gain_vs_baseline"
 LABEL = "ours:gain_vs_baseline"
 SWEEPS = ("gift_awgn_deep", "gift_regime", "variants", "rivals_regime")
-OPTIONAL = ("gift_awgn_shallow", "rivals", "ceiling_deep", "ceiling_shallow")
+OPTIONAL = ("gift_awgn_shallow", "rivals", "ceiling_deep", "ceiling_shallow", "extended", "ceiling_extended")
 PAPER_PCT = 28.0
+
+#: the columns: family title -> methods in it, each (name, colour, marker); GIFT and its ceiling
+#: first and strongest
+FAMILIES = (
+    ("GIFT and the ceiling of its line", (
+        ("gift", "tab:blue", "o"), ("ceiling pathwise", "tab:orange", "s"), ("gift-noconfirm", "tab:cyan", "^"),
+        ("gift-budget100", "tab:purple", "v"))),
+    ("Algorithm 1 as printed", (
+        ("gift-printed", "tab:red", "o"), ("pathwise", "tab:brown", "s"), ("ceiling score_paper", "tab:orange", "D"),
+        *((f"printed-eta{e}", c, "v") for e, c in (("0.05", "#9ecae1"), ("0.1", "#4292c6"), ("0.3", "#08519c"),
+                                                    ("1", "#08306b"))),
+        *((f"printed-w0-eta{e}", c, "^") for e, c in (("0.05", "#a1d99b"), ("0.1", "#41ab5d"), ("0.3", "#006d2c"),
+                                                       ("1", "#00441b"))))),
+    ("other in-situ methods", (
+        ("pat", "tab:green", "o"), ("identify-retrain", "tab:red", "s"), ("ift", "tab:olive", "D"),
+        ("spsa", "tab:purple", "v"), ("gradient", "tab:grey", "^"), ("random", "black", "x"))),
+    ("retraining in silico, no chip", (
+        ("retrain", "tab:pink", "o"), ("retrain-s0", "tab:brown", "s"))),
+)
+LABELS = {"gift": "GIFT", "ceiling pathwise": "ceiling of GIFT's line", "gift-noconfirm": "GIFT without confirmation",
+          "gift-budget100": "GIFT, chip budget 100", "gift-printed": "printed D^[0]",
+          "pathwise": "pathwise direction", "ceiling score_paper": "ceiling of the D^[0] line",
+          "pat": "physics-aware training", "retrain": "retrain at st (oracle)", "retrain-s0": "retrain at s0 (control)"}
 
 
 def ceiling_as_finetune(ds: xr.Dataset, kind: str) -> xr.Dataset:
@@ -46,92 +74,122 @@ def ceiling_as_finetune(ds: xr.Dataset, kind: str) -> xr.Dataset:
 
 
 def cell_points(ds: xr.Dataset, split: str) -> list[dict]:
-    """One record per (s0, st) cell with data: baseline mean, gain mean and its 95 % half-width."""
+    """One record per (s0, st) cell with data: ``baseline`` (mean accuracy of w0), the mean
+    relative gain ``gain_pct`` with its 95 % half-width ``ci95`` and the seeds' range
+    (``pct_min``, ``pct_max``: the best single run), and the same in accuracy points
+    (``gain_abs``, ``abs_ci95``, ``abs_min``, ``abs_max``)."""
     p = "" if split == "train" else "test_"
     imp = improvements(ds, split)
     m, h = mean_ci(imp["acc_pct"])
+    ma, ha = mean_ci(imp["acc_abs"])
+    lo, hi = imp["acc_pct"].min("seed"), imp["acc_pct"].max("seed")
+    alo, ahi = imp["acc_abs"].min("seed"), imp["acc_abs"].max("seed")
     base = ds[f"{p}accuracy_before"].mean("seed")
     out = []
     for s0 in ds["s0"].values:
         for st in ds["st"].values:
             g = float(m.sel(s0=s0, st=st))
             if np.isfinite(g):
-                out.append({"s0": float(s0), "st": float(st), "baseline": float(base.sel(s0=s0, st=st)),
-                            "gain_pct": g, "ci95": float(h.sel(s0=s0, st=st))})
+                at = {"s0": s0, "st": st}
+                out.append({"s0": float(s0), "st": float(st), "baseline": float(base.sel(at)),
+                            "gain_pct": g, "ci95": float(h.sel(at)), "pct_min": float(lo.sel(at)),
+                            "pct_max": float(hi.sel(at)), "gain_abs": float(ma.sel(at)), "abs_ci95": float(ha.sel(at)),
+                            "abs_min": float(alo.sel(at)), "abs_max": float(ahi.sel(at))})
     return out
 
 
-def series(data: dict) -> dict[str, list[tuple[xr.Dataset, str]]]:
-    """label -> fine-tuning datasets (dims s0, st, seed) from every sweep present in ``data``."""
-    out: dict[str, list] = {}
+def series(data: dict) -> dict[tuple[str, str], list[xr.Dataset]]:
+    """(method, net) -> fine-tuning datasets (dims s0, st, seed) from every sweep present in
+    ``data``; the ceilings as ``ceiling pathwise`` / ``ceiling score_paper`` / ``ceiling gradient``."""
+    out: dict = {}
 
-    def add(label, ds):
-        out.setdefault(label, []).append(ds)
+    def add(method, net, ds):
+        out.setdefault((str(method), net), []).append(ds)
 
-    for name, label in (("gift_awgn_deep", "gift (deep)"), ("gift_regime", "gift (deep)"),
-                        ("gift_awgn_shallow", "gift (shallow)")):
+    for name, net in (("gift_awgn_deep", "deep"), ("gift_regime", "deep"), ("gift_awgn_shallow", "shallow")):
         if name in data:
-            add(label, data[name])
+            add("gift", net, data[name])
     if "variants" in data:
         for v in data["variants"]["variant"].values:
-            add(f"{v} (deep)", data["variants"].sel(variant=v, drop=True))
-    for name, net in (("rivals_regime", "deep"), ("rivals", "shallow")):
+            add(v, "deep", data["variants"].sel(variant=v, drop=True))
+    for name, net in (("rivals_regime", "deep"), ("extended", "deep"), ("rivals", "shallow")):
         if name in data:
             for mth in data[name]["method"].values:
-                add(f"{mth} (deep)" if mth == "gift" and net == "deep" else f"{mth} ({net})",
-                    data[name].sel({"method": mth}, drop=True))
-    for name, net in (("ceiling_deep", "deep"), ("ceiling_shallow", "shallow")):
+                add(mth, net, data[name].sel({"method": mth}, drop=True))
+    for name, net in (("ceiling_deep", "deep"), ("ceiling_extended", "deep"), ("ceiling_shallow", "shallow")):
         if name in data:
             for kind in ("pathwise", "score_paper", "gradient"):
                 if f"{kind}_accuracy_best" in data[name]:
-                    add(f"ceiling {kind} ({net})", ceiling_as_finetune(data[name], kind))
+                    add(f"ceiling {kind}", net, ceiling_as_finetune(data[name], kind))
     return out
 
 
-def draw(data: dict, ax=None):
-    """Two panels (training, test data); ``ax``: two axes to draw into. Returns the Figure."""
+def _points(parts: list, split: str) -> list[dict]:
+    """The cells of one (method, net) over its sweeps; a cell in two sweeps (gift at one cell of
+    both grids) is taken once, from the first (the one with more seeds comes first in series)."""
+    seen, pts = set(), []
+    for ds in parts:
+        for r in cell_points(ds, split):
+            if (r["s0"], r["st"]) not in seen:
+                seen.add((r["s0"], r["st"]))
+                pts.append(r)
+    return pts
+
+
+def draw(data: dict, ax=None, split: str = "train"):
+    """Two rows (relative %, absolute points) by one column per method family. ``ax``: a 2 x 4
+    array of axes to draw into. Returns the Figure."""
     if ax is None:
-        fig, axes = plt.subplots(1, 2, figsize=(17, 5.5), sharey=True)  # room for a two-column legend
+        fig, axes = plt.subplots(2, len(FAMILIES), figsize=(5.2 * len(FAMILIES), 11), sharex=True)
     else:
-        axes = list(ax)
-        fig = axes[0].figure
+        axes = np.asarray(ax)
+        fig = axes.flat[0].figure
     ser = series(data)
-    markers = "osD^v<>pPX*hH8d"
-    cmap = plt.get_cmap("tab20")
-    ys = [0.0]
-    for a, split in zip(axes, ("train", "test")):
-        seen_rows = {}
-        for k, (label, parts) in enumerate(ser.items()):
-            pts = []
-            for ds in parts:
-                # a cell present in two sweeps (gift at one cell of both grids) is one point
-                for r in cell_points(ds, split):
-                    key = (label, r["s0"], r["st"])
-                    if key not in seen_rows:
-                        seen_rows[key] = r
-                        pts.append(r)
-            if not pts:
-                continue
-            x = [r["baseline"] for r in pts]
-            y = [r["gain_pct"] for r in pts]
-            e = [r["ci95"] if np.isfinite(r["ci95"]) else 0.0 for r in pts]
-            ys += [v + d for v, d in zip(y, e)] + [v - d for v, d in zip(y, e)]  # the limits hold the intervals
-            ceiling = label.startswith("ceiling")
-            a.errorbar(x, y, yerr=e, fmt=markers[k % len(markers)], ms=4 if not ceiling else 6, capsize=2,
-                       color=cmap(k % 20), mfc="none" if ceiling else None, lw=0.8, label=label)
-        a.axhline(PAPER_PCT, color="crimson", ls="--", lw=1.2, label="paper: 28 %")
-        a.axhline(0, color="grey", lw=0.8)
-        xs = np.linspace(0.1, 1.0, 200)
-        a.plot(xs, 100 * (1 / xs - 1), ":", color="black", lw=0.8, label="largest possible: 100 (1/A - 1)")
-        a.set_xlabel(f"baseline accuracy of w0 on the chip ({'training' if split == 'train' else 'test'} data)")
-        a.set_xlim(0.0, 1.0)
-        a.set_title(f"{'training' if split == 'train' else 'test'} data", fontsize=9)
-    axes[0].set_ylim(max(min(ys) - 5, -100), max(max(ys) + 10, PAPER_PCT + 15))
-    axes[0].set_ylabel("relative accuracy gain, % (mean over seeds, 95 % CI)")
-    n_labels = len(axes[-1].get_legend_handles_labels()[1])
-    axes[-1].legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), ncol=1 if n_labels <= 24 else 2)
-    fig.suptitle("relative accuracy gain against baseline accuracy, one point per (s0, st) cell and method; "
-                 "28 % needs a baseline below 0.78", fontsize=9)
+    xs = np.linspace(0.08, 1.0, 200)
+    for col, (title, methods) in enumerate(FAMILIES):
+        for row, (key, lo_key, hi_key, bound) in enumerate((("gain_pct", "pct_min", "pct_max", 100 * (1 / xs - 1)),
+                                                            ("gain_abs", "abs_min", "abs_max", 100 * (1 - xs)))):
+            a = axes[row][col]
+            ys = [0.0, PAPER_PCT]
+            any_shallow = False
+            for rank, (method, colour, marker) in enumerate(methods):
+                for net in ("deep", "shallow"):
+                    pts = _points(ser.get((method, net), []), split)
+                    if not pts:
+                        continue
+                    x = np.array([r["baseline"] for r in pts])
+                    y = np.array([r[key] for r in pts])
+                    lo = np.array([r[lo_key] for r in pts])
+                    hi = np.array([r[hi_key] for r in pts])
+                    ys += list(lo) + list(hi)
+                    strong = rank < 2 and col == 0  # GIFT and its ceiling: larger, drawn on top
+                    a.vlines(x, lo, hi, color=colour, lw=0.7, alpha=0.6, zorder=2 + strong)
+                    a.plot(x, y, ls="none", marker=marker, ms=(7 if strong else 5) if net == "deep" else 4,
+                           color=colour, mfc=colour if net == "deep" else "none", mew=1.0, zorder=3 + strong,
+                           label=LABELS.get(method, method) if net == "deep" else None)
+                    any_shallow = any_shallow or net == "shallow"
+            top, bottom = max(ys) * 1.08 + 2, min(ys) * 1.08 - 2
+            a.plot(xs, bound, ":", color="black", lw=0.8, label="largest possible")
+            a.axhline(PAPER_PCT, color="crimson", ls="--", lw=1.2, label="28 (% or points)")
+            a.axhline(0, color="grey", lw=0.8)
+            a.set_ylim(bottom, top)
+            a.set_xlim(0.0, 1.0)
+            a.grid(alpha=0.25)
+            if row == 0:
+                a.set_title(title, fontsize=10)
+                if any_shallow:  # one entry for the hollow markers instead of a second entry per method
+                    a.plot([], [], ls="none", marker="o", mfc="none", color="grey", label="hollow: the shallower net")
+                handles, labels = a.get_legend_handles_labels()
+            else:  # the column's legend under it, off the data
+                a.legend(handles, labels, fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2,
+                         frameon=False)
+                a.set_xlabel(f"baseline accuracy of w0 on the chip ({'training' if split == 'train' else 'test'} data)")
+    axes[0][0].set_ylabel("relative accuracy gain, %")
+    axes[1][0].set_ylabel("absolute accuracy gain, accuracy points")
+    fig.suptitle("accuracy gain against w0's baseline accuracy on the chip, one marker per (s0, st) cell and method "
+                 f"({'training' if split == 'train' else 'test'} data): the mean over seeds, the bar the seeds' range "
+                 "(top: the best single run);\ndeeper net filled, shallower hollow; dashed: 28; dotted: the largest "
+                 "gain possible at that baseline", fontsize=10)
     fig.tight_layout()
     return fig
 

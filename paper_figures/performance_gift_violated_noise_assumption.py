@@ -7,7 +7,7 @@ Gaussian noise (middle), and uniformly distributed noise (right). Confidence int
 represent 95%."
 
 The paper's laws U(-st, st), Laplace(0, st) and multiplicative Gaussian with std st are mapped
-onto CONTRACTS §2 exactly (:func:`paper_figures._jobs.true_noise`): uniform with s = st/sqrt(3),
+onto reference §2 exactly (:func:`paper_figures._jobs.true_noise`): uniform with s = st/sqrt(3),
 laplace with s = st*sqrt(2), multiplicative m = st with the additive awgn switched OFF. GIFT
 itself still assumes AWGN at s0. Data: sweep ``gift_violated`` (dims noise_kind, s0, st, seed).
 Run: ``python -m paper_figures.performance_gift_violated_noise_assumption``.

@@ -1,6 +1,6 @@
 """Ours: GIFT and gift-printed beside every rival fine-tuning method, on the same grid.
 
-Not a paper figure. Methods (CONTRACTS §4): gift, gift-printed (Algorithm 1 exactly as
+Not a paper figure. Methods (reference §4): gift, gift-printed (Algorithm 1 exactly as
 printed), pathwise, ift, gradient, random, spsa, pat, identify-retrain and retrain (the oracle
 that knows st and uses no chip). Top: relative accuracy improvement on training data;
 middle: the same on test data; bottom: chip use (in_situ_evaluations, in units of one

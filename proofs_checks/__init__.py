@@ -1,9 +1,9 @@
-"""proofs_checks: every claim of the paper as a computed verdict (CONTRACTS §4-5).
+"""proofs_checks: every claim of the paper as a computed verdict (reference §4-5).
 
-``run_checks()`` runs the registered checks (the twelve of CONTRACTS §5, then the ids appended
+``run_checks()`` runs the registered checks (the twelve of reference §5, then the ids appended
 by issue 12) and returns their records ``{id, claim, verdict, evidence, correction,
 counterexample, hypotheses}``. ``theorem1`` checks Theorem 1 on any J_s family (sympy or
-numeric; CONTRACTS §5b), ``theorem1_check`` on one's own model, data and trained weights.
+numeric; reference §5b), ``theorem1_check`` on one's own model, data and trained weights.
 """
 
 from ._family import Family as Family

@@ -1,6 +1,6 @@
-"""``gift check`` (registered by proofs_checks): every claim of the paper as a computed verdict (CONTRACTS §4-5), and
+"""``gift check`` (registered by proofs_checks): every claim of the paper as a computed verdict (reference §4-5), and
 ``gift check theorem1 --family FILE.py --s0 S0 --st ST``: Theorem 1 on one's own J_s family
-(CONTRACTS §5b).
+(reference §5b).
 
 Prints a table (id, verdict, hypotheses -- computed-true out of those a refutation needs, then the
 counts of assumed hypotheses and of out-of-hypothesis findings --, one-line evidence) or, with
@@ -55,7 +55,7 @@ def add_arguments(parser):
     parser.add_argument("--only", action="append", default=None, metavar="ID",
                         help="run only this check id (repeatable)")
     parser.add_argument("--seed", type=int, default=0, help="PRNG seed (same seed, same numbers)")
-    parser.add_argument("--family", metavar="FILE.py", help="theorem1: the family file (CONTRACTS §5b)")
+    parser.add_argument("--family", metavar="FILE.py", help="theorem1: the family file (reference §5b)")
     parser.add_argument("--s0", type=_positive_number, help="theorem1: the training noise level s0")
     parser.add_argument("--st", type=_positive_number, help="theorem1: the true noise level st")
     parser.add_argument("--confidence", type=_confidence, default=0.95,
@@ -86,7 +86,7 @@ def _run_theorem1(args):
         res = theorem1(fam, args.s0, args.st, confidence=args.confidence)
     except FamilyError as exc:
         raise GiftInputError(f"gift check theorem1 --family {args.family}: {exc}") from None
-    out = contract_json(res)          # exactly the CONTRACTS §5b object
+    out = contract_json(res)          # exactly the reference §5b object
     if not getattr(args, "json", False):
         out["_full"] = res             # the text form shows everything
     return out
@@ -141,7 +141,7 @@ def demo_part(seed: int = 0, ids=("score_function_identity", "linear_example_bou
 
     Returns
     -------
-    dict ``checks`` (CONTRACTS §4 records) and ``total_checks`` (the registry's size).
+    dict ``checks`` (reference §4 records) and ``total_checks`` (the registry's size).
     """
     from proofs_checks import CHECK_IDS, run_checks
 

@@ -1,5 +1,5 @@
 """Theorem 1 (thm:FT-is-needed) on any family J_s(w): the printed and the corrected
-condition, C1, and whether the conclusion holds at (s0, st) -- CONTRACTS §5b.
+condition, C1, and whether the conclusion holds at (s0, st) -- reference §5b.
 
 A family is either
 
@@ -43,7 +43,7 @@ import numpy as np
 from ._interval import float_up, sup_bound, sympy_enclosure
 from ._record import decide, fmt
 
-#: what a family file must define (CONTRACTS §5b)
+#: what a family file must define (reference §5b)
 FAMILY_NAMES = ("s", "w", "J", "w0")
 
 
@@ -63,7 +63,7 @@ class Family(NamedTuple):
 
 
 class FamilyError(ValueError):
-    """A family that breaks the contract of CONTRACTS §5b (one line, names the rule)."""
+    """A family that breaks the contract of reference §5b (one line, names the rule)."""
 
     def __init__(self, message):
         super().__init__(" ".join(str(message).split()))      # one line, whatever the cause's text
@@ -133,7 +133,7 @@ def family(J, w0, *, s=None, w=None, wt=None, name: str = "family", certify=None
 
 
 def load_family(path: str) -> Family:
-    """Load a family file (CONTRACTS §5b); a broken file raises :class:`FamilyError`."""
+    """Load a family file (reference §5b); a broken file raises :class:`FamilyError`."""
     if not os.path.isfile(path):
         raise FamilyError(f"{path}: no such file")
     try:
@@ -374,7 +374,7 @@ def theorem1(fam: Family, s0, st, *, confidence: float = 0.95, rtol: float = 0.0
     ``v_norm2`` / ``sup_abs_d2_dot_v`` as {"value", "lo", "hi"} (lo = hi for exact families),
     ``hypotheses`` (each with ``verified``), ``conclusion`` in {"holds", "fails",
     "inconclusive"}, ``descent`` (is there a small step along v that lowers J_st), and an
-    ``evidence`` sentence. :func:`contract_json` keeps the CONTRACTS §5b keys.
+    ``evidence`` sentence. :func:`contract_json` keeps the reference §5b keys.
     """
     if fam.kind == "sympy":
         return _theorem1_sympy(fam, s0, st, rtol=rtol, max_pieces=max_pieces)
@@ -389,7 +389,7 @@ def inside_hypotheses(res: dict):
 
 
 def contract_json(res: dict) -> dict:
-    """The CONTRACTS §5b object of a :func:`theorem1` result, plus ``inside_hypotheses``
+    """The reference §5b object of a :func:`theorem1` result, plus ``inside_hypotheses``
     (True / False / None, see :func:`inside_hypotheses`) and ``counterexample`` (True only when
     the conclusion fails on an instance inside every hypothesis: a counterexample to Theorem 1
     as printed)."""
@@ -436,10 +436,19 @@ def _theorem1_sympy(fam: Family, s0, st, *, rtol, max_pieces) -> dict:
     zero_g0 = [_sign(x) == 0 for x in g0]
     proven_g0 = [z and _zero_proven(x) for z, x in zip(zero_g0, g0)]
     critical0 = False if not all(zero_g0) else (True if all(proven_g0) else None)      # None: |g| < 1e-300, unproven
+    hint = ""
+    big = max(abs(float(sp.N(x, 30))) for x in g0) if g0 else 0.0
+    if critical0 is False and big < 1e-8:
+        # a decimal w0 (a float solution) is a critical point only to a float's precision: the exact
+        # check needs it exact, and says so rather than a bare "not critical"
+        hint = (f"; |grad J_s0(w0)| = {big:.2g}: zero to a float's precision, not exactly -- a decimal w0 is "
+                f"rounded; give it exactly (sp.Rational, sp.sqrt, or a root from sp.solve(sp.diff(J, w).subs(s, "
+                f"s0), w)) for the exact check, or write the family as a numeric J(w, s), which is checked with "
+                f"rigorous interval enclosures and Krawczyk's test")
     hyps = [_hyp("s_positive", "s0, st in (0, inf)", bool(s0e > 0 and ste > 0), f"s0 = {s0e}, st = {ste}"),
             _hyp("st_ne_s0", "0 < |st - s0| (ass:Laplacian-properties)", _sign(gap) > 0, f"|st - s0| = {gap}"),
             _hyp("w0_critical", "w0 in {grad J_s0 = 0} (ass:Nonempty-minimizer-sets)", critical0,
-                 f"grad J_s0(w0) = {g0 if len(g0) > 1 else g0[0]} (exact, the whole gradient)")]
+                 f"grad J_s0(w0) = {g0 if len(g0) > 1 else g0[0]} (exact, the whole gradient){hint}")]
     # the sup over zeta
     sup = None
     if gap != 0:
@@ -573,7 +582,7 @@ def _evidence(res: dict, extra: str = "") -> str:
 
 
 # --------------------------------------------------------------------------------------
-# numeric families (JAX), with confidence intervals
+# numeric families (JAX): finite means, rigorous interval enclosures
 # --------------------------------------------------------------------------------------
 class _Numeric(NamedTuple):
     per_sample: Any      # w (P,), s -> (K,)

@@ -1,4 +1,4 @@
-"""The verdict record of CONTRACTS §4 and the rules that turn numbers into verdicts.
+"""The verdict record of reference §4 and the rules that turn numbers into verdicts.
 
 Every verdict is computed from a comparison made on the current run: a symbolic
 difference that is or is not zero, or a statistic against a stated critical value.
@@ -11,7 +11,7 @@ from typing import Any, NamedTuple
 
 from scipy import stats
 
-#: the three verdicts of CONTRACTS §4
+#: the three verdicts of reference §4
 VERDICTS = ("holds", "fails", "inconclusive")
 
 #: family-wise error of one `gift check` run: the probability that any numerical test of any
@@ -69,7 +69,7 @@ def z_crit(confidence: float = CONFIDENCE) -> float:
 
 def record(id: str, claim: str, verdict: str, evidence: str, correction: str | None = None,
            counterexample: Any = None, hypotheses: list | None = None) -> dict:
-    """One CONTRACTS §4 record ``{id, claim, verdict, evidence, correction, counterexample}``
+    """One reference §4 record ``{id, claim, verdict, evidence, correction, counterexample}``
     plus ``hypotheses``: the statement's hypotheses, each ``{"name", "statement", "verified",
     "detail", "needed_for_refutation", "assumed"}`` on the check's instance(s) (``verified``
     True/False computed on the instance, or None when undecided or assumed), and the findings an

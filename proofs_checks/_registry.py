@@ -1,4 +1,4 @@
-"""The registry of check ids (CONTRACTS §5, then the ids appended by issues 12 and 27) and the runner."""
+"""The registry of check ids (reference §5, then the ids appended by issues 12 and 27) and the runner."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import jax
 from . import _gift, _kushner, _linear, _sampling, _sampling_proofs, _sgd, _symbolic, _taylor, _theorem1
 from ._record import SHARES
 
-#: id -> check function ``(key=None, precise=False) -> record``; the first twelve are CONTRACTS §5
+#: id -> check function ``(key=None, precise=False) -> record``; the first twelve are reference §5
 CHECKS: dict[str, Callable] = {
     "lemma_gaussian_product_derivative": lambda key=None, precise=False: _symbolic.lemma_gaussian_product_derivative(
         max_L=4 if precise else 3),
@@ -46,7 +46,7 @@ assert len(CHECK_IDS) <= SHARES, "each check owns one share of the family-wise e
 
 
 def run_checks(ids=None, *, precise: bool = False, seed: int = 0, log=None) -> list[dict]:
-    """Run the checks ``ids`` (all by default) in float64; one CONTRACTS §4 record each.
+    """Run the checks ``ids`` (all by default) in float64; one reference §4 record each.
 
     A check that raises is reported as "inconclusive" with the error as evidence (the run
     goes on). ``log`` (default stderr) receives one progress line per check.

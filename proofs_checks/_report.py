@@ -48,7 +48,7 @@ def render_markdown(records, *, seconds: float | None = None, precise: bool = Fa
              "| id | verdict | hypotheses | evidence |", "|---|---|---|---|"]
     for r in records:
         lines.append(f"| `{r['id']}` | **{r['verdict']}** | {hypotheses_status(r)} | "
-                     f"{one_line(r['evidence'], 160).replace('|', '/')} |")
+                     f"{one_line(r['evidence'], 160).replace('|', chr(92) + '|')} |")  # an escaped |, not a cell
     for r in records:
         lines += ["", f"## {r['id']}: {r['verdict']}", "", f"**Claim.** {r['claim']}", "",
                   f"**Evidence.** {r['evidence']}", ""]

@@ -1,7 +1,7 @@
 """Symbolic checks (sympy): lem:chain-derivative, the backpropagation formulas and the
 score-function identity for d/ds grad J.
 
-Each function returns a CONTRACTS §4 record whose verdict is the outcome of a symbolic
+Each function returns a reference §4 record whose verdict is the outcome of a symbolic
 simplification computed on this run.
 """
 

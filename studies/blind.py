@@ -11,14 +11,14 @@
 
 ``write`` draws, per file, a random architecture (2-4 layers, widths 3-28, tanh), random
 weights, inputs, noise level and effect strength, and simulates the chip with
-:mod:`studies.contract_sim`, a plain-numpy transcription of CONTRACTS §2 written from the
+:mod:`studies.contract_sim`, a plain-numpy transcription of reference §2 written from the
 contract's text, not from gift's forward pass, so the study sees what a user's own
 simulator (or the independent judge's) would produce.
 
-Built-in study: each file holds the CONTRACTS §3 keys plus ``hidden`` (the effects) and
+Built-in study: each file holds the reference §3 keys plus ``hidden`` (the effects) and
 ``hidden_params``; gift never reads them (the byte content of these files is unchanged since
 the study lived in gift_theory/lab). Open study (``--physics open``): the files hold the
-CONTRACTS §3 keys only, and the labels -- physics, CONTRACTS §6 mechanism class, the layers
+reference §3 keys only, and the labels -- physics, reference §6 mechanism class, the layers
 where a one-step check must fail, ``expressible_by``, parameters -- go to ``DIR/labels.json``;
 ``--setting reference`` pins the network to 8-16-8-4, 160 inputs x 48 shots, s = 0.1.
 
@@ -29,7 +29,7 @@ meshes, attenuators, homodyne readout) with its imperfections, on a 16-32-16-8 n
 ``score`` runs ``gift diagnose FILE --json --seed i --quiet`` on the i-th file (sorted) --
 through the ``gift`` console entry point in this process (default), or one ``gift`` process
 per file (``--runner subprocess``) -- and prints one JSON line per file and a summary. It
-reads only the CONTRACTS §4/§6 JSON: detection (missing_effect_detected), identification
+reads only the reference §4/§6 JSON: detection (missing_effect_detected), identification
 (built-in study: the hidden effect ranked first; for two effects both among the top three
 names, or the top entry is the pair), false alarms on null files, the p-value after fitting
 the winner, and (:func:`score_row`) ``explained`` correct, wrong explanations, failing
@@ -145,7 +145,7 @@ def _jsonable(v, digits=6):
 
 
 def _save_measurement(folder, fname, x, y, t, Ws, bs, tp, taps):
-    """The CONTRACTS §3 keys only (no label ever goes into a file gift reads)."""
+    """The reference §3 keys only (no label ever goes into a file gift reads)."""
     arrays = {"x": x, "y": y, "t": t, "activation": np.array("tanh")}
     for l, (W, b) in enumerate(zip(Ws, bs), start=1):
         arrays[f"W{l}"], arrays[f"b{l}"] = W, b
@@ -163,7 +163,7 @@ def write_open(folder, files_per_physics: int, seed: int, taps: bool, physics=tu
                setting="random"):
     """Files for physics outside the catalogue (and null files); labels go to ``folder/labels.json``.
 
-    The ``.npz`` files hold only CONTRACTS §3 keys, so what gift reads carries no label. Each
+    The ``.npz`` files hold only reference §3 keys, so what gift reads carries no label. Each
     file's draws come from its own stream, named by the seed, the physics and the file's index.
     """
     for name in physics:
@@ -329,7 +329,7 @@ def score_row(out, label, taps: bool) -> dict:
                         the label's ``mechanism``); None on a null file
     container_explained a wrong explanation whose top entry is in the label's ``contained_in``
                         (a model that contains the physics without being it: over-flexible)
-    status_first        ranking[0]'s ``status`` (CONTRACTS §6, 2026-11-25; None if absent)
+    status_first        ranking[0]'s ``status`` (reference §6, 2026-11-25; None if absent)
     rejected_first      a rejected effect first: ranking[0] is rejected while another entry
                         passes or is refused. With ``status`` on the entries: ranking[0] "fails"
                         and another is "passes" or "refused"; without it: ranking[0]'s

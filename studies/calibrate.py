@@ -19,7 +19,7 @@ one) and the coupling test's p per layer, and the summary the refusal rate.
 networks, inputs and draws): how often it names a class at Holm-adjusted 0.01 and 0.05, and
 per test and layer its unadjusted rejection rates and a KS p-value against the uniform law.
 
-``ident``: for every effect of CONTRACTS §2 (and a two-effect case and the null), data
+``ident``: for every effect of reference §2 (and a two-effect case and the null), data
 with that hidden effect on a random network per seed; records whether ``diagnose`` flags a
 missing effect, ranks the hidden one first (top three for two), and whether the winner's
 p-value after fitting is >= 0.01. ``time``: one ``diagnose`` of a 240-input x 64-shot file

@@ -1,11 +1,11 @@
-"""An independent chip simulator: CONTRACTS §1-§3 in plain numpy, plus physics outside the catalogue.
+"""An independent chip simulator: reference §1-§3 in plain numpy, plus physics outside the catalogue.
 
-Written from the text of /work/shared/CONTRACTS.md (§1 the model, §2 the effects, §3 the
+Written from the text of docs/reference.md (§1 the model, §2 the effects, §3 the
 file keys), not from gift's forward pass: ``tests/studies/test_contract_sim.py`` checks
 that the two agree in distribution on every built-in effect, and the blind studies
 (:mod:`studies.blind`) feed gift files whose physics gift has never seen.
 
-The generative process (CONTRACTS §2), for layers l = 1..L::
+The generative process (reference §2), for layers l = 1..L::
 
     a_0 = x + n_a0
     u_l = W_l^eff a_{l-1}                   (optical weighted sum)
@@ -13,9 +13,9 @@ The generative process (CONTRACTS §2), for layers l = 1..L::
     a_l = D(act(z_l) + n_al)   (l < L),   y = a_L = D(z_L)     (D(z_L^2) with square_law)
     D   = saturation, then shot, then quantization (each only when present)
 
-Every layer output fed forward is what a tap measures. The catalogue effects (CONTRACTS §2
+Every layer output fed forward is what a tap measures. The catalogue effects (reference §2
 names, ``CATALOGUE``) take their §2 parameters; the open physics (``OPEN_PHYSICS``) are
-defined below and each declares its CONTRACTS §6 mechanism class, the layers it acts on
+defined below and each declares its reference §6 mechanism class, the layers it acts on
 (where a one-step check -- layer l's model fed the measured output of layer l-1 of the
 same shot -- must fail), and ``expressible_by``: the catalogue effects whose model is
 exactly this physics (after issue 14's built-ins ``bias_offset`` and ``activation_gain``).
@@ -59,7 +59,7 @@ The second set (issue 24, ``NEW_PHYSICS``)::
                                       one c for the layer. time_drift; []
 ``dead_neuron``      layer, neuron    one neuron of one hidden layer transmits nothing: its
                                       activation is 0 (a_l[i] = D(0 + n_al)). activation_mismatch
-                                      (CONTRACTS §6 names a dead neuron there); layers [layer]; []
+                                      (reference §6 names a dead neuron there); layers [layer]; []
 ``common_noise``     c                every layer: z_l += c xi_l, one xi_l per layer per shot shared
                                       by all its neurons (additive). correlated_noise; []
 ``detector_gain_offset`` gain, offset every layer output: D first maps v[i] to gain[i] v[i] + offset[i],
@@ -73,7 +73,7 @@ The second set (issue 24, ``NEW_PHYSICS``)::
                                       per device. weight_error; layers [L]; [] (contained in the
                                       catalogue's weight_error, which puts offsets in every layer)
 
-The catalogue's ``layer_gain`` (CONTRACTS §2, 2026-11-25) takes ``{"g": [g_1 .. g_L]}``: g_l
+The catalogue's ``layer_gain`` (reference §2, 2026-11-25) takes ``{"g": [g_1 .. g_L]}``: g_l
 multiplies layer l's gain.
 
 Randomness: one ``numpy.random.Generator`` threads through a whole simulation; an effect
@@ -88,11 +88,11 @@ from typing import Callable
 
 import numpy as np
 
-#: the effect names of CONTRACTS §2
+#: the effect names of reference §2
 CATALOGUE = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "drift", "crosstalk", "weight_error",
              "shot", "saturation", "quantization", "layer_gain")
 
-#: the mechanism class (CONTRACTS §6) of every catalogue effect
+#: the mechanism class (reference §6) of every catalogue effect
 CLASS_OF = {"awgn": "noise_level", "laplace": "noise_law", "uniform": "noise_law",
             "shot": "input_dependent_noise", "multiplicative": "input_dependent_noise",
             "common_mode": "gain_fluctuation", "drift": "time_drift",
@@ -100,7 +100,7 @@ CLASS_OF = {"awgn": "noise_level", "laplace": "noise_law", "uniform": "noise_law
             "saturation": "readout_nonlinearity", "quantization": "readout_nonlinearity",
             "layer_gain": "gain_error"}
 
-#: the mechanism classes of CONTRACTS §6 (time_drift, correlated_noise, gain_error: 2026-11-25)
+#: the mechanism classes of reference §6 (time_drift, correlated_noise, gain_error: 2026-11-25)
 MECHANISMS = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "time_drift",
               "correlated_noise", "gain_error", "weight_error", "bias_offset", "activation_mismatch",
               "readout_nonlinearity")
@@ -119,7 +119,7 @@ class OpenPhysics:
     """A physical effect outside the catalogue, with what a correct diagnosis should say about it.
 
     name : the effect's name in this simulator (``simulate_contract``'s ``effects`` key)
-    mechanism : its CONTRACTS §6 class
+    mechanism : its reference §6 class
     scope : "all" | "hidden" | "output" | "first" | "drawn" (one layer, drawn per device as
         ``params["layer"]``): the layers it acts on (``layers(L, params)``, 1-based)
     expressible_by : catalogue effects whose model is exactly this physics
@@ -274,7 +274,7 @@ def ar1_path(rng, length, tau):
 
 
 def simulate_contract(rng, widths, Ws, bs, x, r, s, effects: dict, activation=np.tanh, t=None):
-    """CONTRACTS §2 in plain numpy, plus ``OPEN_PHYSICS``.
+    """reference §2 in plain numpy, plus ``OPEN_PHYSICS``.
 
     Parameters
     ----------

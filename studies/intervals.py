@@ -1,10 +1,10 @@
-"""Coverage of the 95 % intervals of ``gift fit`` (CONTRACTS §4 ``"intervals"``; issue 26 item 2).
+"""Coverage of the 95 % intervals of ``gift fit`` (reference §4 ``"intervals"``; issue 26 item 2).
 
     python -m studies.intervals [--files 100] [--cells s,q,kappa,sigma] [--taps both|yes|no]
                                 [--out studies/results/2026-11-25d/intervals] [--report]
 
 For each cell (a parameter, with or without taps) and file i, a chip is simulated by the
-independent plain-numpy simulator (:mod:`studies.contract_sim`, written from CONTRACTS §2, not
+independent plain-numpy simulator (:mod:`studies.contract_sim`, written from reference §2, not
 from gift's forward pass) with a true value drawn at random, on a random 6-10-8-3 tanh network
 (60 inputs x 24 shots); gift fits the model exactly as ``gift fit FILE --add EFFECT`` does
 (awgn on the fitting half, then the effect on top) and computes the interval of

@@ -15,7 +15,7 @@ W (shape (d_out, d_in)) is realised optically as
                                               that undoes the attenuators' scaling)
 
 so u = W_eff a with W_eff = sigma_max Re(M_U P diag(sigma / sigma_max) M_V) (the map is real
-linear in the real input a). The network then follows CONTRACTS §1-§2 exactly:
+linear in the real input a). The network then follows reference §1-§2 exactly:
 
     a_0 = x + n_a0,   z_l = W_eff,l a_{l-1} + b_l + n_wl (+ readout noise),   a_l = tanh(z_l) + n_al,
     y = z_L,          n_* ~ N(0, s^2) independent.
@@ -65,7 +65,7 @@ as early as their modes allow; the columns are the layout's vertical slices.
 With every imperfection off the realised W equals the programmed W to rounding
 (``tests/studies/test_mesh_sim.py``: 1e-10 on random shapes).
 
-**Labels** (CONTRACTS §6 classes; ``MESH_PHYSICS``; the reasons):
+**Labels** (reference §6 classes; ``MESH_PHYSICS``; the reasons):
 
 - uniform loss -> ``gain_error`` in the layers it acts on: W_eff = g W exactly (one fixed
   gain per layer, the class's definition and the built-in ``layer_gain``'s model).
@@ -413,7 +413,7 @@ def uniform_loss_gain(W_shape, loss_db: float) -> float:
 
 def simulate_mesh(rng, Ws, bs, x, r, s, imperfections: Imperfections = Imperfections(), t=None, chunk=4096,
                   device=None):
-    """The chip: CONTRACTS §1-§2 with each weighted sum realised by the mesh.
+    """The chip: reference §1-§2 with each weighted sum realised by the mesh.
 
     Parameters
     ----------
@@ -462,7 +462,7 @@ def simulate_mesh(rng, Ws, bs, x, r, s, imperfections: Imperfections = Imperfect
 class MeshPhysics:
     """One physics of the mesh study with what a correct diagnosis should say.
 
-    name : the file name's stem; mechanism : its primary CONTRACTS §6 class; accepted : the
+    name : the file name's stem; mechanism : its primary reference §6 class; accepted : the
     classes accepted as the first mechanism (the primary one included); layers(L) : where the
     one-step check must fail; expressible_by / contained_in : as in studies.contract_sim;
     imperfections(L, strength) : the :class:`Imperfections` of a file; definition : one line.

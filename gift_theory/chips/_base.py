@@ -36,7 +36,7 @@ class Chip(Protocol):
 
     def measure(self, params, x, shots: int, *, taps: bool = False, key=None) -> Measurement:
         """Program ``params``, send each row of ``x`` (n, d_0) ``shots`` times, return the
-        :class:`~gift_theory.Measurement` (CONTRACTS §3: the inputs, the shots, the programmed
+        :class:`~gift_theory.Measurement` (reference §3: the inputs, the shots, the programmed
         weights, the hidden layers' taps when asked and the chip has them, else None)."""
         ...
 

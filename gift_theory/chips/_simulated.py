@@ -1,5 +1,5 @@
 """A simulated chip: the model M_s with hidden true physics (noise level st and any
-CONTRACTS §2 effects). Fresh noise on every call -- a real device cannot repeat its noise,
+reference §2 effects). Fresh noise on every call -- a real device cannot repeat its noise,
 so methods get no common random numbers across calls from it."""
 
 from __future__ import annotations

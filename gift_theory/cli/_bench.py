@@ -1,5 +1,5 @@
 """``gift bench``: estimator speed and efficiency against the machine's own matmul rate
-(CONTRACTS §4). The benchmarks are :func:`gift_theory._bench.run_benchmarks`; this module
+(reference §4). The benchmarks are :func:`gift_theory._bench.run_benchmarks`; this module
 parses and prints."""
 
 from __future__ import annotations

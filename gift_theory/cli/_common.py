@@ -121,12 +121,13 @@ def did_you_mean(message: str) -> str:
 # ------------------------------------------------------------------------------------------
 class Progress:
     """``progress(i, n, label)`` callbacks that print ``prog: [i+1/n] label (t s, ~left s left)``
-    on stderr before item i starts; silent when ``quiet``. The time left is the mean time of the
-    items done so far times the items left (shown from the second item on; ``eta=False`` for
+    on stderr before item i starts (``after=True``: as item i is done); silent when ``quiet``.
+    The time left is the mean time of the items timed so far (from the first call on) times the
+    items still to run (shown from the second item on, not after the last; ``eta=False`` for
     items of very different lengths, where that mean would mislead)."""
 
-    def __init__(self, prog: str, quiet: bool = False, stream=None, eta: bool = True):
-        self.prog, self.quiet, self.eta = prog, quiet, eta
+    def __init__(self, prog: str, quiet: bool = False, stream=None, eta: bool = True, after: bool = False):
+        self.prog, self.quiet, self.eta, self.after = prog, quiet, eta, after
         self.stream = stream
         self.t0 = None
         self.first = 0
@@ -139,7 +140,10 @@ class Progress:
             self.t0, self.first = now, i
         done = i - self.first
         elapsed = now - self.t0
-        left = f", ~{elapsed / done * (n - i):.0f} s left" if done > 0 and self.eta else ""
+        # items to run: from item i on (before it starts), after item i (when it is done) -- the
+        # diagnosis reports a candidate done, and counting it still to run put ~3 s left on the last
+        todo = n - i - (1 if self.after else 0)
+        left = f", ~{elapsed / done * todo:.0f} s left" if done > 0 and todo > 0 and self.eta else ""
         out = self.stream or sys.stderr
         out.write(f"{self.prog}: [{i + 1}/{n}] {label} ({elapsed:.0f} s{left})\n")
         out.flush()

@@ -12,13 +12,16 @@ this file's size (inputs, shots, taps or not), from the power computed on the fi
 from __future__ import annotations
 
 from .._errors import require
-from ._labargs import add_common, figure_dir, key, load
+from ._labargs import add_common, figure_dir, key, load, write_manifest
 
 
 def add_arguments(parser):
     add_common(parser)
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
-                        help="the model's physics (CONTRACTS §2), e.g. awgn=0.1 shot=0.01; default: fit awgn")
+                        help="the model's physics (reference §2), e.g. awgn=0.1 shot=0.01; default: fit awgn")
+    parser.add_argument("--chip-model", default=None, metavar="M.chip.npz",
+                        help="score a fitted chip model (gift calibrate writes one): the weights the file programmed, "
+                             "as the model predicts the chip realises them, under its noise (not with --effect)")
     parser.add_argument("--power-replicates", type=int, default=20, metavar="B",
                         help="simulated files behind the power figures next to the verdict (default 20; 0: none)")
 
@@ -27,12 +30,26 @@ def run(args):
     import gift_theory as gt
     from .._model import named_subkey
     from ..lab import compare_measurement, where_it_fails
-    from ..lab._compare import power_notes, power_of, predictive_moments
-    from ..lab._figures import moments_figure, save_figures, where_figure
+    from ..lab._compare import power_notes, power_of
+    from ..lab._figures import compare_figures
 
+    folder = figure_dir(args, "compare")  # a folder of another command's: refused before any work
     meas = load(args)  # plugins first: --effect may name one
     physics = None
-    if args.effect:
+    if args.chip_model is not None:
+        import dataclasses
+
+        from ..calibration import load_chip_model
+
+        if args.effect:
+            raise gt.GiftInputError("--chip-model: the model's noise is its own; not with --effect")
+        cm = load_chip_model(args.chip_model)
+        if tuple(cm.widths) != tuple(meas.arch.widths):
+            raise gt.GiftInputError(f"--chip-model {args.chip_model}: a model of a {'-'.join(map(str, cm.widths))} "
+                                    f"network, the file measured {'-'.join(map(str, meas.arch.widths))}")
+        meas = dataclasses.replace(meas, params=cm.realise(meas.params))
+        physics = cm.physics
+    elif args.effect:
         specs = list(args.effect)
         if not any(s.strip().split("=")[0].strip() == "awgn" for s in specs):
             raise gt.GiftInputError("--effect: the model needs awgn=S among its effects (the baseline noise level)")
@@ -43,7 +60,8 @@ def run(args):
                                     f"use gift fit --add {offsets[0]} (fitted offsets)")
     res = compare_measurement(key(args), meas, physics, shots=args.shots)
     model, c = res["model"], res["comparison"]
-    out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": res["fitted"]},
+    out = {"model": {"effects": model.effects, "params": model.params_json(), "fitted": res["fitted"],
+                     **({"chip_model": args.chip_model} if args.chip_model else {})},
            "discrepancy": c.discrepancy, "se": c.se, "noise_floor": c.noise_floor, "floor_se": c.floor_se,
            "p_value": c.p_value, "inputs_scored": res["scored"].n,
            "per_layer": {f"layer{l}": float(v) for l, v in zip(c.layer_ids, c.per_layer)},
@@ -54,20 +72,19 @@ def run(args):
     out["power"] = (power_of(named_subkey(key(args), "power"), model, res["scored"], replicates=args.power_replicates)
                     if args.power_replicates else [])
     out["power_notes"] = power_notes(out["power"], verdict_passes=c.p_value >= 0.01)
-    folder = figure_dir(args)
     if folder:
-        mom = predictive_moments(named_subkey(key(args), "figure_moments"), model, res["scored"],
-                                 label=" + ".join(model.effects) + (" (fitted)" if res["fitted"] else ""))
-        figs = {"where.png": where_figure(where, title=f"{' + '.join(model.effects)}: where it fails"),
-                **{f"moments_layer{l}.png": moments_figure(mom, l) for l in res["scored"].layer_ids()}}
-        out["figures"] = save_figures(figs, folder)
+        out["figures"] = compare_figures(key(args), model, res["scored"], where,
+                                         " + ".join(model.effects) + (" (fitted)" if res["fitted"] else ""), folder)
+        write_manifest(folder, "compare", args, out["figures"])
     return out
 
 
 def render(out) -> str:
     m = out["model"]
     ps = ", ".join(f"{k}={v:.4g}" for k, v in m["params"].items())
-    lines = [f"model {' + '.join(m['effects'])} ({ps}){' fitted on half the inputs' if m['fitted'] else ''}",
+    lines = [f"model {' + '.join(m['effects'])} ({ps}){' fitted on half the inputs' if m['fitted'] else ''}"
+             + (f", the weights as the chip model {m['chip_model']} predicts the chip realises them"
+                if m.get("chip_model") else ""),
              f"discrepancy {out['discrepancy']:.4g} +- {out['se']:.2g} on {out['inputs_scored']} inputs; "
              f"noise floor {out['noise_floor']:.4g} +- {out['floor_se']:.2g}; p = {out['p_value']:.3g}"
              + ("  -> the model FAILS (p < 0.01)" if out["p_value"] < 0.01 else "  -> consistent with the data"),

@@ -1,7 +1,7 @@
 """``gift diagnose MEAS``: is a physical effect missing from the model, and which one?
 
 Fits the awgn baseline and every candidate effect on half the inputs, scores them on the
-other half (CONTRACTS §4 JSON with ``--json``; a text report and a figure folder without).
+other half (reference §4 JSON with ``--json``; a text report and a figure folder without).
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from ._common import Progress
 from ._fit import no_taps_caveat
-from ._labargs import add_common, figure_dir, key, load
+from ._labargs import add_common, figure_dir, key, load, write_manifest
 
 
 def add_arguments(parser):
@@ -27,13 +27,14 @@ def run(args):
     from .._model import named_subkey
     from ..lab import diagnose
     from ..lab._compare import power_notes, power_of
-    from ..lab._figures import diagnosis_figures
+    from ..lab._figures import diagnosis_comparison, diagnosis_figures
 
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
+    folder = figure_dir(args, "diagnose")  # a folder of another command's: refused before any work
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
-                   progress=Progress("gift diagnose: candidates", args.quiet))
+                   progress=Progress("gift diagnose: candidates", args.quiet, after=True))
     out = res.as_json()
     if not res.missing_effect_detected:
         # "nothing missing" is only as strong as the test's power at this file's size (the
@@ -41,9 +42,10 @@ def run(args):
         out["power"] = (power_of(named_subkey(key(args), "power"), res.baseline, meas.subset(res.held_out),
                                  replicates=args.power_replicates) if args.power_replicates else [])
         out["power_notes"] = power_notes(out["power"], verdict_passes=True)
-    folder = figure_dir(args)
+    out["model_comparison"] = diagnosis_comparison(res)
     if folder:
         out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args))
+        write_manifest(folder, "diagnose", args, out["figures"])
     return out
 
 
@@ -60,7 +62,7 @@ def render(out) -> str:
         lines.append("failing layers (one-step check, 0.01 with Bonferroni over the layers): "
                      + (", ".join(map(str, fl)) if fl else "none"))
     if out.get("mechanisms"):
-        lines.append("mechanisms the localised evidence points to (CONTRACTS section 6; score in sd, p after "
+        lines.append("mechanisms the localised evidence points to (reference §6; score in sd, p after "
                      "multiplicity correction):")
         for m in out["mechanisms"]:
             where = f"layers {', '.join(map(str, m['layers']))}" if m["layers"] else "layers ?"
@@ -86,6 +88,12 @@ def render(out) -> str:
         name = "awgn alone (the baseline)" if r.get("baseline") else " + ".join(r.get("with", []) + [r["effect"]])
         lines.append(f"  {i:2d}. {name:<28s} {r.get('status', ''):<8s} {r['discrepancy_after']:10.4g}  "
                      f"p = {r['p_value_after']:<9.3g} [{r.get('mechanism', '')}] {ps}")
+    if out.get("model_comparison") and len(out["model_comparison"]) > 1:
+        first = out["model_comparison"][0]["model"]
+        lines.append(f"model comparison on the held-out inputs (difference to {first}, +- its paired bootstrap "
+                     f"standard error over the inputs):")
+        for t in out["model_comparison"][1:6]:
+            lines.append(f"  {t['model']:<32s} {t['delta']:+10.4g} +- {t['delta_se']:.2g}")
     if out.get("not_fitted"):
         lines.append("not fitted: " + ", ".join(r["effect"] for r in out["not_fitted"]) + " -- "
                      + out["not_fitted"][0]["reason"])
@@ -97,7 +105,8 @@ def render(out) -> str:
         lines.append("one-step check per layer (layer fed the measured layer before, at its own noise level s):")
         for w in out["where"]:
             lines.append(f"  layer {w['layer']}: discrepancy {w['discrepancy']:.4g} (z = {w['z']:.1f}, "
-                         f"p = {w['p_value']:.3g}, s = {w.get('s', float('nan')):.3g})")
+                         f"p = {w['p_value']:.3g}, s = {w.get('s', float('nan')):.3g}"
+                         + (" through its measured transfer" if w.get("s_through_transfer") else "") + ")")
     if out.get("signatures"):
         lines.append("signatures against the baseline (z > 3 stands out):")
         for name, s in out["signatures"].items():

@@ -1,9 +1,9 @@
 """``gift fit MEAS --add NAME [--add NAME ...]``: add effects, fit them, report the error
-before and after (CONTRACTS §4 JSON with ``--json``; text and an error-ladder figure without)."""
+before and after (reference §4 JSON with ``--json``; text and an error-ladder figure without)."""
 
 from __future__ import annotations
 
-from ._labargs import add_common, figure_dir, key, load
+from ._labargs import add_common, figure_dir, key, load, write_manifest
 
 # measured (docs/lab.md section 6): without taps the offsets of all but the smallest nets are
 # not identified, and the refit null then rejects a correct weight_error model too often
@@ -19,7 +19,7 @@ def no_taps_caveat(names) -> str:
 def add_arguments(parser):
     add_common(parser)
     parser.add_argument("--add", action="append", required=True, metavar="NAME",
-                        help="a registered effect (CONTRACTS §2 or a plugin) to add to the model (repeatable, in order)")
+                        help="a registered effect (reference §2 or a plugin) to add to the model (repeatable, in order)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
     parser.add_argument("--replicates", type=int, default=None, metavar="B",
                         help="parametric replicates behind the 95 %% intervals of the moment-fitted parameters "
@@ -43,6 +43,7 @@ def run(args):
 
     require(args.replicates is None or args.replicates >= 2, f"--replicates {args.replicates}: needs at least 2")
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
+    folder = figure_dir(args, "fit")  # a folder of another command's: refused before any work
     meas = load(args)
     res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
@@ -52,15 +53,24 @@ def run(args):
             sys.stderr.write(f"intervals: {done}/{total} parametric replicates\n")
             sys.stderr.flush()
 
-    out.update(fit_uncertainty(key(args), meas, res.after, shots=args.shots, B=args.replicates, progress=progress))
+    unc = fit_uncertainty(key(args), meas, res.after, shots=args.shots, B=args.replicates, progress=progress)
+    out.update(unc)
     # the verdict on the fitted model is only as strong as its test's power at this file's size
     # (the held-out half it was scored on): what the test could not have seen on top of it
     out["power"] = (power_of(named_subkey(key(args), "power"), res.after, meas.subset(res.held_out),
                              replicates=args.power_replicates) if args.power_replicates else [])
     out["power_notes"] = power_notes(out["power"], verdict_passes=res.comparison_after.p_value >= 0.01)
-    folder = figure_dir(args)
+    from ..lab._figures import comparison_table
+
+    if all(c.channel_values is not None for _, c in res.ladder) and len(res.ladder) > 1:
+        out["model_comparison"] = comparison_table([(lab, c, "") for lab, c in res.ladder][::-1])
     if folder:
-        out["figures"] = fit_figures(res, folder, meas=meas, key=key(args))
+        from ..lab import where_it_fails
+
+        held = meas.subset(res.held_out)
+        where = where_it_fails(named_subkey(key(args), "figure_where"), res.after, held)
+        out["figures"] = fit_figures(res, folder, meas=meas, key=key(args), uncertainty=unc, where=where)
+        write_manifest(folder, "fit", args, out["figures"])
     return out
 
 
@@ -123,8 +133,12 @@ def render(out) -> str:
                         if found else f"none stands out (beyond {STANDOUT_K:g} robust standard errors of the median)"))
         lines += ["  " + f for f in found]
     lines.append("error ladder:")
+    delta = {t["model"]: t for t in out.get("model_comparison", [])[1:]}
     for r in out["ladder"]:
-        lines.append(f"  {r['model']:<40s} {r['discrepancy']:10.4g} +- {r['se']:.2g}  p = {r['p_value']:.3g}")
+        d = delta.get(r["model"])
+        lines.append(f"  {r['model']:<40s} {r['discrepancy']:10.4g} +- {r['se']:.2g}  p = {r['p_value']:.3g}"
+                     + (f"   ({d['delta']:+.4g} +- {d['delta_se']:.2g} against the fitted model, paired over "
+                        f"the inputs)" if d else ""))
     if out.get("figures"):
         lines.append("figures: " + ", ".join(out["figures"]))
     return "\n".join(lines)

@@ -1,8 +1,9 @@
 """``gift import IN --out OUT`` (also ``gift export``): one measurement campaign from any format
-gift reads to any it writes (CONTRACTS §3).
+gift reads to any it writes (reference §3).
 
 IN: ``.npz``, long or wide CSV, netCDF / HDF5 (the format told by the content, then the
-extension); ``--weights W.npz`` where IN holds none. OUT by its extension: ``.npz``,
+extension); ``--weights W.npz`` where IN holds none (default: ``IN-stem.weights.npz`` when it
+exists, as written beside a CSV). OUT by its extension: ``.npz``,
 ``.nc`` (or ``.h5``: netCDF-4) or ``.csv`` (wide, or long with ``--long``; the weights then
 go to ``OUT-stem.weights.npz``). The input is read and validated completely before anything
 is written, and every file is written atomically: a bad input leaves OUT as it was.
@@ -30,7 +31,9 @@ def run(args):
             f"--out {args.out}: unknown extension {ext or '(none)'!r}; write .npz, .csv or netCDF (.nc, .h5)")
     require(not args.long or ext == ".csv", f"--long: only for a .csv OUT, not {args.out}")
     fmt_in = detect_format(args.input)
-    meas = load_measurement(args.input, weights=args.weights)
+    from ._labargs import weights_of
+
+    meas = load_measurement(args.input, weights=weights_of(args, args.input))
     wpath = save_file(args.out, meas, csv="long" if args.long else "wide")
     fmt_out = {".npz": "npz", ".csv": "csv-long" if args.long else "csv-wide"}.get(ext, "netcdf")
     return {"in": args.input, "format_in": fmt_in, "out": args.out, "format_out": fmt_out, "weights_out": wpath,

@@ -12,12 +12,15 @@ from ._plugins import add_plugin_argument, load_plugins
 
 def add_common(parser):
     add_plugin_argument(parser)
-    parser.add_argument("measurement", metavar="MEAS", help="measurement file (CONTRACTS §3): .npz, long or wide .csv, netCDF / HDF5 (.nc, .h5)")
-    parser.add_argument("--weights", help="weights .npz (W1..WL, b1..bL) for a file that holds none (CSV, netCDF)")
+    parser.add_argument("measurement", metavar="MEAS", help="measurement file (reference §3): .npz, long or wide .csv, netCDF / HDF5 (.nc, .h5)")
+    parser.add_argument("--weights", help="weights .npz (W1..WL, b1..bL) for a file that holds none (CSV, netCDF); "
+                                          "default: MEAS-stem.weights.npz beside it, when it exists")
     parser.add_argument("--seed", type=int, default=0, help="seed of the held-out split, the model shots and the fit")
     parser.add_argument("--shots", type=int, default=None, help="model shots per input (default: the measured r)")
     parser.add_argument("--figures", default=None, metavar="DIR",
-                        help="folder for the figures (default without --json: MEAS_gift/; with --json: none)")
+                        help="folder for this command's figures, each PNG with its numbers as netCDF beside it "
+                             "(default without --json: MEAS_gift/COMMAND/; with --json: none); a folder holding "
+                             "another command's figures is refused")
 
 
 def load(args):
@@ -26,17 +29,67 @@ def load(args):
 
     load_plugins(args)
     require(args.shots is None or args.shots >= 2, f"--shots {args.shots}: needs at least 2")
-    return load_measurement(args.measurement, weights=args.weights)
+    return load_measurement(args.measurement, weights=weights_of(args))
+
+
+def weights_of(args, measurement: str | None = None):
+    """``--weights``, else the ``STEM.weights.npz`` that ``gift simulate --csv`` and ``gift import``
+    write beside a file without weights (a CSV), when it exists (said on stderr), else None.
+    ``measurement``: the file's path (default ``args.measurement``)."""
+    if args.weights:
+        return args.weights
+    measurement = args.measurement if measurement is None else measurement
+    stem, ext = os.path.splitext(measurement)
+    beside = stem + ".weights.npz"
+    if ext.lower() != ".npz" and os.path.exists(beside):
+        import sys
+
+        print(f"weights from {beside} (written beside {os.path.basename(measurement)}; --weights overrides)",
+              file=sys.stderr)
+        return beside
+    return None
 
 
 def key(args):
     return jax.random.PRNGKey(args.seed)
 
 
-def figure_dir(args):
+#: the file in a figure folder that says which command's figures it holds
+MANIFEST = "figures.json"
+
+
+def figure_dir(args, command: str):
+    """The folder ``command``'s figures go to: ``--figures DIR``, else (without ``--json``)
+    ``MEAS_gift/COMMAND/``, else None. A folder whose manifest says it holds another command's
+    figures is a bad input (checked before any work: one command never overwrites another's)."""
     if args.figures:
-        return args.figures
-    if args.json:
+        folder = args.figures
+    elif args.json:
         return None
-    stem = os.path.splitext(args.measurement)[0]
-    return stem + "_gift"
+    else:
+        folder = os.path.join(os.path.splitext(args.measurement)[0] + "_gift", command)
+    path = os.path.join(folder, MANIFEST)
+    if os.path.exists(path):
+        import json
+
+        try:
+            with open(path, encoding="utf-8") as fh:
+                owner = json.load(fh).get("command")
+        except (OSError, ValueError, AttributeError):
+            owner = None
+        require(owner in (None, command), f"--figures {folder}: holds the figures of gift {owner}; give gift "
+                                          f"{command} a folder of its own")
+    return folder
+
+
+def write_manifest(folder: str, command: str, args, figures: list) -> None:
+    """Record in ``folder`` which command wrote its figures, from which file (:data:`MANIFEST`)."""
+    import json
+
+    from .._io import atomic_write_text
+
+    atomic_write_text(os.path.join(folder, MANIFEST), json.dumps(
+        {"command": command, "measurement": os.path.abspath(args.measurement),
+         "figures": [os.path.basename(f) for f in figures],
+         "data": [os.path.splitext(os.path.basename(f))[0] + ".nc" for f in figures
+                  if os.path.exists(os.path.splitext(f)[0] + ".nc")]}, indent=1) + "\n")

@@ -36,6 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "compare": ("gift_theory.cli._compare", "compare a model with a measurement file"),
     "diagnose": ("gift_theory.cli._diagnose", "find the physical effect the model is missing"),
     "fit": ("gift_theory.cli._fit", "add effects to the model, fit them, report the error before and after"),
+    "calibrate": ("gift_theory.cli._calibrate", "corrected weights for a chip from a measurement of the programmed ones"),
     "import": ("gift_theory.cli._import", "convert a measurement file (npz, long or wide CSV, netCDF/HDF5) to npz, netCDF or CSV"),
     "export": ("gift_theory.cli._import", "the same as import: write a measurement file as netCDF (.nc), wide CSV or npz"),
 }
@@ -96,7 +97,7 @@ class _Parser(argparse.ArgumentParser):
     def format_help(self):
         from ._common import REFERENCE
 
-        return super().format_help().replace("CONTRACTS §", "reference §").rstrip("\n") + (
+        return super().format_help().replace("reference §", "reference §").rstrip("\n") + (
             f"\n\nreference: {REFERENCE} (file formats, JSON outputs, effects, mechanism classes)\n")
 
 
@@ -188,7 +189,7 @@ def main(argv=None) -> int:
     except Exception as exc:  # the work failed: one line unless debugging
         from ._plugins import plugin_failure
 
-        line = plugin_failure(exc)  # a plugin's own code raised: a bad input (CONTRACTS §2b)
+        line = plugin_failure(exc)  # a plugin's own code raised: a bad input (reference §2b)
         if line is not None and not debug:
             sys.stderr.write(line + "\n")
             return 2

@@ -1,4 +1,4 @@
-"""``--plugin FILE.py``: effects a user adds (CONTRACTS §2b), for simulate, compare, diagnose and fit.
+"""``--plugin FILE.py``: effects a user adds (reference §2b), for simulate, compare, diagnose and fit.
 
 Every such command also loads the entry-point group ``gift.effects`` (installed packages that
 ship effects). A plugin that fails to import or breaks the contract is a bad input: one line
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 def add_plugin_argument(parser) -> None:
     parser.add_argument("--plugin", action="append", default=[], metavar="FILE.py",
-                        help="a Python file that registers effects (CONTRACTS §2b), repeatable; "
+                        help="a Python file that registers effects (reference §2b), repeatable; "
                              "installed packages' entry points 'gift.effects' load too")
 
 
@@ -27,7 +27,7 @@ def load_plugins(args) -> list[str]:
 def plugin_failure(exc: BaseException) -> str | None:
     """The one line for an exception raised inside a plugin's code while a command runs (a
     class method such as ``search``, ``from_data`` or ``signature``, or any helper the hooks
-    call), or None when no frame of the traceback is a plugin's. CONTRACTS §2b: a plugin that
+    call), or None when no frame of the traceback is a plugin's. reference §2b: a plugin that
     raises while running is a bad input -- ``FILE: effect NAME (class C), hook H: raised TYPE: msg``.
     The stage hooks are caught where they are called (:class:`gift_theory.effects.Physics`);
     this catches the rest."""

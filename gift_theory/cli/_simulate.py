@@ -1,4 +1,4 @@
-"""``gift simulate``: write a measurement file (CONTRACTS §3) from a simulated chip.
+"""``gift simulate``: write a measurement file (reference §3) from a simulated chip.
 
 The hidden-effect data generator: choose the architecture, the programmed weights, the
 inputs, the shots and the chip's effects; the file never exists half-written.
@@ -25,7 +25,7 @@ def add_arguments(parser):
     parser.add_argument("--inputs", type=int, default=240, help="number of inputs n (uniform in [0, 1]^d_0)")
     parser.add_argument("--shots", type=int, default=64, help="repeated shots r per input")
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
-                        help="a chip effect (CONTRACTS §2), repeatable: awgn=0.1 shot=0.01 laplace "
+                        help="a chip effect (reference §2), repeatable: awgn=0.1 shot=0.01 laplace "
                              "quantization=6,2.0 weight_error=e:0.05,seed:3 (default awgn=0.1)")
     parser.add_argument("--taps", action="store_true", help="also record the hidden layers a1..a{L-1}")
     parser.add_argument("--times", action="store_true", help="also record acquisition times t (drift needs them)")

@@ -44,13 +44,23 @@ def run(args) -> dict:
         save_weights(args.out, params, {k: v for k, v in info.items() if k not in ("path", "cached")})
         info["out"] = args.out
     keys = ("dataset", "arch", "s0", "seed", "method", "steps", "path", "cached", "train_seconds",
-            "train_loss", "train_accuracy", "test_loss", "test_accuracy")
+            "train_loss", "train_accuracy", "test_loss", "test_accuracy", "train_examples", "test_examples")
     return {k: info.get(k) for k in keys} | ({"out": info["out"]} if "out" in info else {})
+
+
+#: the standard MNIST's training and test images: a folder with fewer is said so
+MNIST_SIZES = (60000, 10000)
 
 
 def render(r: dict) -> str:
     src = "cache" if r["cached"] else f"trained in {r['train_seconds']:.1f} s"
-    return (f"{r['dataset']} {r['arch']} at s0={r['s0']:g}, seed {r['seed']} ({src})\n"
+    n, m = r.get("train_examples"), r.get("test_examples")
+    size = f", {n} training / {m} test examples" if n is not None else ""
+    note = ""
+    if r["dataset"] == "mnist" and n is not None and (n, m) != MNIST_SIZES:
+        note = (f"\n  note: the folder holds {n} training and {m} test images, not MNIST's {MNIST_SIZES[0]} and "
+                f"{MNIST_SIZES[1]}: a subset, or not the folder meant?")
+    return (f"{r['dataset']} {r['arch']} at s0={r['s0']:g}, seed {r['seed']} ({src}{size}){note}\n"
             f"  train: loss {r['train_loss']:.4f}  accuracy {100 * r['train_accuracy']:.2f} %\n"
             f"  test:  loss {r['test_loss']:.4f}  accuracy {100 * r['test_accuracy']:.2f} %\n"
             f"  weights: {r['path']}" + (f"\n  copied to: {r['out']}" if r.get("out") else ""))

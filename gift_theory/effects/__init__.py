@@ -1,4 +1,4 @@
-"""The physical effects of CONTRACTS §2 and §2b, one module each, their composition, and
+"""The physical effects of reference §2 and §2b, one module each, their composition, and
 the open catalogue (effects a user adds).
 
 =================  ======================  ==============  =====================  ======================
@@ -20,9 +20,9 @@ activation_gain    kappa (hidden layers)   activation      activation_mismatch  
 layer_gain         g (one per layer)       weights         gain_error             :mod:`.layer_gain`
 =================  ======================  ==============  =====================  ======================
 
-The first eleven are CONTRACTS §2's original table (:data:`EFFECT_NAMES`); :data:`BUILTIN`
+The first eleven are reference §2's original table (:data:`EFFECT_NAMES`); :data:`BUILTIN`
 lists all fourteen built-in ones (the §2 table now lists every one of them). A user adds an
-effect in a file of their own (CONTRACTS §2b)::
+effect in a file of their own (reference §2b)::
 
     from gift_theory.effects import Effect, register
 
@@ -78,11 +78,11 @@ from ._physics import awgn as awgn
 from ._plugins import load_entry_points as load_entry_points
 from ._plugins import load_plugin as load_plugin
 
-#: the CONTRACTS §2 names, in catalogue order (the effects the contract's table lists)
+#: the reference §2 names, in catalogue order (the effects the contract's table lists)
 EFFECT_NAMES = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "drift",
                 "crosstalk", "weight_error", "shot", "saturation", "quantization")
 
-#: every built-in effect, in catalogue order: CONTRACTS §2's first eleven, then the ones added since
+#: every built-in effect, in catalogue order: reference §2's first eleven, then the ones added since
 BUILTIN = EFFECT_NAMES + ("bias_offset", "activation_gain", "layer_gain")
 
 if set(BUILTIN) != set(REGISTRY):  # pragma: no cover - a module was added without listing it

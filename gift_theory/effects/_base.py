@@ -1,4 +1,4 @@
-"""The physical-effect protocol and its composition (CONTRACTS §2, §2b, §6).
+"""The physical-effect protocol and its composition (reference §2, §2b, §6).
 
 A device and a model are both this generative process with extra effects::
 
@@ -15,7 +15,7 @@ of D) -- and only on the layers its ``layers`` scope names. :class:`~.Physics` a
 the effects of a composition in the canonical order (stage, then ``order``), so the
 order in which a user lists them never matters.
 
-The catalogue is open (CONTRACTS §2b): any :class:`Effect` subclass decorated with
+The catalogue is open (reference §2b): any :class:`Effect` subclass decorated with
 :func:`register` is an effect like the built-in ones. :func:`register` checks the class
 against the contract and raises :class:`~gift_theory.GiftInputError` with one line
 naming the class and the rule it breaks.
@@ -40,7 +40,7 @@ REGISTRY: dict[str, type["Effect"]] = {}
 #: canonical stage order; inside a stage, the class attribute ``order``.
 STAGES = ("level", "law", "weights", "bias", "gain", "activation", "readout")
 
-#: the mechanism classes of CONTRACTS §6, in the table's order.
+#: the mechanism classes of reference §6, in the table's order.
 MECHANISMS = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "time_drift",
               "correlated_noise", "gain_error", "weight_error", "bias_offset", "activation_mismatch",
               "readout_nonlinearity")
@@ -116,7 +116,7 @@ def _scope_error(layers) -> str | None:
 
 
 def _check_class(cls) -> None:
-    """The class-level rules of CONTRACTS §2b that need no dataclass processing."""
+    """The class-level rules of reference §2b that need no dataclass processing."""
     label = _label(cls)
     name = cls.__dict__.get("name", getattr(cls, "name", None))
     if not isinstance(name, str) or not name:
@@ -137,7 +137,7 @@ def _check_class(cls) -> None:
     mechanism = getattr(cls, "mechanism", None)
     if mechanism not in MECHANISMS:
         what = "needs a class attribute `mechanism`," if mechanism is None else f"mechanism={mechanism!r} must be"
-        raise GiftInputError(f"{label}: {what} one of the CONTRACTS §6 classes {', '.join(MECHANISMS)}")
+        raise GiftInputError(f"{label}: {what} one of the reference §6 classes {', '.join(MECHANISMS)}")
     if stage == "level" and name != "awgn":
         raise GiftInputError(f"{label}: stage 'level' is awgn's (the additive noise level); "
                              f"a noise law takes stage 'law'")
@@ -311,7 +311,7 @@ class Effect:
     Class attributes
     ----------------
     name : str
-        The effect's name (CONTRACTS §2 for built-in ones), spelled exactly so.
+        The effect's name (reference §2 for built-in ones), spelled exactly so.
     params : tuple of str
         The names of its physical parameters: dataclass fields, pytree leaves (fitted,
         differentiated).
@@ -324,7 +324,7 @@ class Effect:
     stage : str
         One of :data:`STAGES`.
     mechanism : str
-        One of :data:`MECHANISMS` (CONTRACTS §6).
+        One of :data:`MECHANISMS` (reference §6).
     layers : str or tuple of int
         Where every hook of the effect acts: ``"all"`` (default), ``"hidden"`` (layers
         1..L-1), ``"output"`` (layer L) or a tuple of 1-based layer numbers. An activation
@@ -351,7 +351,7 @@ class Effect:
     standard-normal draws an effect needs per shot.
 
     Any of ``weights``, ``bias``, ``activation``, ``readout`` may also take a keyword ``t``:
-    the shot's normalised acquisition time (CONTRACTS §3), shaped to broadcast against the
+    the shot's normalised acquisition time (reference §3), shaped to broadcast against the
     hook's first argument ((..., 1, 1) for W, (..., 1) for the others, ``...`` the shots'
     batch axes); ``gain`` receives t positionally, of the batch shape. A hook whose ``t`` has
     no default makes the effect ``needs_times``; without times the forward pass gives it
@@ -422,7 +422,7 @@ class Effect:
         A scalar parameter is returned as it is. A per-neuron parameter (``shape = {param:
         "neurons"}``) is held as a scalar (every neuron the same, e.g. before a fit) or as one
         1-D array per layer; this returns that layer's array, shape (d_l,), which broadcasts
-        against the hook's (..., d_l) values -- or the scalar. Public API (CONTRACTS §2b)::
+        against the hook's (..., d_l) values -- or the scalar. Public API (reference §2b)::
 
             @register
             class Transmission(Effect):

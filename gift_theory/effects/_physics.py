@@ -1,7 +1,7 @@
 """A composition of effects: the physics of one device or one model of it.
 
 :class:`Physics` holds the effects of one device in the canonical order and dispatches the
-stages of the generative process (CONTRACTS §2, §2b) to them::
+stages of the generative process (reference §2, §2b) to them::
 
     W_eff = effective_weights(W, l, L)          weights hooks, in order
     b_eff = bias(b, l, L)                       bias hooks, in order

@@ -1,4 +1,4 @@
-"""Loading effects a user adds (CONTRACTS §2b): a Python file, or the entry-point group
+"""Loading effects a user adds (reference §2b): a Python file, or the entry-point group
 ``gift.effects``.
 
 A plugin file is imported under a module name of its own (derived from its resolved path,
@@ -65,7 +65,7 @@ def load_plugin(path) -> list[str]:
     Parameters
     ----------
     path : str or os.PathLike
-        A Python file whose classes use ``@register`` (CONTRACTS §2b).
+        A Python file whose classes use ``@register`` (reference §2b).
 
     Returns
     -------

@@ -1,6 +1,6 @@
 """``activation_gain``: the chip's nonlinearity has another slope, act(z) = sigma(kappa z)
 on the hidden layers (a nonlinear element driven harder or softer than modelled;
-CONTRACTS §6 class ``activation_mismatch``). ``kappa = 1`` is the paper's model."""
+reference §6 class ``activation_mismatch``). ``kappa = 1`` is the paper's model."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """``bias_offset``: b_eff = b + delta_l, delta_l[i] ~ N(0, sigma^2) iid per neuron, drawn
 once per device and fixed (a fabrication / calibration offset of each neuron's
-pre-activation; CONTRACTS §6 class ``bias_offset``). Like ``weight_error``, the device is
+pre-activation; reference §6 class ``bias_offset``). Like ``weight_error``, the device is
 named by ``seed`` (static): the same seed is the same device, another seed another
 device. Its draws are independent of ``weight_error``'s for the same seed."""
 

@@ -1,5 +1,5 @@
 """``drift``: gain g_l = 1 + r t, t in [0, 1] the shot's normalised acquisition time
-(CONTRACTS §6 class ``time_drift``: a parameter that changes over the acquisition time).
+(reference §6 class ``time_drift``: a parameter that changes over the acquisition time).
 Without acquisition times t = 0 and the effect is silent."""
 
 from __future__ import annotations

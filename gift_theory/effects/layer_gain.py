@@ -1,5 +1,5 @@
 """``layer_gain``: one fixed gain g_l per layer, fixed per device, W_l^eff = g_l W_l (optical
-insertion loss, detector responsivity; CONTRACTS §2, §6 class ``gain_error``).
+insertion loss, detector responsivity; reference §2, §6 class ``gain_error``).
 
 The parameter ``g`` is per layer (``shape = {"g": "layers"}``): a number (the same gain on
 every layer, as ``layer_gain=0.6`` on the command line gives) or one value per layer, held as

@@ -28,6 +28,7 @@ from ._rivals import retrain as retrain
 from ._rivals import spsa as spsa
 from ._run import GRID as GRID
 from ._run import METHODS as METHODS
+from ._run import RUNNERS as RUNNERS
 from ._run import oracle_grid as oracle_grid
 from ._run import true_physics as true_physics
 from ._run import compare_methods as compare_methods

@@ -188,26 +188,88 @@ def paired_line_search(problem, direction, *, C2=None, se_pair=None, refine: int
     if not confirm:
         info["reason"] = "unconfirmed: the best measured step is taken"
         return w_best, info
+    accepted, conf = confirm_on_chip(problem, w_best, z_accept=z_accept, rounds=confirm_rounds)
+    info.update(conf, accepted=accepted)
+    return (w_best if accepted else w0), info
+
+
+def confirm_on_chip(problem, w, *, z_accept: float = 2.5, rounds: int | None = None, reference=None):
+    """Is ``w`` better than ``reference`` (default w0) on the chip? Fresh paired Evals until convinced.
+
+    Each round measures one Eval_w(K1, K2) of the reference and one of ``w`` on the same inputs
+    (fresh shots: 2 units of budget) and looks at the running mean of the paired per-input
+    differences; ``w`` is accepted as soon as its improvement exceeds ``z_look`` standard errors,
+    ``z_look`` the Bonferroni boundary that keeps the overall one-sided level at
+    P(Z > z_accept) over the looks the budget allows (module docstring).
+
+    Returns
+    -------
+    accepted : bool
+    info : dict with ``z_look``, ``confirm_mean``, ``confirm_se``, ``confirm_z``, ``confirm_rounds``
+        and ``reason`` (one line)
+    """
+    ref = problem.w0 if reference is None else reference
+    n = int(problem.evaluations_left() // 2)
+    if rounds is not None:
+        n = min(n, int(rounds))
+    z_look = max(z_accept, float(stats.norm.isf(stats.norm.sf(z_accept) / max(n, 1))))
+    info = {"z_look": z_look, "confirm_rounds": 0}
     diffs = []
-    rounds = int(problem.evaluations_left() // 2)
-    if confirm_rounds is not None:
-        rounds = min(rounds, int(confirm_rounds))
-    z_look = max(z_accept, float(stats.norm.isf(stats.norm.sf(z_accept) / max(rounds, 1))))
-    info["z_look"] = z_look
-    for _ in range(rounds):
+    for _ in range(n):
         if problem.evaluations_left() < 2 - 1e-9:
             break
-        diffs.append(problem.eval_chip(w0) - problem.eval_chip(w_best))
+        diffs.append(problem.eval_chip(ref) - problem.eval_chip(w))
         m, s = _mean_se(np.mean(diffs, axis=0))
-        info["confirm_mean"], info["confirm_se"] = m, s
-        info["confirm_z"] = m / s if s > 0 else math.copysign(math.inf, m)
+        info.update(confirm_mean=m, confirm_se=s, confirm_rounds=len(diffs),
+                    confirm_z=m / s if s > 0 else math.copysign(math.inf, m))
         if m > z_look * s:
-            info["accepted"] = True
             info["reason"] = f"accepted: confirmation z = {info['confirm_z']:.2f} > {z_look:.2f}"
-            return w_best, info
+            return True, info
     info["reason"] = (f"confirmation not significant: z = {info['confirm_z']:.2f} <= {z_look:.2f} after {len(diffs)} "
                       f"fresh pairs" if diffs else "no budget left for the confirmation")
-    return w0, info
+    return False, info
+
+
+def confirm_best(problem, candidates, *, z_accept: float = 2.5):
+    """The best of several candidate weight sets, if the chip confirms it better than w0.
+
+    Each round measures one Eval_w(K1, K2) of w0 and of every candidate on the same inputs (fresh
+    shots); after each round the candidate of the largest mean paired improvement is accepted
+    when it exceeds ``z_look`` standard errors, the Bonferroni boundary over the looks the budget
+    allows times the candidates (overall one-sided level P(Z > z_accept)).
+
+    Returns
+    -------
+    index of the accepted candidate or None, info (as :func:`confirm_on_chip`, plus ``chosen``
+    and each candidate's last ``confirm_means``)
+    """
+    k = len(candidates)
+    if k == 1:
+        ok, info = confirm_on_chip(problem, candidates[0], z_accept=z_accept)
+        return (0 if ok else None), dict(info, chosen=0 if ok else None)
+    n = int(problem.evaluations_left() // (k + 1))
+    z_look = max(z_accept, float(stats.norm.isf(stats.norm.sf(z_accept) / max(n * k, 1))))
+    info = {"z_look": z_look, "confirm_rounds": 0, "chosen": None}
+    diffs = [[] for _ in candidates]
+    for _ in range(n):
+        if problem.evaluations_left() < k + 1 - 1e-9:
+            break
+        l0 = problem.eval_chip(problem.w0)
+        for d, w in zip(diffs, candidates):
+            d.append(l0 - problem.eval_chip(w))
+        stats_ = [_mean_se(np.mean(d, axis=0)) for d in diffs]
+        best = int(np.argmax([m for m, _ in stats_]))
+        m, s_ = stats_[best]
+        info.update(confirm_mean=m, confirm_se=s_, confirm_rounds=len(diffs[0]), confirm_means=[a for a, _ in stats_],
+                    confirm_z=m / s_ if s_ > 0 else math.copysign(math.inf, m))
+        if m > z_look * s_:
+            info["chosen"] = best
+            info["reason"] = f"accepted candidate {best}: confirmation z = {info['confirm_z']:.2f} > {z_look:.2f}"
+            return best, info
+    info["reason"] = (f"confirmation not significant: z = {info['confirm_z']:.2f} <= {z_look:.2f} after "
+                      f"{info['confirm_rounds']} fresh rounds" if info["confirm_rounds"] else
+                      "no budget left for the confirmation")
+    return None, info
 
 
 def why(method: str, w0, params, info: dict) -> dict | None:
@@ -230,7 +292,7 @@ def why(method: str, w0, params, info: dict) -> dict | None:
                   f"step {c} x eta has the lowest Eval" + ("" if info.get("keep_w0") else " (w0 not a candidate)"))
         return {"kept_w0": kept, "reason": reason, "confirmation_z": math.nan, "predicted_gain": math.nan,
                 "predicted_gain_pct": math.nan}
-    if "accepted" not in info:
+    if "accepted" not in info or "probe" not in info:  # not a line search (calibrate, identify-retrain)
         return None
     pg = info.get("predicted_gain", math.nan)
     l0 = info.get("loss_w0", math.nan)

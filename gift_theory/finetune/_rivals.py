@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._errors import require
 from .._model import forward, named_subkey, sample_noise, squared_error
 from .._params import flatten
 from ..effects import Physics
@@ -79,7 +80,7 @@ def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps
 
     ``evaluations`` units of chip budget buy ``shots`` repeated shots of as many fine-tuning
     inputs as they pay for (with the hidden layers where the chip has taps); the lab's
-    :func:`~gift_theory.lab.diagnose` fits awgn and every effect of CONTRACTS §2 (but
+    :func:`~gift_theory.lab.diagnose` fits awgn and every effect of reference §2 (but
     weight_error, whose fixed offsets retraining cannot use) on half the inputs and tests
     them on the other half. The physics is the top-ranked model when the awgn model fails
     its test (p < 0.01), else the awgn model with its fitted s.
@@ -93,21 +94,55 @@ def identify_physics(problem, *, shots: int = 16, evaluations: float = 2.0, taps
 
     n = int(min(problem.K1, max(8, math.floor(evaluations * problem.unit_shots / shots))))
     meas = problem.chip.measure(problem.w0, problem.x_ft[:n], shots, taps=taps)
-    # per-device offsets are a property of this chip's fixed draws, not of its noise: retraining cannot use them
-    d = diagnose(named_subkey(problem.key, f"identify{seed}"), meas,
-                 candidates=[c for c in default_candidates(meas) if not fitted_as_offsets(c)])
-    physics = d.ranking[0].model.physics if d.missing_effect_detected else d.baseline.physics
-    return physics, {"physics": physics.describe(), "inputs": n, "shots": shots, "taps": meas.has_taps,
+    physics, info = physics_of(named_subkey(problem.key, f"identify{seed}"), meas)
+    return physics, {**info, "inputs": n, "shots": shots}
+
+
+def physics_of(key, meas):
+    """The physics a measurement of w0 shows, for retraining: the lab's diagnosis over every effect
+    but the per-device offsets (retraining draws no device, so it cannot use them); the
+    top-ranked model when the awgn model fails its test and that model passes, else the awgn
+    model at its fitted level (a model the data reject is no chip to retrain under).
+
+    Returns
+    -------
+    physics, info (``physics``, ``taps``, ``baseline_p``, ``missing_effect_detected``, ``ranking``
+    (the top three), ``top_status``, ``used``)
+    """
+    from ..lab import default_candidates, diagnose
+    from ..lab._offset_kinds import fitted_as_offsets
+
+    d = diagnose(key, meas, candidates=[c for c in default_candidates(meas) if not fitted_as_offsets(c)])
+    top = d.ranking[0] if d.ranking else None
+    passes = top is not None and top.status == "passes"
+    physics = top.model.physics if d.missing_effect_detected and passes else d.baseline.physics
+    return physics, {"physics": physics.describe(), "taps": meas.has_taps,
                      "baseline_p": d.baseline_comparison.p_value,
                      "missing_effect_detected": d.missing_effect_detected,
-                     "ranking": [c.as_json()["effect"] for c in d.ranking[:3]]}
+                     "ranking": [c.as_json()["effect"] for c in d.ranking[:3]],
+                     "top_status": None if top is None else top.status,
+                     "used": "the top-ranked model" if d.missing_effect_detected and passes else
+                     ("the awgn model (the top-ranked model fails its test)" if d.missing_effect_detected else
+                      "the awgn model (it fits)")}
 
 
-def identify_retrain(problem, **kw):
-    """Spend the budget measuring the chip, identify its physics (s and any missing effect of
-    CONTRACTS §2, :func:`identify_physics`), retrain in silico at the estimate from w0."""
+def identify_retrain(problem, *, confirm: bool = True, z_accept: float = 2.5, **kw):
+    """Spend part of the budget measuring the chip, identify its physics (s and any missing effect
+    of docs/reference.md §2 the data do not reject, :func:`identify_physics`), retrain in silico at
+    the estimate from w0; then confirm the retrained weights against w0 on the chip (paired
+    evaluations on fresh shots, the line search's rule) and return w0 unless the chip finds them
+    significantly better. A chip with fixed per-device errors (detector gains, offsets, fixed maps)
+    can be read as noise effects that retraining under makes worse on the chip; the confirmation
+    is what keeps that from being returned. ``confirm=False``: the retrained weights as they are."""
+    from ._linesearch import confirm_on_chip
+
     physics, info = identify_physics(problem, **kw)
-    return retrain(problem, physics), info
+    w = retrain(problem, physics)
+    if not confirm:
+        return w, info
+    accepted, conf = confirm_on_chip(problem, w, z_accept=z_accept)
+    info.update(conf, accepted=accepted)
+    return (w if accepted else problem.w0), info
 
 
 # ------------------------------------------------------------------------------- SPSA
@@ -154,12 +189,16 @@ def spsa(problem, *, batch: int = 64, c: float = 0.01, step: float = 5e-4, alpha
 
 
 # ------------------------------------------------------------------------------- PAT
-@partial(jax.jit, static_argnames=("arch", "tx"))
-def _pat_step(params, opt_state, key, x, y, y_chip, physics, arch, tx):
+@partial(jax.jit, static_argnames=("arch", "tx", "draws"))
+def _pat_step(params, opt_state, key, x, y, y_chip, physics, arch, tx, draws=1):
     def loss(p):
-        noise = sample_noise(key, arch, physics, y_chip.shape[:2], p[0].W.dtype)
+        shape = (y_chip.shape[0], y_chip.shape[1] * draws)
+        noise = sample_noise(key, arch, physics, shape, p[0].W.dtype)
         out = forward(p, x[:, None, :], noise, physics, arch).y
-        out = out + jax.lax.stop_gradient(y_chip - out)  # forward value from the chip, backward through the model
+        if draws == 1:  # the chip's value forward, the model's derivative backward
+            out = out + jax.lax.stop_gradient(y_chip - out)
+        else:  # the chip's mean error forward; the model's own spread (and its derivative) kept
+            out = out + jax.lax.stop_gradient(jnp.mean(y_chip, 1, keepdims=True) - jnp.mean(out, 1, keepdims=True))
         return jnp.mean(squared_error(out, y[:, None, :]))
 
     g = jax.grad(loss)(params)
@@ -167,23 +206,50 @@ def _pat_step(params, opt_state, key, x, y, y_chip, physics, arch, tx):
     return optax.apply_updates(params, updates), opt_state
 
 
-def pat(problem, *, batch: int = 32, lr: float = 0.01, momentum: float = 0.9):
+def pat(problem, *, batch: int = 32, lr: float = 0.01, momentum: float = 0.9, noise: str = "s0", draws: int = 8,
+        start=None, level: float | None = None, reserve: float = 0.0):
     """Hybrid physics-aware training: forward passes on the chip, gradients through the model.
 
-    Mini-batch SGD on the fine-tuning set until the chip budget is spent; the output of each
-    step's forward pass is the chip's measurement, its derivative the model's (at s0).
+    Mini-batch SGD on the fine-tuning set until the chip budget is spent.
+
+    ``noise="s0"`` (the textbook rule): each step's output is the chip's measurement, its
+    derivative the model's at s0 (one model draw per shot). The gradient is then 2 (y_chip - y)
+    d out/dw: it carries the chip's mean error but not the derivative of the chip's noise
+    variance, the other half of the loss E|y_chip - y|^2 -- on a chip noisier than the model
+    (st > s0) the steps fit the mean by growing weights that amplify the chip's noise, so the
+    true loss can rise while the mean error falls (``gift demo``: 0.73 -> 0.93 at s0 = 0.05,
+    st = 0.2).
+
+    ``noise="identified"``: one evaluation first estimates the chip's additive noise level
+    (:func:`identify_noise_level`), and the model at that level takes ``draws`` draws per shot;
+    the step's output is the model's own draws shifted by the chip's mean error (y_chip's mean
+    minus the model's), so the gradient is the chip's mean error times the model's derivative plus
+    the derivative of the model's noise variance at the chip's level: the whole loss.
+
+    ``start``: the weights to start from (default w0); ``level``: the chip's noise level when it
+    is already known (no evaluation spent on it); ``reserve``: chip evaluations left unspent.
     """
+    require(noise in ("s0", "identified"), f"pat: noise={noise!r}; known: s0, identified")
     tx = optax.sgd(lr, momentum=momentum)
-    params = problem.w0
+    params = problem.w0 if start is None else start
     opt_state = tx.init(params)
+    physics, info = problem.model, {}
+    if noise == "identified":
+        if level is None:
+            s_hat, info = identify_noise_level(problem, evaluations=1.0)
+        else:
+            s_hat, info = level, {}
+        physics = problem.model.replace(s=float(s_hat))
     per_step = batch * problem.K2
-    remaining = problem.chip.ledger.remaining()
+    remaining = problem.chip.ledger.remaining() - reserve * problem.unit_shots
     n_steps = int(remaining // per_step) if math.isfinite(remaining) else 100
     rng = np.random.default_rng(int(jax.random.randint(jax.random.fold_in(problem.key, 3), (), 0, 2**31 - 1)))
     key = jax.random.fold_in(problem.key, 901)
+    d = 1 if noise == "s0" else int(draws)
     for k in range(n_steps):
         idx = rng.choice(problem.K1, size=min(batch, problem.K1), replace=False)
         y_chip = jnp.asarray(problem.chip.measure(params, problem.x_ft[idx], problem.K2).y, jnp.float32)
         params, opt_state = _pat_step(params, opt_state, jax.random.fold_in(key, k), jnp.asarray(problem.x_ft[idx]),
-                                      jnp.asarray(problem.y_ft[idx]), y_chip, problem.model, problem.arch, tx)
-    return params, {"steps": n_steps, "batch": batch, "lr": lr}
+                                      jnp.asarray(problem.y_ft[idx]), y_chip, physics, problem.arch, tx, d)
+    return params, {"steps": n_steps, "batch": batch, "lr": lr, "noise": noise,
+                    **({"noise_level": physics.s, "noise_level_se": info.get("s_hat_se")} if noise != "s0" else {})}

@@ -1,4 +1,4 @@
-"""``run_finetune``: one method on one misspecified pair, scored by the referee (CONTRACTS §4)."""
+"""``run_finetune``: one method on one misspecified pair, scored by the referee (reference §4)."""
 
 from __future__ import annotations
 
@@ -6,11 +6,13 @@ import time
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._arch import Architecture
 from .._errors import require
 from .._params import cast
 from .._phases import phase
+from ..chips import SimulatedChip, chip_scores
 from ..effects import Physics
 from ._directions import direction
 from ._linesearch import gift_printed, paired_line_search, why
@@ -21,8 +23,8 @@ from ._tree import norm
 from ..estimators import paper_constant
 
 #: every method `gift finetune --method` accepts, plus "none" (no fine-tuning)
-METHODS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "spsa", "pat", "identify-retrain",
-           "retrain", "none")
+METHODS = ("gift", "gift-printed", "pathwise", "ift", "gradient", "random", "spsa", "pat", "pat-identified",
+           "identify-retrain", "calibrate", "retrain", "none")
 
 
 def _line(kind):
@@ -49,6 +51,15 @@ def _printed(problem, eta=None, rel_step: float = 0.01, direction_K2: int = 16, 
     return w, info
 
 
+def _pat_identified(problem, **kw):
+    return pat(problem, noise="identified", **kw)
+
+
+def _calibrate(problem, **kw):
+    from ..calibration import calibrate
+    return calibrate(problem, **kw)
+
+
 def _none(problem):
     return problem.w0, {}
 
@@ -57,6 +68,9 @@ def _retrain(problem, at: str = "chip"):
     """The oracle retrains at the chip's physics; ``at="s0"`` is its control, the same retraining at
     the model's own awgn(s0) (no noise mismatch: what extra training alone gives)."""
     require(at in ("chip", "s0"), f"retrain: at={at!r}; known: chip, s0")
+    require(at == "s0" or getattr(problem.chip, "physics", None) is not None,
+            "--method retrain: the oracle knows a simulated chip's physics; a user's chip hides it "
+            "(--retrain-at s0 retrains at s0)")
     physics = problem.chip.physics if at == "chip" else problem.model
     return retrain(problem, physics), {"physics": physics.describe(), "at": at}
 
@@ -78,7 +92,9 @@ RUNNERS = {
     "random": _line("random"),
     "spsa": spsa,
     "pat": pat,
+    "pat-identified": _pat_identified,
     "identify-retrain": identify_retrain,
+    "calibrate": _calibrate,
     "retrain": _retrain,
     "none": _none,
 }
@@ -125,16 +141,22 @@ def true_physics(st: float, true_effects=()) -> Physics:
 def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gift", seed: int = 0,
                 budget: float = 20, K1=None, K2: int = 1, referee_K2: int = 32, chip=None,
                 predict_s: float | None = None, prediction_K2: int = 8, **options) -> dict:
-    """Run ``method`` on a prepared setting; the CONTRACTS §4 finetune keys plus ``info``.
+    """Run ``method`` on a prepared setting; the reference §4 finetune keys plus ``info``.
 
     The referee scores w0 and the returned weights on the same draws, loss and accuracy from
     one pass (``info["referee"]``: standard errors of each number and of the paired changes).
+    ``chip``: a device of the Chip protocol instead of a simulated chip with ``physics``; a
+    user's chip (anything but a :class:`~gift_theory.chips.SimulatedChip`) is scored on its own
+    fresh shots, ``referee_K2`` per input, not charged to the budget (``"scored_by": "chip"``;
+    ``physics`` may then be None: the chip's physics is unknown).
     ``predict_s``: for a line-search method, also Theorem 1's first-order prediction of the
     change of J_st at the best measured step, in silico with AWGN at ``predict_s`` and
     ``prediction_K2`` draws per training input, against the referee's realised change
     (``info["prediction"]``, :mod:`gift_theory.finetune._predict`).
     """
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
+    user_chip = chip is not None and not isinstance(chip, SimulatedChip)
+    require(physics is not None or user_chip, "finetune: the chip's physics is needed without a chip")
     with phase("problem"):
         problem = make_problem(arch, w0, ds.x_train, ds.y_train, s0=s0, true_physics=physics, budget=budget, K1=K1,
                                K2=K2, seed=seed, chip=chip)
@@ -143,11 +165,12 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
         params, info = RUNNERS[method](problem, **options)
         params = jax.block_until_ready(cast(params, jnp.float32))
     seconds = time.perf_counter() - t0
-    out = {"method": method, "s0": float(s0), "st": float(physics.s), "in_situ_evaluations": problem.evaluations_used(),
-           "seconds": seconds}
+    out = {"method": method, "s0": float(s0), "st": None if physics is None else float(physics.s),
+           "in_situ_evaluations": problem.evaluations_used(), "seconds": seconds,
+           "scored_by": "chip" if user_chip else "referee"}
     u = info.pop("_u", None)
     cand = None
-    if predict_s is not None and u is not None and info.get("alpha_best") is not None:
+    if predict_s is not None and u is not None and info.get("alpha_best") is not None and not user_chip:
         cand, u_unit = candidate(w0, u, info["alpha_best"])
         with phase("prediction"):
             prediction = first_order_prediction(problem, u_unit, info["alpha_best"], predict_s, info.get("C2_model"),
@@ -157,7 +180,10 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
                              ("test_", ds.x_test, ds.y_test, ds.labels_test)):
         sets = [w0, params] + ([cand] if cand is not None and split == "" else [])
         with phase("referee"):
-            losses, correct = referee_scores(sets, x, y, lab, physics, arch, K2=referee_K2)
+            if user_chip:  # the chip's own fresh shots, not charged to the method's budget
+                losses, correct = chip_scores(problem.chip, sets, x, y, lab, shots=referee_K2)
+            else:
+                losses, correct = referee_scores(sets, x, y, lab, physics, arch, K2=referee_K2)
         before, after = summary(losses[0], correct[0]), summary(losses[1], correct[1])
         out[f"{split}loss_before"], out[f"{split}loss_after"] = before["loss"], after["loss"]
         out[f"{split}accuracy_before"], out[f"{split}accuracy_after"] = before["accuracy"], after["accuracy"]
@@ -179,21 +205,25 @@ def finetune_on(ds, arch, w0, *, s0: float, physics: Physics, method: str = "gif
     return out
 
 
-def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),
+def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float | None = 0.2, true_effects=(),
                  method: str = "gift", seed: int = 0, weights: str | None = None, train_epochs: int | None = None,
-                 data_folder: str | None = None, **options) -> dict:
+                 data_folder: str | None = None, chip=None, out: str | None = None, **options) -> dict:
     """Fine-tune weights trained in silico at ``s0`` against a simulated chip at ``st``.
 
     Parameters
     ----------
     dataset, arch : the setting (weights trained once at s0, then cached)
     s0 : assumed noise level; st : the chip's true level
-    true_effects : CONTRACTS §2 effect specs the chip also has (``"shot=0.01"``, ...)
+    true_effects : reference §2 effect specs the chip also has (``"shot=0.01"``, ...)
     method : one of :data:`METHODS`
     seed : names the trained weights, the chip's noise and the method's randomness
     weights : optional weight file to fine-tune instead of training at s0
     train_epochs : train w0 for this many epochs instead of the default recipe's
     data_folder : the MNIST IDX folder for ``dataset="mnist"``
+    chip : a user's chip instead of the simulated one: an object of the Chip protocol, or
+        ``"FILE.py:NAME"`` (:func:`gift_theory.chips.load_chip`); ``st`` and ``true_effects`` then
+        describe nothing and must be None / empty; the scores are the chip's (fresh shots, not charged)
+    out : write the returned weights there (.npz with W1.., b1..)
     options : budget (chip evaluations, default 20), K1 (fine-tuning inputs, default all
         training inputs), K2 (shots per input per Eval, default 1), referee_K2, and the
         method's own keywords: ``confirm=False`` (gift, ift, gradient, random: no
@@ -202,20 +232,39 @@ def run_finetune(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, s
 
     Returns
     -------
-    dict with the CONTRACTS §4 finetune keys, plus ``gift_info`` (why a line search or
+    dict with the reference §4 finetune keys, plus ``gift_info`` (why a line search or
     Algorithm 1 returned w0 or a step: ``kept_w0``, ``reason``, ``confirmation_z``,
     ``predicted_gain``, ``predicted_gain_pct``; None for the other methods) and ``info``
     (what the method did).
     """
     require(method in RUNNERS, f"--method {method!r}: unknown; known: {', '.join(METHODS)}")
-    physics = true_physics(st, true_effects)  # bad input is reported before any training
+    if chip is not None:
+        require(st is None and not true_effects, "--chip: the chip is real; --st and --true-effect describe a "
+                                                 "simulated chip and go without --chip")
+        physics = None
+    else:
+        require(st is not None, "--st: the simulated chip's noise level is needed (or --chip FILE.py:NAME)")
+        physics = true_physics(st, true_effects)  # bad input is reported before any training
+    if out is not None:
+        require(str(out).endswith(".npz"), f"--out {out}: the weights are written as .npz")
+    arch_ = Architecture.parse(arch) if isinstance(arch, str) else arch
+    if isinstance(chip, str):
+        from ..chips import load_chip
+        chip = load_chip(chip, getattr(arch_, "widths", None))
     with phase("setting"):
         ds, arch_, w0 = load_setting(dataset, arch, s0, seed, weights=weights, train_epochs=train_epochs,
                                       data_folder=data_folder)
-    out = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=method, seed=seed, **options)
-    out.pop("params")
-    out.pop("direction")
-    return {"dataset": dataset, "arch": list(arch_.widths), **out}
+    res = finetune_on(ds, arch_, w0, s0=s0, physics=physics, method=method, seed=seed, chip=chip, **options)
+    params = res.pop("params")
+    res.pop("direction")
+    if out is not None:
+        from .._io import atomic_write
+        from .._params import params_to_arrays
+
+        arrays = {k: np.asarray(v, np.float64) for k, v in params_to_arrays(params).items()}
+        atomic_write(out, lambda fh: np.savez(fh, **arrays))
+        res["out"] = str(out)
+    return {"dataset": dataset, "arch": list(arch_.widths), **res}
 
 
 def compare_methods(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),

@@ -4,7 +4,7 @@ fit it, watch the error fall.
 
 The stages, one module each, in the order one :func:`diagnose` runs them::
 
-    _io          measurement files (CONTRACTS §3)
+    _io          measurement files (reference §3)
     _shots       a model of the device and its shots (the core's sampler and forward pass)
     _channels    the channels of a cell and the measurement's noise floor
     _qtest       the discrepancy test
@@ -16,7 +16,7 @@ The stages, one module each, in the order one :func:`diagnose` runs them::
 
 Public API (a notebook can do everything ``gift simulate/compare/diagnose/fit`` do)::
 
-    meas = load_measurement("chip.npz")                 # CONTRACTS §3, validated
+    meas = load_measurement("chip.npz")                 # reference §3, validated
     res = diagnose(key, meas)                           # baseline, p-value, ranking of effects
     fit = fit_effects(key, meas, ["shot"])              # before/after, fitted parameters
     cmp = compare(key, Model(physics), meas)            # discrepancy, floor, p-value
@@ -52,8 +52,18 @@ from ._fit import fit_uncertainty as fit_uncertainty
 from ._fit_moments import MomentProblem as MomentProblem
 from ._identify import Identification as Identification
 from ._identify import identify as identify
+from ._compare import PredictiveShots as PredictiveShots
+from ._compare import discrepancy_difference as discrepancy_difference
+from ._compare import predictive_shots as predictive_shots
+from ._figures import comparison_figure as comparison_figure
+from ._figures import comparison_table as comparison_table
+from ._figures import correlation_figure as correlation_figure
 from ._figures import error_ladder as error_ladder
+from ._figures import law_figure as law_figure
 from ._figures import moments_figure as moments_figure
+from ._figures import pairs_figure as pairs_figure
+from ._figures import pit_figure as pit_figure
+from ._figures import ppc_figure as ppc_figure
 from ._figures import where_figure as where_figure
 from ._io import load_csv as load_csv
 from ._io import load_netcdf as load_netcdf

@@ -14,7 +14,7 @@ import functools
 
 import jax
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from .._measurement import Measurement
 from .._model import named_subkey
@@ -51,6 +51,9 @@ class Comparison:
         alone adds, the statistic of ``p_value``; ``discrepancy`` stays the raw held-out Q
         (what ranking by held-out error needs: estimation error is part of a model's cost)
     replicates : number of refit-null replicates behind ``p_value`` (0: none needed)
+    channel_values : (n, L' C) the per-input channel values behind ``discrepancy`` (the paired
+        standard error of a difference of two models' discrepancies on the same inputs,
+        :func:`discrepancy_difference`), or None
     """
 
     discrepancy: float
@@ -66,6 +69,7 @@ class Comparison:
     channels: tuple = ()
     net_discrepancy: float | None = None
     replicates: int = 0
+    channel_values: np.ndarray | None = dataclasses.field(default=None, repr=False, compare=False)
 
     def as_dict(self) -> dict:
         extra = {} if not self.replicates else {"net_discrepancy": self.net_discrepancy,
@@ -112,7 +116,42 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     T, cells = combine(C, ref.weights)
     return Comparison(discrepancy=Q, se=null_sd, noise_floor=ref.noise_floor, floor_se=ref.floor_se, p_value=p,
                       per_input=T, per_layer=np.sum(np.maximum(zl, 0.0) ** 2, axis=1), layer_ids=meas.layer_ids(),
-                      cells=cells, channel_z=zl, channels=ref.channels, net_discrepancy=net, replicates=B)
+                      cells=cells, channel_z=zl, channels=ref.channels, net_discrepancy=net, replicates=B,
+                      channel_values=C.reshape(meas.n, -1))
+
+
+#: bootstrap replicates of :func:`discrepancy_difference`
+DIFFERENCE_REPLICATES = 1000
+
+
+def _q_of(T):
+    """Q of :func:`~gift_theory.lab._qtest.q_test` for a stack of channel matrices (B, n, C)."""
+    n = T.shape[1]
+    mean, sd = T.mean(1), T.std(1, ddof=1)
+    ok = sd > 1e-12 * (np.abs(mean) + 1e-300)
+    t = np.where(ok, mean / np.where(ok, sd, 1.0) * np.sqrt(n), 0.0)
+    with np.errstate(over="ignore", under="ignore", divide="ignore"):
+        z = stats.norm.isf(stats.t.sf(t, df=n - 1))
+    z = np.where(np.isfinite(z), z, t)
+    return np.sum(np.maximum(z, 0.0) ** 2, axis=1)
+
+
+def discrepancy_difference(a: Comparison, b: Comparison, replicates: int = DIFFERENCE_REPLICATES,
+                           seed: int = 0) -> tuple[float, float]:
+    """``(delta, se)``: a's discrepancy minus b's on the same inputs and its standard error, by the
+    paired bootstrap over inputs (inputs are independent; both models' channel values of an input
+    are resampled together, so what the two share cancels, as in ArviZ's ``compare``). ``se`` is
+    NaN when either comparison carries no channel values or the inputs differ."""
+    delta = float(a.discrepancy - b.discrepancy)
+    Ta, Tb = getattr(a, "channel_values", None), getattr(b, "channel_values", None)
+    if Ta is None or Tb is None or Ta.shape[0] != Tb.shape[0]:
+        return delta, float("nan")
+    if Ta is Tb:
+        return delta, 0.0
+    n = Ta.shape[0]
+    idx = np.random.default_rng(seed).integers(0, n, size=(replicates, n))
+    d = _q_of(Ta[idx]) - _q_of(Tb[idx])
+    return delta, float(np.std(d, ddof=1))
 
 
 def layer_level(key, model: Model, meas: Measurement, layer: int, xtol: float = 1e-4) -> float:
@@ -139,6 +178,81 @@ def layer_level(key, model: Model, meas: Measurement, layer: int, xtol: float = 
     return float(np.exp(optimize.brentq(gap, lo, hi, xtol=xtol)))
 
 
+#: degree of the polynomial each neuron's measured transfer is read with (:func:`transfer_level`)
+TRANSFER_DEGREE = 3
+#: a failing layer's level is read through its measured transfer only when that transfer changes
+#: the model shots' log variance by more than this, rms over the cells (a factor 1.65 in
+#: variance): a transfer near the identity is the polynomial's own error (rms 0.06-0.22 on the
+#: layers of shot, multiplicative and Laplace files, where it moved the level by up to 13 %;
+#: 1.2 on a square-law detector)
+TRANSFER_MIN_LOG_VAR = 0.5
+
+
+def _transfer(Ybar, Mbar, degree: int = TRANSFER_DEGREE):
+    """Per neuron the polynomial (least squares over the inputs) mapping the model's cell means
+    ``Mbar`` (n, d) to the measured ones ``Ybar``: a callable applied to model shots (..., d)."""
+    d = Ybar.shape[1]
+    coefs = []
+    for j in range(d):
+        x = Mbar[:, j]
+        scale = max(float(np.std(x)), 1e-12)
+        c = np.polynomial.polynomial.polyfit((x - x.mean()) / scale, Ybar[:, j], min(degree, max(len(x) - 2, 1)))
+        coefs.append((x.mean(), scale, c))
+
+    def apply(M):
+        return np.stack([np.polynomial.polynomial.polyval((M[..., j] - m0) / sc, c)
+                         for j, (m0, sc, c) in enumerate(coefs)], axis=-1)
+    return apply
+
+
+def transfer_level(key, model: Model, meas: Measurement, layer: int, start: float,
+                   xtol: float = 1e-4) -> tuple[float, float] | None:
+    """``(s, level_z)``: the additive noise level of layer ``layer`` read through its *measured*
+    transfer, and how far the layer's variability is from the joint level's through it; None
+    when the transfer changes the cells' log variance by less than :data:`TRANSFER_MIN_LOG_VAR`
+    (rms over the cells).
+
+    Each neuron's transfer is the polynomial (:data:`TRANSFER_DEGREE`) from the model's cell means
+    to the measured ones; the model's one-step shots are passed through it before their
+    variances meet the measured ones (as in :func:`layer_level`, mean log variance of r shots).
+    Where the readout is not the model's -- a square-law detector y = beta v^2 -- the measured
+    variance is the noise's times the transfer's slope squared (4 beta^2 v^2 s^2): read as is, the
+    output's level came out 0.005 on a chip at s = 0.1 whose hidden layers read 0.1; through the
+    transfer it is the noise's own. ``start``: the level the transfer is fitted at, the root
+    searched over [start / 20, 20 start] (the joint level: the level read without the transfer
+    can sit at its own bracket's end)."""
+    li = meas.layer_ids().index(layer)
+    Y = np.asarray(meas.layers()[li], np.float64)
+    target = float(np.mean(np.log(np.var(Y, axis=1, ddof=1) + 1e-30)))
+
+    def shots(s):
+        m = Model(model.physics.replace(s=float(s)), model.params, model.offsets)
+        return np.asarray(one_step_shots(key, m, meas, layer), np.float64)
+
+    M0 = shots(start)
+    f = _transfer(Y.mean(1), M0.mean(1))
+    with np.errstate(divide="ignore"):
+        bend = float(np.sqrt(np.mean((np.log(np.var(f(M0), axis=1, ddof=1) + 1e-30)
+                                      - np.log(np.var(M0, axis=1, ddof=1) + 1e-30)) ** 2)))
+    if bend < TRANSFER_MIN_LOG_VAR:
+        return None
+
+    @functools.lru_cache(maxsize=None)
+    def gap(log_s):
+        return float(np.mean(np.log(np.var(f(shots(np.exp(log_s))), axis=1, ddof=1) + 1e-30))) - target
+
+    lo, hi = float(np.log(start / 20.0)), float(np.log(start * 20.0))
+    if gap(lo) >= 0:
+        level = float(np.exp(lo))
+    elif gap(hi) <= 0:
+        level = float(np.exp(hi))
+    else:
+        level = float(np.exp(optimize.brentq(gap, lo, hi, xtol=xtol)))
+    joint = np.mean(np.log(np.var(Y, axis=1, ddof=1) + 1e-30)
+                    - np.log(np.var(f(shots(max(float(model.physics.s), 1e-4))), axis=1, ddof=1) + 1e-30), 1)
+    return level, over_inputs(joint)
+
+
 def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None = None, *,
                    own_level: bool = True) -> list[dict]:
     """Per measured layer: the one-step discrepancy (the layer's model fed the measured previous
@@ -150,12 +264,18 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
         the jointly fitted s -- does not make a healthy layer fail on its variance alone; a
         layer fails on the shape of its response and noise, not on a level another layer set.
 
+    A layer that fails its check (at 0.01, Bonferroni over the layers checked) and whose measured
+    transfer bends the model's variance has its level read through that transfer instead
+    (:func:`transfer_level`; ``"s_through_transfer": true``): its response is not the model's,
+    and a readout that bends it scales its variance with the slope squared.
+
     Without taps only layer 1 can be fed (when the network has one layer, that is the
     output); deeper layers need the taps.
     """
     if ref is None:
         ref = reference(named_subkey(key, "floor"), meas)
     rows = []
+    checked = len([l for l in meas.layer_ids() if meas.taps is not None or l == 1])
     for li, (l, Y) in enumerate(zip(meas.layer_ids(), meas.layers())):
         if meas.taps is None and l > 1:
             continue
@@ -174,8 +294,14 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
         if len(ref.channels) > 2:
             C = np.concatenate([C, paired_moment_channels(np.asarray(M, np.float64), Y, ref.split)], axis=1)
         Q, p, null_mean, null_sd, _ = q_test(C)
-        rows.append({"layer": l, "discrepancy": Q, "se": null_sd, "z": (Q - null_mean) / null_sd if null_sd > 0
-                     else float("nan"), "p_value": p, "s": level, "level_z": level_z})
+        row = {"layer": l, "discrepancy": Q, "se": null_sd, "z": (Q - null_mean) / null_sd if null_sd > 0
+               else float("nan"), "p_value": p, "s": level, "level_z": level_z}
+        if own_level and "awgn" in model.physics and p < 0.01 / max(checked, 1):
+            through = transfer_level(k_l, model, meas, l, max(float(model.physics.s), 1e-4))
+            if through is not None:
+                row["s"], row["level_z"] = through
+                row["s_through_transfer"] = True
+        rows.append(row)
     return rows
 
 
@@ -222,6 +348,43 @@ class Moments:
         return lr, float(np.sqrt(2.0 / (self.r - 1) + 2.0 / (self.K - 1)))
 
 
+@dataclasses.dataclass(frozen=True)
+class PredictiveShots:
+    """The measured shots and a model's own shots at the same inputs, per measured layer (the
+    numbers of a posterior-predictive overlay, :func:`gift_theory.lab._figures.ppc_figure`).
+
+    layer_ids : the 1-based layer of each entry
+    measured : lists of (n, r, d_l); model : lists of (n, K, d_l)
+    label : the model's name
+    """
+
+    layer_ids: tuple
+    measured: list
+    model: list
+    label: str
+
+    @property
+    def r(self) -> int:
+        return int(self.measured[0].shape[1])
+
+    def moments(self) -> "Moments":
+        """The per-neuron means and variances of these shots (:class:`Moments`)."""
+        return Moments(layer_ids=self.layer_ids, mean=[Y.mean(1) for Y in self.measured],
+                       var=[Y.var(1, ddof=1) for Y in self.measured], model_mean=[M.mean(1) for M in self.model],
+                       model_var=[M.var(1, ddof=1) for M in self.model], r=self.r, K=int(self.model[0].shape[1]),
+                       label=self.label)
+
+
+def predictive_shots(key, model: Model, meas: Measurement, *, shots: int | None = None,
+                     label: str | None = None) -> PredictiveShots:
+    """The measured shots and K = ``shots`` (default 4 r, at least 16) of the model's at every
+    input of ``meas`` (the draws of :func:`predictive_moments` for the same key)."""
+    K = max(4 * meas.r, 16) if shots is None else int(shots)
+    ms = [np.asarray(M, np.float64) for M in model_shots(key, model, meas, K)]
+    return PredictiveShots(layer_ids=tuple(meas.layer_ids()), measured=list(meas.layers()),
+                           model=ms, label=label or " + ".join(model.effects))
+
+
 def predictive_moments(key, model: Model, meas: Measurement, *, shots: int | None = None,
                        label: str | None = None) -> Moments:
     """The measured and the model's per-neuron mean and variance at every input of ``meas``.
@@ -234,13 +397,7 @@ def predictive_moments(key, model: Model, meas: Measurement, *, shots: int | Non
     shots : model shots per input K (default 4 r, at least 16)
     label : the model's name in the figures (default: its effects joined by " + ")
     """
-    K = max(4 * meas.r, 16) if shots is None else int(shots)
-    outs = model_shots(key, model, meas, K)
-    ms = [np.asarray(M, np.float64) for M in outs]
-    Ys = meas.layers()
-    return Moments(layer_ids=tuple(meas.layer_ids()), mean=[Y.mean(1) for Y in Ys], var=[Y.var(1, ddof=1) for Y in Ys],
-                   model_mean=[M.mean(1) for M in ms], model_var=[M.var(1, ddof=1) for M in ms], r=meas.r,
-                   K=int(ms[0].shape[1]), label=label or " + ".join(model.effects))
+    return predictive_shots(key, model, meas, shots=shots, label=label).moments()
 
 
 # ---- power: what a "consistent" verdict can and cannot rule out on this file ---------------------

@@ -17,14 +17,14 @@ the held-out half. ``missing_effect_detected`` is the baseline's goodness-of-fit
 ``p_value < 0.01``. A model with fitted offsets is tested against a refit null
 (:mod:`._offset_fit`, :mod:`._offset_null`).
 
-**Status and order** (CONTRACTS §6, 2026-11-25). Every candidate has a ``status``:
+**Status and order** (reference §6, 2026-11-25). Every candidate has a ``status``:
 ``"passes"`` (p >= 0.01 and every check of the verdict's rule holds: its values identified and
 its own effect's, with taps every layer right, and it buys its keep -- :mod:`._verdict`),
 ``"refused"`` (p >= 0.01 but a check refuses it) or ``"fails"`` (p < 0.01). The ranking lists
 those that pass, then the refused ones, then those the data reject (:func:`ranked`); among those
 that pass by the penalised held-out discrepancy ``discrepancy_after + 2 sd * (parameters the
 effect adds)`` (sd the baseline's standard deviation of the discrepancy, a per-device offset
-family counted by its effective degrees of freedom: CONTRACTS §4's parsimony, so a
+family counted by its effective degrees of freedom: reference §4's parsimony, so a
 one-parameter effect that explains the data beats a many-parameter one that also does), among
 the refused and the rejected by the held-out discrepancy itself. So ranking[0] is the model the
 verdict line names, and an effect the data reject at 0.01 is never first while another entry
@@ -85,7 +85,7 @@ from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, 
 from ._shots import Model, model_shots
 from ._verdict import as_json_fields, refusals, time_free, verdict
 
-#: the significance level of the goodness-of-fit test (CONTRACTS §4)
+#: the significance level of the goodness-of-fit test (reference §4)
 ALPHA = 0.01
 #: with taps, an offset model whose plain held-out test gives p below this is not run against
 #: its refit null (:meth:`Session.score`)
@@ -109,7 +109,7 @@ def default_candidates(meas: Measurement) -> list[str]:
     return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)]
 
 
-#: a candidate's status (CONTRACTS §6), in ranking order
+#: a candidate's status (reference §6), in ranking order
 STATUSES = ("passes", "refused", "fails")
 
 
@@ -166,7 +166,7 @@ class Candidate:
             out["with"] = list(self.effects[:-1])
         if self.refused_because:
             out["refused_because"] = list(self.refused_because)
-        from ._intervals import per_neuron_json  # CONTRACTS §2b: per-neuron values and their standard errors
+        from ._intervals import per_neuron_json  # reference §2b: per-neuron values and their standard errors
         out.update(per_neuron_json(self.model))
         if self.comparison.replicates:
             out["net_discrepancy_after"] = self.comparison.net_discrepancy
@@ -425,7 +425,7 @@ class Diagnosis:
     not_fitted: tuple = ()
     output_explanations: tuple = ()
     #: the verdict names the awgn model itself (it passes and the identification flags nothing):
-    #: the JSON ranking then starts with it (CONTRACTS §6: ranking[0] is what the verdict names)
+    #: the JSON ranking then starts with it (reference §6: ranking[0] is what the verdict names)
     names_baseline: bool = False
 
     @property
@@ -442,7 +442,7 @@ class Diagnosis:
                 "n_free": 0.0, "nominal_params": 0}
 
     def as_json(self) -> dict:
-        """The CONTRACTS §4 object of ``gift diagnose --json`` (plus a few extra keys)."""
+        """The reference §4 object of ``gift diagnose --json`` (plus a few extra keys)."""
         c = self.baseline_comparison
         return {"baseline": {"effects": self.baseline.effects, "params": self.baseline.params_json(),
                              "discrepancy": c.discrepancy, "noise_floor": c.noise_floor, "p_value": c.p_value,
@@ -468,8 +468,8 @@ def _status(c: Candidate) -> str:
 
 
 def rank_key(c: Candidate):
-    """The order of the ranking (CONTRACTS §6): those that pass, then the refused ones, then those
-    the data reject; among those that pass by penalised score (the parsimony of CONTRACTS §4),
+    """The order of the ranking (reference §6): those that pass, then the refused ones, then those
+    the data reject; among those that pass by penalised score (the parsimony of reference §4),
     among the others by held-out discrepancy; ties by name (the order never depends on the
     order the candidates were scored in)."""
     status = _status(c)
@@ -936,7 +936,7 @@ class FitResult:
     held_out: np.ndarray | None = None  # the inputs scored (indices into the measurement)
 
     def as_json(self) -> dict:
-        """The CONTRACTS §4 object of ``gift fit --json`` (plus a few extra keys)."""
+        """The reference §4 object of ``gift fit --json`` (plus a few extra keys)."""
         a, b = self.comparison_after, self.comparison_before
         return {"effects": self.after.effects, "params": self.after.params_json(),
                 "discrepancy_before": b.discrepancy, "discrepancy_after": a.discrepancy,

@@ -4,11 +4,11 @@ Without taps only the output is measured, and every layer's deviation folds into
 mean map: a dead neuron in layer 2, a transfer that is not tanh, a detector's gain and offset
 all show as ``W_eff - W`` at the output, and the layer-wise tests (:mod:`._identify`) read them
 as a weight error there. This module asks the converse question, at the network level: for each
-candidate mechanism H -- a class of CONTRACTS §6 at a layer, with its own few parameters --
+candidate mechanism H -- a class of reference §6 at a layer, with its own few parameters --
 does the model *with H in it* reproduce the per-input mean of every output neuron?
 
 * The output's mean and its derivatives in each candidate's parameters come from one Monte
-  Carlo propagation through the programmed model (CONTRACTS §1, awgn at the identified level s,
+  Carlo propagation through the programmed model (reference §1, awgn at the identified level s,
   the standard normal draws fixed), the output's sensitivity to each hidden layer's activation
   carried back draw by draw (``G_{L-1} = W_L``, ``G_l = G_{l+1} diag(sigma'(z_{l+1})) W_{l+1}``);
   the noise level's column by a central difference on the same draws.

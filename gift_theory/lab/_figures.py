@@ -3,10 +3,13 @@ moments beside the model's.
 
 Plotting never recomputes the science: each function draws numbers already computed by
 :func:`gift_theory.lab.fit_effects`, :func:`gift_theory.lab.diagnose`,
-:func:`gift_theory.lab.where_it_fails` or :func:`gift_theory.lab._compare.predictive_moments`.
-Every figure function takes ``ax=`` (one panel) or ``fig=`` (several panels: a Figure or a
-SubFigure to draw into), returns the matplotlib Figure, never selects a backend and never
-writes a file; :func:`save_figures` writes them (atomically) and the CLI calls it.
+:func:`gift_theory.lab.where_it_fails`, :func:`gift_theory.lab._compare.predictive_shots` or
+the fit's intervals (the one exception, :func:`comparison_table`, bootstraps the paired
+standard error of two discrepancies from their channel values). Every figure function takes
+``ax=`` (one panel) or ``fig=`` (several panels: a Figure or a SubFigure to draw into), returns
+the matplotlib Figure, never selects a backend and never writes a file; :func:`save_figures`
+writes them (atomically), each beside its numbers as netCDF (``*_data`` functions: the
+``xarray.Dataset`` a figure draws), and the CLI calls it.
 """
 
 from __future__ import annotations
@@ -72,13 +75,37 @@ def error_ladder(rungs, noise_floor: float, floor_se: float, *, title: str = "er
     return _root(ax)
 
 
-def where_figure(stats: dict, *, title: str = "where the model fails", fig=None):
+def _significance(m: int, alpha: float = 0.01) -> float:
+    """The |z| beyond which one of ``m`` N(0, 1) cells is significant at family-wise ``alpha``
+    (two-sided, Bonferroni)."""
+    from scipy import stats
+
+    return float(stats.norm.isf(alpha / (2.0 * max(m, 1))))
+
+
+def _outline(ax, mask, color="k", lw=1.6):
+    """A box around every True cell of ``mask`` (rows, cols) of an imshow."""
+    from matplotlib.patches import Rectangle
+
+    for i, j in zip(*np.nonzero(mask)):
+        ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, edgecolor=color, lw=lw, zorder=3))
+
+
+#: statistics of the where-figure whose z is not normal in its tails (shown, not marked)
+UNMARKED = ("excess_kurtosis",)
+
+
+def where_figure(stats: dict, *, title: str = "where the model fails", fig=None, alpha: float = 0.01):
     """Per-cell standardised statistics over (layer:neuron) x bins of the model's pre-activation,
     one heatmap per statistic, each bin's value written in it.
 
     ``stats`` is the output of :func:`gift_theory.lab.where_it_fails`: ``rows`` ("layer:neuron",
-    0-based neurons) and for each statistic a (rows, bins) array of ``sum z / sqrt(count)``,
-    N(0, 1) under the model.
+    0-based neurons), ``edges`` (the bins' edges on the pre-activation, shared by every row) and
+    for each statistic a (rows, bins) array of ``sum z / sqrt(count)``, N(0, 1) under the model.
+    Every panel is on one colour scale (they are all z: a 3 reads as a 3 in every panel) and
+    the cells beyond the family-wise ``alpha`` threshold over all marked cells (Bonferroni,
+    two-sided) are outlined; the kurtosis (:data:`UNMARKED`), whose z is not normal in its tails
+    at a few dozen shots, is shown and not marked. An empty bin (no input reaches it) is grey.
 
     Returns
     -------
@@ -88,38 +115,349 @@ def where_figure(stats: dict, *, title: str = "where the model fails", fig=None)
     rows = list(stats["rows"])
     nr = len(rows)
     bins = np.asarray(stats["maps"][names[0]]).shape[1]
+    edges = stats.get("edges")
     if fig is None:
-        fig = _new_figure((2.2 + 2.7 * len(names), 1.6 + 0.22 * nr))
+        fig = _new_figure((2.6 + 2.7 * len(names), 2.0 + 0.22 * nr))
     axes = np.atleast_1d(fig.subplots(1, len(names), sharey=True))
     font = 7 if nr <= 40 else 5 if nr <= 80 else 0  # values on the bins while they stay legible
     layer_of = [r.split(":")[0] for r in rows]
     breaks = [i - 0.5 for i in range(1, nr) if layer_of[i] != layer_of[i - 1]]
+    Ms = {name: np.asarray(stats["maps"][name], float) for name in names}
+    marked = [n for n in names if n not in UNMARKED]
+    m = sum(int(np.isfinite(Ms[n]).sum()) for n in marked)
+    zc = _significance(m, alpha)
+    finite = [np.abs(M[np.isfinite(M)]) for M in Ms.values()]
+    lim = max([zc + 1.0] + [float(f.max()) for f in finite if f.size])
+    cmap = _cmap_with_empty()
+    im = None
     for k, (ax, name) in enumerate(zip(axes, names)):
-        M = np.asarray(stats["maps"][name], float)
-        lim = max(float(np.nanmax(np.abs(M))) if np.isfinite(M).any() else 1.0, 3.0)
-        # every statistic is standardised (N(0, 1) under the model): one symmetric scale
-        im = ax.imshow(M, aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
-        head, cbar_label = WHERE_LABELS.get(name, (name, "z"))
-        ax.set_title(head, fontsize=9)
-        ax.set_xticks(range(bins))
-        ax.set_xticklabels([str(b + 1) for b in range(bins)], fontsize=7)
-        ax.set_xlabel("bin of the model's pre-activation\n(1 = lowest)", fontsize=8)
+        M = Ms[name]
+        im = ax.imshow(np.ma.masked_invalid(M), aspect="auto", cmap=cmap, vmin=-lim, vmax=lim, interpolation="nearest")
+        head, _ = WHERE_LABELS.get(name, (name, "z"))
+        ax.set_title(head + ("\n(not marked: not normal in its tails)" if name in UNMARKED else ""), fontsize=9)
+        if edges is not None:
+            ax.set_xticks(np.arange(bins + 1) - 0.5)
+            ax.set_xticklabels([f"{e:.2g}" for e in edges], fontsize=6, rotation=60)
+            ax.set_xlabel("model's noiseless pre-activation z\n(bin edges; every row the same bins)", fontsize=8)
+        else:
+            ax.set_xticks(range(bins))
+            ax.set_xticklabels([str(b + 1) for b in range(bins)], fontsize=7)
+            ax.set_xlabel("bin of the model's pre-activation\n(1 = lowest)", fontsize=8)
         for y in breaks:
             ax.axhline(y, color="k", lw=0.8)
+        if name not in UNMARKED:
+            _outline(ax, np.nan_to_num(np.abs(M)) > zc)
         if font:
             for (i, j), v in np.ndenumerate(M):
                 if np.isfinite(v):
                     ax.text(j, i, f"{v:.1f}", ha="center", va="center", fontsize=font,
                             color="white" if abs(v) > 0.6 * lim else "black")
-        cb = fig.colorbar(im, ax=ax, shrink=0.9, aspect=30)
-        cb.set_label(cbar_label, fontsize=8)
-        cb.ax.tick_params(labelsize=7)
         if k == 0:
             step = max(1, int(np.ceil(nr / 60)))
             ax.set_yticks(range(0, nr, step))
             ax.set_yticklabels(rows[::step], fontsize=7 if nr <= 40 else 5)
             ax.set_ylabel("layer:neuron (neurons from 0)", fontsize=8)
-    fig.suptitle(title + "   (each bin: sum of z / sqrt(count), N(0, 1) under the model; |z| > 3 stands out)",
+    cb = fig.colorbar(im, ax=list(axes), shrink=0.9, aspect=40)
+    cb.set_label("z (N(0, 1) under the model), one scale for every panel", fontsize=8)
+    cb.ax.tick_params(labelsize=7)
+    for v in (-zc, zc):
+        cb.ax.axhline(v, color="k", lw=1.2)
+    fig.suptitle(f"{title}   (each bin: sum of z / sqrt(count) over the inputs in it; outlined: |z| > {zc:.2f}, "
+                 f"significant at {alpha:g} family-wise over {m} cells; grey: no input in the bin)", fontsize=9)
+    return _root(fig)
+
+
+def _cmap_with_empty():
+    import matplotlib
+
+    return matplotlib.colormaps["RdBu_r"].with_extremes(bad="0.8")
+
+
+def pit_figure(stats: dict, *, title: str = "calibration of the model's law: PIT of the measured shots", fig=None):
+    """Per measured layer, the histogram of the measured shots' randomised PIT among the model's
+    shots of their cell (``stats["pit"]`` of :func:`gift_theory.lab.where_it_fails`): flat under
+    the model; a U shape means the model's spread is too narrow, a hump too wide, a slope a
+    shifted mean. Band: +-2 sd of a bin's share if each cell counted once (a cell's shots share
+    the model's draws, so this is the wider, conservative band)."""
+    layers = sorted(stats["pit"])
+    if fig is None:
+        fig = _new_figure((2.2 + 2.6 * len(layers), 3.2))
+    axes = np.atleast_1d(fig.subplots(1, len(layers), sharey=True))
+    for ax, l in zip(axes, layers):
+        counts = np.asarray(stats["pit"][l], float)
+        nb = counts.size
+        share = counts / max(counts.sum(), 1.0)
+        p = 1.0 / nb
+        band = 2.0 * np.sqrt(p * (1 - p) / max(stats["pit_cells"][l], 1))
+        ax.axhspan(p - band, p + band, color="0.88", label="uniform $\\pm$ 2 sd")
+        ax.axhline(p, color="0.4", lw=0.8)
+        ax.bar((np.arange(nb) + 0.5) / nb, share, width=1.0 / nb, color="tab:blue", alpha=0.7, edgecolor="k",
+               lw=0.4, label="measured shots")
+        ax.set_xlim(0, 1)
+        ax.set_xlabel("PIT: share of the model's shots below a measured one", fontsize=8)
+        ax.set_title(f"layer {l}", fontsize=9)
+        ax.legend(fontsize=7, loc="lower center")
+    axes[0].set_ylabel("share of the measured shots", fontsize=8)
+    fig.suptitle(title + "  (flat: calibrated; U: model too narrow; hump: too wide; slope: mean shifted)", fontsize=9)
+    return _root(fig)
+
+
+def correlation_figure(stats: dict, *, title: str = "correlation between neurons: measured against model",
+                       fig=None, alpha: float = 0.01):
+    """Per measured layer of two or more neurons, the z of each pair's within-cell correlation
+    (measured against the model's, Fisher z over inputs; ``stats["correlation"]``), on one colour
+    scale for every panel, the pairs significant at family-wise ``alpha`` over all pairs
+    outlined. A shared gain or a common noise shows as a block of one sign."""
+    corr = {l: np.asarray(v, float) for l, v in stats["correlation"].items()}
+    layers = sorted(corr)
+    if fig is None:
+        fig = _new_figure((1.8 + 3.2 * max(len(layers), 1), 3.6))
+    if not layers:
+        ax = fig.add_subplot()
+        ax.text(0.5, 0.5, "no measured layer has two neurons", ha="center", va="center")
+        ax.set_axis_off()
+        return _root(fig)
+    axes = np.atleast_1d(fig.subplots(1, len(layers)))
+    m = sum(C.shape[0] * (C.shape[0] - 1) // 2 for C in corr.values())
+    zc = _significance(m, alpha)
+    lim = max([zc + 1.0] + [float(np.abs(C).max()) for C in corr.values()])
+    im = None
+    for ax, l in zip(axes, layers):
+        C = corr[l]
+        im = ax.imshow(C, cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
+        _outline(ax, np.triu(np.abs(C) > zc, 1) | np.tril(np.abs(C) > zc, -1), lw=1.0)
+        d = C.shape[0]
+        step = max(1, int(np.ceil(d / 16)))
+        ax.set_xticks(range(0, d, step))
+        ax.set_yticks(range(0, d, step))
+        ax.tick_params(labelsize=6)
+        ax.set_xlabel("neuron", fontsize=8)
+        ax.set_ylabel("neuron", fontsize=8)
+        ax.set_title(f"layer {l}", fontsize=9)
+    cb = fig.colorbar(im, ax=list(axes), shrink=0.9)
+    cb.set_label("z of measured - model correlation\n(Fisher z, over inputs)", fontsize=8)
+    for v in (-zc, zc):
+        cb.ax.axhline(v, color="k", lw=1.2)
+    fig.suptitle(f"{title}   (outlined: |z| > {zc:.2f}, significant at {alpha:g} family-wise over {m} pairs)",
+                 fontsize=9)
+    return _root(fig)
+
+
+def law_figure(stats: dict, *, title: str = "the noise's law: quantiles of the standardised shots", fig=None):
+    """Per measured layer, the quantile-quantile plot of the measured shots standardised by the
+    model's cell mean and variance against the model's own shots standardised alike
+    (``stats["qq"]``): on the diagonal under the model; tails above it on the right (below on
+    the left) are heavier than the model's (a Laplace law), inside it lighter (a uniform law).
+    The legend gives both pooled excess kurtoses."""
+    qq = stats["qq"]
+    layers = sorted(qq)
+    if fig is None:
+        fig = _new_figure((1.8 + 3.0 * len(layers), 3.6))
+    axes = np.atleast_1d(fig.subplots(1, len(layers)))
+    for ax, l in zip(axes, layers):
+        q = qq[l]
+        xm, ym = np.asarray(q["model"], float), np.asarray(q["measured"], float)
+        lo, hi = float(min(xm.min(), ym.min())), float(max(xm.max(), ym.max()))
+        ax.plot([lo, hi], [lo, hi], color="k", lw=0.8, ls="--", label="the model's law")
+        ax.plot(xm, ym, "o-", ms=3, color="tab:red",
+                label=f"measured: excess kurtosis {q['kurtosis_measured']:+.2f}\n(model's {q['kurtosis_model']:+.2f})")
+        ax.set_xlabel("model's quantile (standardised shot)", fontsize=8)
+        ax.set_title(f"layer {l}", fontsize=9)
+        ax.legend(fontsize=7, loc="upper left")
+        ax.grid(alpha=0.3, lw=0.5)
+    axes[0].set_ylabel("measured quantile (standardised shot)", fontsize=8)
+    fig.suptitle(title + "  (above the diagonal on the right: heavier tails than the model's)", fontsize=9)
+    return _root(fig)
+
+
+def ppc_figure(pred, layer: int, *, fig=None, max_neurons: int = 16, title: str | None = None):
+    """Posterior-predictive overlay of one layer, neuron by neuron (ArviZ's ``plot_ppc``): the
+    measured shots' density pooled over the inputs (black) against the model's, each replicate
+    of r shots per input a thin line and their mean a thick one, for one or several models
+    (a :class:`~gift_theory.lab._compare.PredictiveShots` or a sequence of them, same inputs).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plist = [pred] if hasattr(pred, "layer_ids") else list(pred)
+    li = list(plist[0].layer_ids).index(layer)
+    Y = np.asarray(plist[0].measured[li], float)
+    n, r, d = Y.shape
+    show = min(d, max_neurons)
+    cols = min(show, 4)
+    rws = int(np.ceil(show / cols))
+    if fig is None:
+        fig = _new_figure((2.4 * cols + 0.6, 2.0 * rws + 0.9))
+    axes = np.atleast_1d(fig.subplots(rws, cols, squeeze=False)).ravel()
+    colors = _COLORS[1:] if len(plist) == 1 else _COLORS
+    for j in range(show):
+        ax = axes[j]
+        vals = [Y[:, :, j].ravel()] + [np.asarray(p.model[li], float)[:, :, j].ravel() for p in plist]
+        lo, hi = min(float(v.min()) for v in vals), max(float(v.max()) for v in vals)
+        edges = np.linspace(lo, hi, 31)
+        centres = 0.5 * (edges[1:] + edges[:-1])
+        for c, p in zip(colors, plist):
+            M = np.asarray(p.model[li], float)[:, :, j]
+            reps = max(M.shape[1] // r, 1)
+            dens = np.array([np.histogram(M[:, g * r:(g + 1) * r].ravel(), edges, density=True)[0] for g in range(reps)])
+            for dd in dens:
+                ax.plot(centres, dd, color=c, lw=0.5, alpha=0.5)
+            ax.plot(centres, dens.mean(0), color=c, lw=1.6, label=f"{p.label} ({reps} x {r} shots)")
+        ax.stairs(np.histogram(Y[:, :, j].ravel(), edges, density=True)[0], edges, color="k", lw=1.3,
+                  label=f"measured ({r} shots)")
+        ax.set_title(f"neuron {layer}:{j}", fontsize=8)
+        ax.tick_params(labelsize=6)
+        if j % cols == 0:
+            ax.set_ylabel("density over the inputs", fontsize=7)
+        if j >= show - cols:
+            ax.set_xlabel("value", fontsize=7)
+    for ax in axes[show:]:
+        ax.set_axis_off()
+    axes[0].legend(fontsize=6, loc="upper right")
+    more = f"; first {show} of {d} neurons" if show < d else ""
+    fig.suptitle(title or f"layer {layer}: measured shots against the model's, pooled over {n} inputs{more}",
+                 fontsize=9)
+    return _root(fig)
+
+
+def comparison_table(named: list, best: int = 0, replicates: int | None = None) -> list[dict]:
+    """The rows of a model comparison (ArviZ's ``compare``): ``named`` is a list of (name,
+    :class:`~gift_theory.lab._compare.Comparison`, status) on the same inputs; each row has the
+    discrepancy and its sd under the model, the difference to the model ``best`` (index) and its
+    paired bootstrap standard error over inputs (:func:`~gift_theory.lab._compare.discrepancy_difference`)."""
+    from ._compare import DIFFERENCE_REPLICATES, discrepancy_difference
+
+    ref = named[best][1]
+    out = []
+    for name, c, status in named:
+        delta, se = discrepancy_difference(c, ref, replicates or DIFFERENCE_REPLICATES)
+        out.append({"model": name, "status": status, "discrepancy": float(c.discrepancy), "sd": float(c.se),
+                    "delta": delta, "delta_se": se, "p_value": float(c.p_value)})
+    return out
+
+
+def comparison_figure(table: list, noise_floor: float, floor_se: float, *, title: str = "model comparison",
+                      fig=None):
+    """The model comparison of :func:`comparison_table`, as a plot and a table: each model's
+    held-out discrepancy (+-2 sd under the model) against the noise floor band, its difference
+    to the first row with +-2 paired standard errors, and the numbers."""
+    if fig is None:
+        fig = _new_figure((12.0, 2.2 + 0.4 * len(table)))
+    ax, tx = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.0, 1.35]})
+    y = np.arange(len(table))[::-1]
+    d = np.array([t["discrepancy"] for t in table])
+    sd = np.array([t["sd"] for t in table])
+    delta = np.array([t["delta"] for t in table])
+    dse = np.array([t["delta_se"] for t in table])
+    ax.axvspan(noise_floor - 2 * floor_se, noise_floor + 2 * floor_se, color="0.88", label="noise floor $\\pm$ 2 se")
+    colors = ["tab:red" if t["p_value"] < 0.01 else "tab:green" for t in table]
+    ax.errorbar(d, y, xerr=2 * sd, fmt="none", ecolor="k", capsize=3, label="discrepancy $\\pm$ 2 sd")
+    ax.scatter(d, y, c=colors, zorder=3, s=30)
+    ok = np.isfinite(dse)
+    ref = d[0]
+    ax.errorbar(ref + delta[ok][1:], y[ok][1:] - 0.25, xerr=2 * dse[ok][1:], fmt="v", color="0.45", ms=4, capsize=2,
+                label=f"difference to {table[0]['model']}\n$\\pm$ 2 paired se (drawn from its point)")
+    ax.set_yticks(y)
+    ax.set_yticklabels([t["model"] for t in table], fontsize=7)
+    from matplotlib.ticker import FuncFormatter
+
+    ax.set_xscale("symlog", linthresh=max(10.0, 4 * float(np.nanmax(sd))))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.set_xlabel("held-out discrepancy, symlog axis (lower is better; red: rejected at 0.01)", fontsize=8)
+    ax.set_ylim(-0.7, len(table) - 0.4)
+    ax.grid(alpha=0.3, lw=0.5, axis="x")
+    tx.set_axis_off()
+    tx.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=3)  # beside the table: no point under it
+    cells = [[t["status"] or "", f"{t['discrepancy']:.4g} +- {t['sd']:.2g}",
+              ("" if i == 0 else f"{t['delta']:+.4g} +- {t['delta_se']:.2g}"), f"{t['p_value']:.3g}"]
+             for i, t in enumerate(table)]
+    tab = tx.table(cellText=cells, rowLabels=[t["model"] for t in table],
+                   colLabels=["status", "discrepancy\n+- sd", f"minus the first\n+- paired se", "p"],
+                   loc="center", cellLoc="right", colWidths=[0.14, 0.22, 0.24, 0.14])
+    tab.auto_set_font_size(False)
+    tab.set_fontsize(7)
+    tab.scale(1.0, 1.35)
+    for (i, _), cell in tab.get_celld().items():
+        if i == 0:
+            cell.set_height(cell.get_height() * 1.8)
+    fig.suptitle(f"{title}   (floor {noise_floor:.4g} +- {floor_se:.2g}; a difference whose +-2 se covers 0 does "
+                 f"not tell the two apart on these inputs)", fontsize=9)
+    return _root(fig)
+
+
+def pairs_figure(joint: dict, *, title: str = "fitted parameters and their joint 95 % region", fig=None,
+                 points: int = 200):
+    """Pair plot of the moment-fitted parameters (``joint`` of
+    :func:`~gift_theory.lab._intervals.moment_intervals`): on the diagonal each parameter's
+    sampling density with its 95 % interval shaded, below it each pair's joint 95 % region (the
+    sandwich covariance's ellipse on the fit scale, log for a positive parameter, mapped back)
+    (Hotelling's, at the replicates' degrees of freedom) with the fitted values and both marginal
+    intervals (Student t: the intervals ``gift fit`` reports); above it the pair's correlation. Two
+    parameters that trade off (shot noise and the additive level without taps) show as a long
+    tilted region whose marginal intervals say little."""
+    from scipy import stats as st
+
+    names = list(joint["params"])
+    k = len(names)
+    cov = np.asarray(joint["cov"], float)
+    centre = np.asarray(joint["centre"], float)
+    logs = [sc == "log" for sc in joint["scale"]]
+    level = float(joint.get("level", 0.95))
+    back = [(np.exp if lg else (lambda v: v)) for lg in logs]
+    if fig is None:
+        fig = _new_figure((1.2 + 2.4 * k, 0.9 + 2.3 * k))
+    axes = np.atleast_2d(fig.subplots(k, k, squeeze=False))
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    dof = int(joint.get("dof", 0)) or 10 ** 6
+    # the intervals' own quantile (Student t at the replicates' degrees of freedom) and, for two
+    # parameters, Hotelling's: the region the same estimated covariance gives
+    qm = st.t.ppf(0.5 + level / 2, dof)
+    r2 = np.sqrt(2.0 * dof / max(dof - 1, 1) * st.f.isf(1 - level, 2, max(dof - 1, 1)))
+    corr = cov / np.maximum(np.outer(sd, sd), 1e-300)
+    for i in range(k):
+        for j in range(k):
+            ax = axes[i, j]
+            if i == j:
+                t = centre[i] + sd[i] * np.linspace(-4, 4, points)
+                dens = st.norm.pdf(t, centre[i], max(sd[i], 1e-300))
+                x = back[i](t)
+                ax.plot(x, dens / np.max(dens), color="tab:blue")
+                inside = np.abs(t - centre[i]) <= qm * sd[i]
+                ax.fill_between(x, 0, dens / np.max(dens), where=inside, color="tab:blue", alpha=0.25,
+                                label=f"{level:.0%}: [{back[i](centre[i] - qm * sd[i]):.3g}, "
+                                      f"{back[i](centre[i] + qm * sd[i]):.3g}]")
+                ax.axvline(joint["estimate"][i], color="k", lw=0.8)
+                ax.set_yticks([])
+                ax.legend(fontsize=6, loc="upper right")
+            elif i > j:
+                a = np.linspace(0, 2 * np.pi, points)
+                C2 = cov[np.ix_([j, i], [j, i])]
+                w, V = np.linalg.eigh(0.5 * (C2 + C2.T))
+                ell = (V * np.sqrt(np.maximum(w, 0.0))) @ np.stack([np.cos(a), np.sin(a)]) * r2
+                ax.fill(back[j](centre[j] + ell[0]), back[i](centre[i] + ell[1]), color="tab:blue", alpha=0.25,
+                        label=f"joint {level:.0%}")
+                ax.plot(joint["estimate"][j], joint["estimate"][i], "k+", ms=9, label="the fitted values")
+                ax.plot(back[j](centre[j] + np.array([-1, 1]) * qm * sd[j]), [back[i](centre[i])] * 2, color="k", lw=0.8,
+                        label=f"marginal {level:.0%} intervals\n(around the bias-corrected centre)")
+                ax.plot([back[j](centre[j])] * 2, back[i](centre[i] + np.array([-1, 1]) * qm * sd[i]), color="k", lw=0.8)
+                if i == k - 1 and j == 0:  # in the empty corner: never over the region
+                    axes[0, k - 1].legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower center")
+            else:
+                ax.text(0.5, 0.75, f"correlation of\n{names[j]} and {names[i]}\n{corr[i, j]:+.2f}", ha="center",
+                        va="center", fontsize=9, transform=ax.transAxes)
+                ax.set_axis_off()
+            if i == k - 1:
+                ax.set_xlabel(names[j], fontsize=8)
+            if j == 0 and i > 0:
+                ax.set_ylabel(names[i], fontsize=8)
+            from matplotlib.ticker import MaxNLocator
+
+            ax.xaxis.set_major_locator(MaxNLocator(4))
+            if i != j:
+                ax.yaxis.set_major_locator(MaxNLocator(4))
+            ax.tick_params(labelsize=6)
+    fig.suptitle(title + f"  (sandwich covariance of the moment fit, {joint.get('dof', 0) + 1} parametric replicates)",
                  fontsize=9)
     return _root(fig)
 
@@ -205,32 +543,190 @@ def moments_figure(moments, layer: int, *, fig=None, title: str | None = None):
     return _root(fig)
 
 
-def save_figures(figures: dict, folder: str) -> list[str]:
-    """Write ``{file name: Figure}`` into ``folder`` (created), each atomically; the paths written."""
-    return [save_figure(f, os.path.join(folder, name), bbox_inches="tight") for name, f in figures.items()]
+def save_figures(figures: dict, folder: str, data: dict | None = None) -> list[str]:
+    """Write ``{file name: Figure}`` into ``folder`` (created), each atomically; beside each PNG
+    whose name ``data`` holds, its numbers as netCDF (same stem, ``.nc``: an ``xarray.Dataset``
+    other tools can redraw). The PNG paths written."""
+    out = []
+    for name, f in figures.items():
+        out.append(save_figure(f, os.path.join(folder, name), bbox_inches="tight"))
+        ds = (data or {}).get(name)
+        if ds is not None:
+            save_dataset(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc"))
+    return out
 
 
-def _moments_figures(key, models, meas) -> dict:
+def save_dataset(ds, path: str) -> str:
+    """An ``xarray.Dataset`` written atomically as netCDF (h5netcdf)."""
+    from .._io import atomic_path
+
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="h5netcdf")
+    return path
+
+
+# ---- the numbers behind each figure, as xarray Datasets ----------------------------------------
+
+def _xr():
+    import xarray as xr
+
+    return xr
+
+
+def where_data(stats: dict):
+    """The where-figure's maps (row, bin) with the bins' edges."""
+    xr = _xr()
+    v = {name: (("row", "bin"), np.asarray(M, float)) for name, M in stats["maps"].items()}
+    if stats.get("edges") is not None:
+        v["edges"] = (("edge",), np.asarray(stats["edges"], float))
+    return xr.Dataset(v, coords={"row": list(stats["rows"])}, attrs={
+        "description": "per cell z (N(0, 1) under the model) summed over the inputs of each bin of the model's "
+                       "pre-activation, divided by sqrt(count); gift_theory.lab.where_it_fails"})
+
+
+def pit_data(stats: dict):
+    """The PIT histograms: counts per layer (pit_bin), the cells behind them in the attributes."""
+    xr = _xr()
+    return xr.Dataset({f"pit_layer{l}": (("pit_bin",), np.asarray(c, float)) for l, c in stats["pit"].items()},
+                      attrs={f"pit_cells_layer{l}": int(c) for l, c in stats["pit_cells"].items()})
+
+
+def correlation_data(stats: dict):
+    """The correlation z per layer (neuron, neuron)."""
+    xr = _xr()
+    return xr.Dataset({f"correlation_z_layer{l}": ((f"neuron_l{l}", f"neuron_l{l}_other"), np.asarray(C, float))
+                       for l, C in stats["correlation"].items()})
+
+
+def law_data(stats: dict):
+    """The quantiles of the standardised shots per layer (probability), both kurtoses in the attributes."""
+    from ._localise import QQ_PROBS
+
+    xr = _xr()
+    v = {}
+    for l, q in stats["qq"].items():
+        v[f"qq_measured_layer{l}"] = (("probability",), np.asarray(q["measured"], float))
+        v[f"qq_model_layer{l}"] = (("probability",), np.asarray(q["model"], float))
+    return xr.Dataset(v, coords={"probability": QQ_PROBS},
+                      attrs={f"kurtosis_{w}_layer{l}": float(q[f"kurtosis_{w}"]) for l, q in stats["qq"].items()
+                             for w in ("measured", "model")})
+
+
+def moments_data(moments, layer: int):
+    """One layer's measured and model means and variances (model, input, neuron)."""
+    xr = _xr()
+    mlist = [moments] if hasattr(moments, "layer_ids") else list(moments)
+    li = list(mlist[0].layer_ids).index(layer)
+    return xr.Dataset({"measured_mean": (("input", "neuron"), np.asarray(mlist[0].mean[li], float)),
+                       "measured_var": (("input", "neuron"), np.asarray(mlist[0].var[li], float)),
+                       "model_mean": (("model", "input", "neuron"), np.stack([m.model_mean[li] for m in mlist])),
+                       "model_var": (("model", "input", "neuron"), np.stack([m.model_var[li] for m in mlist]))},
+                      coords={"model": [m.label for m in mlist]},
+                      attrs={"layer": int(layer), "r": int(mlist[0].r), "K": int(mlist[0].K)})
+
+
+def ppc_data(pred, layer: int):
+    """One layer's measured shots (input, shot, neuron) and each model's (model, input, model_shot,
+    neuron): ArviZ's observed and posterior-predictive groups."""
+    xr = _xr()
+    plist = [pred] if hasattr(pred, "layer_ids") else list(pred)
+    li = list(plist[0].layer_ids).index(layer)
+    return xr.Dataset({"measured": (("input", "shot", "neuron"), np.asarray(plist[0].measured[li], float)),
+                       "model_shots": (("model", "input", "model_shot", "neuron"),
+                                 np.stack([np.asarray(p.model[li], float) for p in plist]))},
+                      coords={"model": [p.label for p in plist]}, attrs={"layer": int(layer)})
+
+
+def ladder_data(rungs, noise_floor: float, floor_se: float):
+    xr = _xr()
+    return xr.Dataset({"discrepancy": (("model",), np.array([r[1] for r in rungs], float)),
+                       "sd": (("model",), np.array([r[2] for r in rungs], float)),
+                       "p_value": (("model",), np.array([r[3] for r in rungs], float))},
+                      coords={"model": [r[0] for r in rungs]},
+                      attrs={"noise_floor": float(noise_floor), "floor_se": float(floor_se)})
+
+
+def comparison_data(table: list, noise_floor: float, floor_se: float):
+    xr = _xr()
+    cols = ("discrepancy", "sd", "delta", "delta_se", "p_value")
+    return xr.Dataset({c: (("model",), np.array([t[c] for t in table], float)) for c in cols}
+                      | {"status": (("model",), np.array([t["status"] or "" for t in table], dtype=str))},
+                      coords={"model": [t["model"] for t in table]},
+                      attrs={"noise_floor": float(noise_floor), "floor_se": float(floor_se),
+                             "difference_to": table[0]["model"]})
+
+
+def pairs_data(joint: dict):
+    xr = _xr()
+    names = list(joint["params"])
+    return xr.Dataset({"estimate": (("param",), np.asarray(joint["estimate"], float)),
+                       "centre_fit_scale": (("param",), np.asarray(joint["centre"], float)),
+                       "cov_fit_scale": (("param", "param_other"), np.asarray(joint["cov"], float)),
+                       "fit_scale": (("param",), np.array(joint["scale"], dtype=str))},
+                      coords={"param": names, "param_other": names},
+                      attrs={"level": float(joint.get("level", 0.95))})
+
+
+# ---- the figure sets of the commands -----------------------------------------------------------
+
+def where_figures(stats: dict, model: str) -> tuple[dict, dict]:
+    """The where-figure and the law of the shots (PIT, correlations, quantiles) of one
+    :func:`~gift_theory.lab.where_it_fails` result, ``model`` its model's name in the titles:
+    ``(figures, data)``."""
+    title = model
+    figs = {"where.png": where_figure(stats, title=f"{model}: where it fails")}
+    data = {"where.png": where_data(stats)}
+    if stats.get("pit"):
+        figs["pit.png"] = pit_figure(stats, title=f"{title}: PIT of the measured shots among the model's own")
+        data["pit.png"] = pit_data(stats)
+        figs["correlation.png"] = correlation_figure(stats, title=f"{title}: correlation between neurons")
+        data["correlation.png"] = correlation_data(stats)
+        figs["law.png"] = law_figure(stats, title=f"{title}: quantiles of the standardised shots")
+        data["law.png"] = law_data(stats)
+    return figs, data
+
+
+def predictive_figures(key, models, meas) -> tuple[dict, dict]:
+    """Each measured layer's moments and posterior-predictive overlay under each of ``models``
+    ((label, Model), common random numbers), ``(figures, data)``."""
     from .._model import named_subkey
-    from ._compare import predictive_moments
+    from ._compare import predictive_shots
 
     k = named_subkey(key, "figure_moments")  # common random numbers: every model the same draws
-    mom = [predictive_moments(k, m, meas, label=lab) for lab, m in models]
-    return {f"moments_layer{l}.png": moments_figure(mom, l) for l in meas.layer_ids()}
+    preds = [predictive_shots(k, m, meas, label=lab) for lab, m in models]
+    mom = [p.moments() for p in preds]
+    figs, data = {}, {}
+    for l in meas.layer_ids():
+        figs[f"moments_layer{l}.png"] = moments_figure(mom, l)
+        data[f"moments_layer{l}.png"] = moments_data(mom, l)
+        figs[f"ppc_layer{l}.png"] = ppc_figure(preds, l)
+        data[f"ppc_layer{l}.png"] = ppc_data(preds, l)
+    return figs, data
 
 
 def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
-    """The figures of a :class:`~gift_theory.lab.Diagnosis`, written to ``folder``: the error
-    ladder of the baseline and the three best candidates, where the baseline fails, and
-    (given the measurement) each measured layer's moments under the baseline and the
-    top-ranked model on the held-out inputs."""
+    """The figures of a :class:`~gift_theory.lab.Diagnosis`, written to ``folder`` (each PNG with
+    its numbers as netCDF beside it): the error ladder of the baseline and the three best
+    candidates; the model comparison of the baseline and every ranked candidate (differences to
+    ranking[0] with their paired standard errors); where the baseline fails and its law of the
+    shots (PIT, correlations, quantiles); given the measurement, each measured layer's moments
+    and posterior-predictive overlay under the baseline and the top-ranked model on the
+    held-out inputs."""
     c = diagnosis.baseline_comparison
     rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
         ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
         for cand in diagnosis.ranking[:3]]
     figs = {"ladder.png": error_ladder(rungs, c.noise_floor, c.floor_se, title="baseline and best candidates")}
+    data = {"ladder.png": ladder_data(rungs, c.noise_floor, c.floor_se)}
+    table = diagnosis_comparison(diagnosis)
+    if table:
+        figs["comparison.png"] = comparison_figure(table, c.noise_floor, c.floor_se,
+                                                   title="model comparison on the held-out inputs")
+        data["comparison.png"] = comparison_data(table, c.noise_floor, c.floor_se)
     if diagnosis.where is not None:
-        figs["where.png"] = where_figure(diagnosis.where, title="baseline: where it fails")
+        f, d = where_figures(diagnosis.where, "the baseline (awgn)")
+        figs.update(f)
+        data.update(d)
     if meas is not None:
         import jax
 
@@ -239,23 +735,70 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
         if diagnosis.ranking:
             top = diagnosis.ranking[0]
             models.append(("first ranked: " + " + ".join(top.model.effects), top.model))
-        figs.update(_moments_figures(key, models, meas.subset(diagnosis.held_out)))
-    return save_figures(figs, folder)
+        f, d = predictive_figures(key, models, meas.subset(diagnosis.held_out))
+        figs.update(f)
+        data.update(d)
+    return save_figures(figs, folder, data)
 
 
-def fit_figures(result, folder: str, meas=None, key=None) -> list[str]:
-    """The error ladder of a :class:`~gift_theory.lab.FitResult` and (given the measurement) each
-    measured layer's moments before and after the fit, over all inputs, written to ``folder``."""
+def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:
+    """The model comparison rows (:func:`comparison_table`) of a diagnosis: the model its verdict
+    names first (ranking[0], or the baseline when the verdict names it), then the baseline and the
+    next candidates, each against the first on the held-out inputs."""
+    named = [(" + ".join(["awgn"] + list(cand.effects)), cand.comparison, getattr(cand, "status", ""))
+             for cand in diagnosis.ranking[:limit] if getattr(cand, "comparison", None) is not None]
+    base = ("awgn (baseline)", diagnosis.baseline_comparison, "passes" if getattr(diagnosis, "names_baseline", False)
+            else "")
+    named = [base] + named if getattr(diagnosis, "names_baseline", False) or not named else named[:1] + [base] + named[1:]
+    return comparison_table(named)
+
+
+def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | None = None,
+                where: dict | None = None) -> list[str]:
+    """The figures of a :class:`~gift_theory.lab.FitResult`, written to ``folder`` (each PNG with its
+    numbers as netCDF beside it): the error ladder and the model comparison of its rungs (each
+    against the fitted model, paired standard errors); given ``uncertainty``
+    (:func:`~gift_theory.lab._fit.fit_uncertainty` with a ``joint``), the pair plot of the fitted
+    parameters; given ``where`` (:func:`~gift_theory.lab.where_it_fails` of the fitted model on the
+    held-out inputs), where it fails and its law of the shots; given the measurement, each
+    measured layer's moments and posterior-predictive overlay before and after the fit."""
     a = result.comparison_after
     rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in result.ladder]
     figs = {"ladder.png": error_ladder(rungs, a.noise_floor, a.floor_se)}
+    data = {"ladder.png": ladder_data(rungs, a.noise_floor, a.floor_se)}
+    if len(result.ladder) > 1 and all(getattr(c, "channel_values", None) is not None for _, c in result.ladder):
+        named = [(lab, c, "") for lab, c in result.ladder][::-1]  # the fitted model first
+        table = comparison_table(named)
+        figs["comparison.png"] = comparison_figure(table, a.noise_floor, a.floor_se,
+                                                   title="the ladder compared on the held-out inputs")
+        data["comparison.png"] = comparison_data(table, a.noise_floor, a.floor_se)
+    if uncertainty and uncertainty.get("joint"):
+        figs["pairs.png"] = pairs_figure(uncertainty["joint"])
+        data["pairs.png"] = pairs_data(uncertainty["joint"])
+    if where is not None:
+        f, d = where_figures(where, "the fitted model")
+        figs.update(f)
+        data.update(d)
     if meas is not None:
         import jax
 
         key = jax.random.PRNGKey(0) if key is None else key
-        figs.update(_moments_figures(key, [("before: " + " + ".join(result.before.effects), result.before),
-                                           ("after: " + " + ".join(result.after.effects), result.after)], meas))
-    return save_figures(figs, folder)
+        f, d = predictive_figures(key, [("before: " + " + ".join(result.before.effects), result.before),
+                                        ("after: " + " + ".join(result.after.effects), result.after)], meas)
+        figs.update(f)
+        data.update(d)
+    return save_figures(figs, folder, data)
+
+
+def compare_figures(key, model, scored, where: dict, label: str, folder: str) -> list[str]:
+    """The figures of ``gift compare``: where ``model`` fails on the scored inputs and its law of
+    the shots, each measured layer's moments and posterior-predictive overlay, written to
+    ``folder`` (each PNG with its numbers as netCDF beside it)."""
+    figs, data = where_figures(where, " + ".join(model.effects))
+    f, d = predictive_figures(key, [(label, model)], scored)
+    figs.update(f)
+    data.update(d)
+    return save_figures(figs, folder, data)
 
 
 def heatmaps(stats: dict, path: str, title: str = "where the model fails") -> str:

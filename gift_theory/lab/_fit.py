@@ -87,7 +87,7 @@ def fit_model(key, meas: Measurement, effects=(), *, start: Model | None = None,
 
 def fit_uncertainty(key, meas: Measurement, after: Model, *, shots: int | None = None, B: int | None = None,
                     progress=None) -> dict:
-    """The uncertainty of a :func:`~gift_theory.lab.fit_effects` result (CONTRACTS §2b, §4):
+    """The uncertainty of a :func:`~gift_theory.lab.fit_effects` result (reference §2b, §4):
     95 % intervals on every fitted scalar parameter and the per-neuron values with their
     standard errors, on the fitting half of ``meas`` that ``fit_effects(key, meas, ...)`` used
     (the same split and keys; methods: :mod:`._intervals`).
@@ -104,7 +104,8 @@ def fit_uncertainty(key, meas: Measurement, after: Model, *, shots: int | None =
     Returns
     -------
     {"intervals": {param: [lo, hi]}, "interval_method": {param: str}, "per_neuron": {...},
-     "per_neuron_se": {...}}
+     "per_neuron_se": {...}, "joint": {...}} (``joint``: the moment-fitted parameters' covariance,
+    :func:`~gift_theory.lab._intervals.moment_intervals`; absent when none is moment-fitted)
     """
     import jax
 
@@ -122,4 +123,5 @@ def fit_uncertainty(key, meas: Measurement, after: Model, *, shots: int | None =
         for name, (lo, hi) in info["intervals"].items():
             intervals[name] = [float(lo), float(hi)]
             method[name] = "profile of the offsets' marginal likelihood (Gauss-Newton at the fit)"
-    return {"intervals": intervals, "interval_method": method, **per_neuron_json(after, meas.arch)}
+    joint = {"joint": mom["joint"]} if mom.get("joint") else {}
+    return {"intervals": intervals, "interval_method": method, **joint, **per_neuron_json(after, meas.arch)}

@@ -1,7 +1,7 @@
 """Layer-wise system identification: each layer's effective transfer and noise, read off the shots.
 
 With taps, layer l's measured output is regressed on the measured output of layer l-1 of the
-*same shot* (layer 1: on x). Under CONTRACTS §2 a tap is the value fed forward, so the
+*same shot* (layer 1: on x). Under reference §2 a tap is the value fed forward, so the
 regressor of a shot is exactly the input its layer saw: the conditional mean of a_l given
 a_{l-1} is the layer's mean map, with no error in the regressor (the noise of a_{l-1} is
 part of the input, not an error of measuring it). Layer 1's input a_0 = x + n_a0 is not
@@ -187,7 +187,7 @@ class _Layer:
 
 def _propagate(meas: Measurement, s: float):
     """Per input, the model's mean (n, d) and unit covariance per s^2 (n, d, d) of a_{L-1}, the
-    output layer's input, without taps: by Monte Carlo through the model (CONTRACTS §1, awgn at
+    output layer's input, without taps: by Monte Carlo through the model (reference §1, awgn at
     level s), the standard normal draws fixed (the same numbers at every s), inputs in chunks.
     Exact up to the draws' error -- a linearised propagation missed the activation's curvature,
     which looked like a gain fluctuating along the signal and like correlated noise (15 % of
@@ -742,6 +742,63 @@ def _expected_kurtosis(act: str | None, z, vz, s2: float, r: int):
     return out
 
 
+def _expected_kurtosis_signal(act: str | None, z, u, vz, var, r: int, signal: tuple):
+    """:func:`_expected_kurtosis` of the residuals of a layer whose noise variance changes with
+    the signal (``signal`` of :func:`_signal_variance`): each shot at its own pre-activation ``z``
+    (n, r, d) -- with taps the input changes from shot to shot, and so does a shot's variance --
+    the value v = sigma(z + sqrt(vz') xi) + s eta (``act`` None: z + sqrt(vz') xi) less its mean
+    given z, plus a readout noise sqrt(q |v|) zeta (form "readout": shot noise, a scale mixture
+    with tails of its own at equal variance) or with vz' = vz + m^2 u^2 (form "pre-activation",
+    ``u`` (n, r, d) each shot's weighted sum: a Gaussian pre-activation of a larger variance);
+    ``vz`` (n, d) the pre-activation's unit variance; ``var`` (n, r, d) the variance each measured
+    shot was divided by (the model's at its level), each drawn shot divided by it too."""
+    form, s2a, c1 = signal
+    f = _ACT[act][0] if act is not None else None
+    n, d = vz.shape
+    z, u, var = (np.broadcast_to(a_, (n, r, d)) for a_ in (z, u, var))  # layer 1: one input per cell, r shots
+    B = int(max(4, min(32, 2e6 / max(n * d * r, 1))))
+    rng = np.random.default_rng(20261129)
+    out = np.empty((2, n, d))
+    chunk = max(1, int(4e6 // max(d * B * r, 1)))
+    for c0 in range(0, n, chunk):
+        zc = np.moveaxis(z[c0:c0 + chunk], 1, 2)[:, :, None, :]  # (c, d, 1, r): each shot its own z
+        vc = vz[c0:c0 + chunk][:, :, None, None] + (c1 / s2a * np.moveaxis(u[c0:c0 + chunk], 1, 2)[:, :, None, :] ** 2
+                                                    if form != "readout" else 0.0)
+        sc = np.sqrt(s2a * np.maximum(vc, 0.0))
+        shape = zc.shape[:2] + (B, r)
+        if f is not None:
+            v = f(zc + sc * rng.standard_normal(shape)) + np.sqrt(s2a) * rng.standard_normal(shape)
+            x = v - smoothed(act, zc, sc * sc, var=False)[0]
+        else:
+            x = sc * rng.standard_normal(shape)
+            v = zc + x
+        if form == "readout":
+            x = x + np.sqrt(c1 * np.abs(v)) * rng.standard_normal(shape)
+        x = x / np.sqrt(np.maximum(np.moveaxis(var[c0:c0 + chunk], 1, 2)[:, :, None, :], 1e-300))
+        out[:, c0:c0 + chunk] = _sample_law(x, r).mean(-1)
+    return out
+
+
+def _signal_variance(obs, vcell, absv, pre2, s2: float) -> tuple:
+    """The layer's noise variance fitted as a function of the signal, ``(form, c0, c1)``: each
+    cell's observed variance ``obs`` (n, d) against ``c0 vcell + c1 x`` by non-negative least
+    squares relative to the model's ``s2 vcell``, x either the readout value's ``absv`` = E|v|
+    (shot noise, form "readout") or the squared pre-activation signal ``pre2`` (a fluctuating
+    gain on the weighted sum, form "pre-activation": a Gaussian pre-activation of a larger
+    variance), whichever leaves the smaller residual. c0 is the additive level s^2 left."""
+    from scipy.optimize import nnls
+
+    w = 1.0 / np.maximum(s2 * vcell, 1e-300).ravel()
+    y = obs.ravel() * w
+    best = None
+    for form, x in (("readout", absv), ("pre-activation", pre2)):
+        A = np.stack([vcell.ravel() * w, np.asarray(x, np.float64).ravel() * w], axis=1)
+        coef, res = nnls(A, y)
+        if best is None or res < best[0]:
+            best = (res, form, float(coef[0]), float(coef[1]))
+    return best[1:]
+
+
 def _curve(lay: _Layer, act: str, s2: float):
     """(d, BINS): per neuron the binned mean residual against the programmed z (the
     nonparametric curve, for the evidence: a dead neuron's is -tanh(z))."""
@@ -771,29 +828,6 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
     Tl = np.sum(obs - s2 * vcell, axis=1)
     s_lvl = float(np.sqrt(s2))
     s_se = float(np.sqrt(n * np.var(Tl, ddof=1)) / max(np.sum(vcell), 1e-300) / (2 * s_lvl))
-    kz, kurt, k_exp = 0.0, 0.0, np.full((n, d), -6.0 / (r + 1))
-    if r >= 5:
-        # per cell the sample kurtosis and its normalising transform; the model's own law of r
-        # shots: an activation bends a Gaussian pre-activation noise into a law of its own
-        # (layer 1: the input's noise through W as well; no taps: the hidden layers' noise
-        # propagated), and a normal sample's kurtosis is biased by -6/(r+1) (before the model's
-        # was subtracted: layer 1 of 12-24-12-6 flagged on 15 % of null files)
-        if lay.basis is not None:  # the model covariance's components (kurtosis: no scale needed)
-            dev = np.matmul(E - E.mean(1, keepdims=True), lay.basis)
-        else:  # each neuron, a shot by its own variance
-            dev = (E - E.mean(1, keepdims=True)) / np.sqrt(np.maximum(var, 1e-300))
-        k_cell = _shots_law(dev, r)
-        law = (lay.law if lay.law is not None
-               else _expected_kurtosis(act if lay.hidden else None, z.mean(1), s2 * vz, s2, r))
-        k_exp = law[0]
-        kz = over_inputs((k_cell[1] - law[1]).mean(1))
-        kurt = float(np.mean(k_cell[0] - k_exp))
-    rows.append(_row("noise_law", "kurtosis", _two_sided(kz), abs(kz), kurt,
-                     f"excess kurtosis {kurt:+.2f} of the "
-                     + ("output's noise along its model covariance's eigenvectors" if lay.basis is not None
-                        else "standardised shots") + f" at layer {l} beyond the model's "
-                     f"{float(np.mean(k_exp)) + 6.0 / (r + 1):+.2f} (0 for a Gaussian law; the model's: its Gaussian "
-                     f"noise bent by the activation)"))
     # variance against the neuron's own signal and the input's energy
     rho = obs / np.maximum(s2 * vcell, 1e-300) - 1.0
     own = np.abs(z).mean(1)
@@ -810,9 +844,52 @@ def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var
     which = max(zs_, key=lambda k: abs(zs_[k]))
     zi = abs(zs_[which])
     slope_own = float(np.sum(rho * own) / max(np.sum(own ** 2), 1e-300))
-    rows.append(_row("input_dependent_noise", "variance", min(1.0, (3 if lay.hidden else 2) * _two_sided(zi)), zi,
+    p_signal = min(1.0, (3 if lay.hidden else 2) * _two_sided(zi))
+    rows.append(_row("input_dependent_noise", "variance", p_signal, zi,
                      slope_own, f"the noise variance at layer {l} changes with {which} (z = {z_own:.1f} own "
                      f"signal |z|, {z_u:.1f} weighted sum, {z_en:.1f} input energy)"))
+    # the law is tested at the variance the data show: where it changes with the signal (that
+    # test rejects), against the model with that dependence fitted -- shot noise's variance
+    # q |v| makes a scale mixture with tails of its own, and a pure shot-noise file was named
+    # noise_law at z = 11 (kurtosis +0.44 at the output) beside input_dependent_noise
+    # (signal: (form, the additive s^2 left, q of q |v| or m^2 of m^2 u^2 in the pre-activation);
+    # a hidden layer's output moves by g u where its pre-activation moves by u, each shot's own u)
+    signal = (_signal_variance(obs, vcell, np.abs(lay.Y).mean(1),
+                               (((g if lay.hidden else 1.0) * (z - b_eff)) ** 2).mean(1), s2)
+              if p_signal < ALPHA and lay.law is None else None)
+    if signal is not None and (signal[1] <= 0.0 or signal[2] <= 0.0):
+        signal = None
+    kz, kurt, k_exp = 0.0, 0.0, np.full((n, d), -6.0 / (r + 1))
+    if r >= 5:
+        # per cell the sample kurtosis and its normalising transform; the model's own law of r
+        # shots: an activation bends a Gaussian pre-activation noise into a law of its own
+        # (layer 1: the input's noise through W as well; no taps: the hidden layers' noise
+        # propagated), and a normal sample's kurtosis is biased by -6/(r+1) (before the model's
+        # was subtracted: layer 1 of 12-24-12-6 flagged on 15 % of null files)
+        if lay.basis is not None:  # the model covariance's components (kurtosis: no scale needed)
+            dev = np.matmul(E - E.mean(1, keepdims=True), lay.basis)
+        else:  # each neuron, a shot by its own variance
+            dev = (E - E.mean(1, keepdims=True)) / np.sqrt(np.maximum(var, 1e-300))
+        k_cell = _shots_law(dev, r)
+        if lay.law is not None:
+            law = lay.law
+        elif signal is None:
+            law = _expected_kurtosis(act if lay.hidden else None, z.mean(1), s2 * vz, s2, r)
+        else:
+            law = _expected_kurtosis_signal(act if lay.hidden else None, z, z - b_eff, vz, var if lay.basis is None
+                                            else np.ones_like(var), r, signal)
+        k_exp = law[0]
+        kz = over_inputs((k_cell[1] - law[1]).mean(1))
+        kurt = float(np.mean(k_cell[0] - k_exp))
+    rows.append(_row("noise_law", "kurtosis", _two_sided(kz), abs(kz), kurt,
+                     f"excess kurtosis {kurt:+.2f} of the "
+                     + ("output's noise along its model covariance's eigenvectors" if lay.basis is not None
+                        else "standardised shots") + f" at layer {l} beyond the model's "
+                     f"{float(np.mean(k_exp)) + 6.0 / (r + 1):+.2f} (0 for a Gaussian law; the model's: its Gaussian "
+                     f"noise bent by the activation" + (f", with the variance fitted to the signal ({signal[0]}: "
+                                                        f"{signal[2]:.3g} {'|v|' if signal[0] == 'readout' else 'u^2'}"
+                                                        f" on top of s = {np.sqrt(signal[1]):.3g})"
+                                                        if signal is not None else "") + ")"))
     # covariance across the layer's neurons within a shot, beyond the model's, on the neurons
     # ``sub`` (all of a layer up to WIDE)
     ds = len(sub)
@@ -1096,7 +1173,7 @@ def _shape_given_detector(rows: list, p_shape: float):
 def _detector_or_modulator(lay: _Layer, act: str, s2: float, obs, mf: float, alive, tt=None, iters: int = 8):
     """Where a hidden layer's per-neuron gains and offsets sit: on z, a modulator's
     ``sigma(g_i z + o_i)``, or on the layer's output, a detector's ``g_i sigma(z) + o_i`` (the
-    readout chain D of CONTRACTS §2; a tap measures what it gives). Near z = 0 the two agree;
+    readout chain D of reference §2; a tap measures what it gives). Near z = 0 the two agree;
     where the activation bends they do not (detectors on every layer of a tapped chip were named
     activation_mismatch, the modulator's class).
 
@@ -1173,7 +1250,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
     transfer_cls = "activation_mismatch" if lay.hidden else "readout_nonlinearity"
     tt = None
     if t is not None:
-        # the map is identified at t = 0, the start of the acquisition (CONTRACTS §2's drift is
+        # the map is identified at t = 0, the start of the acquisition (reference §2's drift is
         # g = 1 + r t): a trend's time average is not a fixed error
         # the map's trends come from the inputs' mean times (a within-input trend would make the
         # model's mean move inside an input by a coefficient read off the means); they are fitted
@@ -1416,7 +1493,7 @@ def _identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: 
                              f"p = {pfit['rows']:.2g}{text})"))
         if choice == "general" and lay.hidden:
             # no restricted map of z fits: the neurons' own gains and offsets may act after the
-            # activation (a detector, D of CONTRACTS §2), which no map of z expresses
+            # activation (a detector, D of reference §2), which no map of z expresses
             q_det, q_mod, q_prog, p_sh, p_tdet = _detector_or_modulator(lay, act, s2, obs, mf, alive, tt)
             df_det = n * da - 2 * da
             if stats.chi2.sf(q_det, df_det) >= ALPHA:

@@ -1,5 +1,5 @@
 """Stage 5c of the lab: how well the fit knows each parameter -- per-neuron standard errors and
-95 % intervals on every fitted scalar parameter (CONTRACTS §2b, §4).
+95 % intervals on every fitted scalar parameter (reference §2b, §4).
 
 Three kinds of fitted values, three methods, each honest for the way its value is fitted:
 
@@ -210,7 +210,7 @@ def uncertainty_of(model: Model) -> dict | None:
 
 def per_neuron_json(model: Model, arch=None) -> dict:
     """``{"per_neuron": {name: {"<layer>": [value per neuron]}}, "per_neuron_se": {same shape}}``
-    (CONTRACTS §2b) of a fitted model: every per-neuron parameter by its name on the layers in
+    (reference §2b) of a fitted model: every per-neuron parameter by its name on the layers in
     its scope, and ``bias_offset``'s fitted offsets under ``"bias_offset"``. A standard error
     not known is null."""
     info = uncertainty_of(model) or {"se": {}}
@@ -315,8 +315,11 @@ def moment_intervals(key, meas: Measurement, model: Model, K: int | None = None,
     Returns
     -------
     {"intervals": {param: (lo, hi)}, "se_theta": {param: float}, "bias_theta": {param: float},
-     "theta_scale": {param: "log"|"linear"},
-     "replicates": B}; a per-layer parameter's coordinates are named ``"p@l"`` (layer l, 1-based)
+     "theta_scale": {param: "log"|"linear"}, "replicates": B, "joint": {"params", "scale", "centre",
+     "estimate", "cov", "level", "dof"}}: a per-layer parameter's coordinates are named ``"p@l"``
+     (layer l, 1-based); ``joint`` is the sandwich's covariance of every free parameter on its
+     fit scale (log for a positive one), around the bias-corrected centre (the pair plot's
+     joint region)
     """
     physics = _per_layer_form(model.physics, meas.arch)
     free = free_scalars(physics, meas)
@@ -363,4 +366,7 @@ def moment_intervals(key, meas: Measurement, model: Model, K: int | None = None,
         out[p] = (max(lo, blo), min(hi, bhi))
         scale[p] = "log" if pos else "linear"
     return {"intervals": out, "se_theta": dict(zip(free, se.tolist())), "bias_theta": dict(zip(free, bias.tolist())),
-            "theta_scale": scale, "replicates": B}
+            "theta_scale": scale, "replicates": B,
+            "joint": {"params": list(free), "scale": [scale[p] for p in free], "centre": centre.tolist(),
+                      "estimate": [float(math.exp(t)) if scale[p] == "log" else float(t) for p, t in zip(free, theta)],
+                      "cov": cov.tolist(), "level": level, "dof": max(B - 1, 1)}}

@@ -1,4 +1,4 @@
-"""Measurement files (CONTRACTS §3): load, validate, save; .npz, long and wide CSV, netCDF / HDF5.
+"""Measurement files (reference §3): load, validate, save; .npz, long and wide CSV, netCDF / HDF5.
 
 One file is one measurement campaign on one device with one set of programmed weights::
 
@@ -49,7 +49,7 @@ def _float_array(arrays, key, where):
 
 
 def validate_arrays(arrays, where: str = "measurement") -> Measurement:
-    """Build a :class:`Measurement` from a mapping of arrays, checking every CONTRACTS §3 rule.
+    """Build a :class:`Measurement` from a mapping of arrays, checking every reference §3 rule.
 
     Raises
     ------
@@ -211,7 +211,7 @@ def _needs_weights(path, arrays, weights):
 
 
 def dataset_arrays(ds, where: str = "dataset") -> dict:
-    """The CONTRACTS §3 arrays of an ``xarray.Dataset``: x as (input, ·), y, taps as (input, shot, ·),
+    """The reference §3 arrays of an ``xarray.Dataset``: x as (input, ·), y, taps as (input, shot, ·),
     t as (input, shot) -- dimensions named ``input`` and ``shot`` moved into place -- the weights
     as stored, and the attribute (or variable) ``activation``."""
     out = {}
@@ -528,6 +528,6 @@ def save_csv(path, meas: Measurement) -> None:
 
 
 def save_measurement(path, meas: Measurement) -> None:
-    """Write ``meas`` as a CONTRACTS §3 ``.npz`` (atomically)."""
+    """Write ``meas`` as a reference §3 ``.npz`` (atomically)."""
     arrays = meas.arrays()
     atomic_write(path, lambda fh: np.savez(fh, **arrays), make_folder=False)

@@ -337,21 +337,79 @@ def layer_evidence(res: Residuals) -> list[dict]:
 
 # ---- heatmaps ---------------------------------------------------------------------------------
 
+#: probabilities of the law panel's quantiles (tails included: a law shows there first)
+QQ_PROBS = np.concatenate([[0.001, 0.003, 0.01, 0.03], np.linspace(0.05, 0.95, 19), [0.97, 0.99, 0.997, 0.999]])
+#: bins of the PIT histograms
+PIT_BINS = 10
+
+
+def _pit(key, Y, M):
+    """(n, r, d) randomised PIT of each measured shot among the model's K shots of its cell:
+    (number of model shots below it + U) / (K + 1), U ~ Uniform(0, 1) -- exactly uniform under
+    the model (the shot's rank among K + 1 exchangeable values)."""
+    n, r, d = Y.shape
+    below = np.empty(Y.shape)
+    chunk = max(1, int(2e7 // max(r * M.shape[1] * d, 1)))
+    for c0 in range(0, n, chunk):
+        below[c0:c0 + chunk] = np.sum(M[c0:c0 + chunk, None, :, :] < Y[c0:c0 + chunk, :, None, :], axis=2)
+    u = np.asarray(jax.random.uniform(key, Y.shape), np.float64)
+    return (below + u) / (M.shape[1] + 1)
+
+
+def _correlation_z(Y, M):
+    """(d, d): per pair of neurons, the measured shots' correlation within a cell against the
+    model's (Fisher z, each net of its small-sample bias rho / (2 (m - 1)) at its own shot count),
+    averaged over inputs and tested over inputs (Student t on the normal scale); 0 on the
+    diagonal."""
+    def fisher(S):
+        c = S - S.mean(1, keepdims=True)
+        C = np.einsum("nki,nkj->nij", c, c)
+        sd = np.sqrt(np.maximum(np.einsum("nii->ni", C), 1e-300))
+        R = np.clip(C / sd[:, :, None] / sd[:, None, :], -0.999999, 0.999999)
+        return np.arctanh(R), R
+
+    fy, _ = fisher(Y)
+    fm, Rm = fisher(M)
+    diff = fy - fm - Rm * (1.0 / (2 * (Y.shape[1] - 1)) - 1.0 / (2 * (M.shape[1] - 1)))
+    n = diff.shape[0]
+    mean, se = diff.mean(0), diff.std(0, ddof=1) / np.sqrt(n)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        t = np.where(se > 0, mean / se, 0.0)
+        z = np.sign(t) * stats.norm.isf(stats.t.sf(np.abs(t), df=n - 1))
+    z = np.where(np.isfinite(z), z, t)
+    np.fill_diagonal(z, 0.0)
+    return z
+
+
 def where_it_fails(key, model: Model, meas: Measurement, bins: int = 6, shots: int | None = None,
                    res: Residuals | None = None) -> dict:
     """Per-cell standardised statistics, binned over the model's noiseless pre-activation (rows
-    ``layer:neuron``, a bin holds ``sum z / sqrt(count)``, N(0, 1) under the model), and the
-    worst cells.
+    ``layer:neuron``, a bin holds ``sum z / sqrt(count)``, N(0, 1) under the model), the worst
+    cells, and per measured layer the calibration of the model's law of the shots.
+
+    The bins are the same for every row, ``edges`` (bins + 1,): quantiles of every row's
+    pre-activations pooled, so each bin is a range of the pre-activation a figure can name (a
+    neuron whose inputs never reach a bin leaves it empty, NaN).
 
     Returns
     -------
-    dict with ``rows`` (list of "layer:neuron"), ``maps`` ({statistic: (rows, bins) array}),
-    ``worst`` (list of {layer, neuron, input, statistic, z}, worst first)
+    dict with ``rows`` (list of "layer:neuron"), ``edges``, ``maps`` ({statistic: (rows, bins)
+    array}), ``worst`` (list of {layer, neuron, input, statistic, z}, worst first), and per layer
+    (``{layer: ...}``): ``pit`` (:data:`PIT_BINS` counts of the measured shots' randomised PIT
+    among the model's shots of their cell, uniform under the model) with ``pit_cells`` (cells
+    behind them), ``correlation`` ((d, d) z of the measured correlation between two neurons
+    within a cell against the model's, over inputs; layers of two or more neurons) and ``qq``
+    (quantiles at :data:`QQ_PROBS` of the shots standardised by the model's cell mean and
+    variance, measured and the model's own, and both pooled excess kurtoses)
     """
     res = res if res is not None else residuals(key, model, meas, shots)
     r = meas.r
     names = ["mean_z", "log_var_ratio", "excess_kurtosis"] + (["time_trend"] if meas.t is not None else [])
     rows, maps, worst = [], {k: [] for k in names}, []
+    pooled = np.concatenate([np.ravel(p) for p in res.pre])
+    edges = np.quantile(pooled, np.linspace(0, 1, bins + 1))
+    pit, pit_cells, corr, qq = {}, {}, {}, {}
+    k_pit = named_subkey(key, "pit")
     for li, l in enumerate(res.layer_ids):
         Y, MB = res.Y[li], res.MB[li]
         K2 = MB.shape[1]
@@ -366,15 +424,14 @@ def where_it_fails(key, model: Model, meas: Measurement, bins: int = 6, shots: i
             tc = meas.t - meas.t.mean()
             cell["time_trend"] = np.einsum("nr,nrd->nd", tc, resid) / np.sqrt(np.sum(tc ** 2, 1) + 1e-300)[:, None]
         pre = res.pre[li]
+        idx = np.clip(np.searchsorted(edges, pre, side="right") - 1, 0, bins - 1)
         for j in range(Y.shape[2]):
             rows.append(f"{l}:{j}")
-            edges = np.quantile(pre[:, j], np.linspace(0, 1, bins + 1))
-            idx = np.clip(np.searchsorted(edges, pre[:, j], side="right") - 1, 0, bins - 1)
             for name in names:
                 v = cell[name][:, j]
                 row = np.full(bins, np.nan)
                 for b_ in range(bins):
-                    sel = idx == b_
+                    sel = idx[:, j] == b_
                     if sel.any():
                         row[b_] = v[sel].sum() / np.sqrt(sel.sum())
                 maps[name].append(row)
@@ -384,8 +441,20 @@ def where_it_fails(key, model: Model, meas: Measurement, bins: int = 6, shots: i
             for f in np.argsort(-np.abs(np.nan_to_num(v)), axis=None)[:10]:
                 i, j = np.unravel_index(f, v.shape)
                 worst.append({"layer": int(l), "neuron": int(j), "input": int(i), "statistic": name, "z": float(v[i, j])})
+        # the law of the shots: PIT, correlations between neurons, quantiles of standardised shots
+        u = _pit(jax.random.fold_in(k_pit, l), Y, MB)
+        pit[int(l)] = np.histogram(u, bins=PIT_BINS, range=(0.0, 1.0))[0]
+        pit_cells[int(l)] = int(Y.shape[0] * Y.shape[2])
+        if Y.shape[2] > 1 and r >= 4:
+            corr[int(l)] = _correlation_z(Y, MB)
+        sd = np.sqrt(res.vB[li] + 1e-300)[:, None, :]
+        ys = np.ravel((Y - res.mB[li][:, None, :]) / sd)
+        ms = np.ravel((res.MA[li] - res.mB[li][:, None, :]) / sd)
+        qq[int(l)] = {"measured": np.quantile(ys, QQ_PROBS), "model": np.quantile(ms, QQ_PROBS),
+                      "kurtosis_measured": float(stats.kurtosis(ys)), "kurtosis_model": float(stats.kurtosis(ms))}
     worst.sort(key=lambda w: -abs(w["z"]))
-    return {"rows": rows, "maps": {k: np.array(v) for k, v in maps.items()}, "worst": worst}
+    return {"rows": rows, "edges": edges, "maps": {k: np.array(v) for k, v in maps.items()}, "worst": worst,
+            "pit": pit, "pit_cells": pit_cells, "correlation": corr, "qq": qq}
 
 
 def anderson_p(res: Residuals, m: int = 3000) -> float:

@@ -1,8 +1,8 @@
-"""Stage 7 of the lab: from what is measured to which mechanism (CONTRACTS §6).
+"""Stage 7 of the lab: from what is measured to which mechanism (reference §6).
 
 The backbone is the layer-wise identification (:func:`~gift_theory.lab._identify.identify`):
 per layer, the effective mean map, the activation's shape and the noise read off the shots,
-each CONTRACTS §6 class a test on these estimates with its own p-value (Holm-adjusted over
+each reference §6 class a test on these estimates with its own p-value (Holm-adjusted over
 classes x layers), an effect size and its layers. A class is listed when a test of it names it
 (:func:`named`: adjusted p-value below :data:`ALPHA`, and without taps a z beyond
 :data:`THRESHOLD`), with the layers where it is, its score (the strongest test's z,
@@ -307,7 +307,7 @@ def rule_level(ctx):
     return _with_fit(ctx, "noise_level", best, layers, text)
 
 
-#: class -> rule (CONTRACTS §6's classes)
+#: class -> rule (reference §6's classes)
 RULES = {
     "noise_level": rule_level,
     "noise_law": rule_law,
@@ -321,7 +321,7 @@ RULES = {
     "activation_mismatch": rule_activation,
     "readout_nonlinearity": rule_readout,
 }
-assert set(RULES) == set(MECHANISMS), "every CONTRACTS §6 class has a rule"
+assert set(RULES) == set(MECHANISMS), "every reference §6 class has a rule"
 
 
 class FitGains(dict):
@@ -378,7 +378,7 @@ def fit_gains(ranking, base_cmp, prior=None, alpha: float = 0.01, share: float =
 
 def mechanisms(ctx: Context) -> list[dict]:
     """The ranked mechanism classes the evidence points to, each ``{mechanism, layers, score,
-    evidence, p_value}`` (CONTRACTS §6): with an identification, those its tests name
+    evidence, p_value}`` (reference §6): with an identification, those its tests name
     (:func:`named`); without one, those whose score exceeds :data:`THRESHOLD`. Best first: by
     score, except that a fluctuating gain goes before the trend its path leaves (:func:`_fluctuation_before_trend`),
     a noise growing with the signal before the levels it raises (:func:`_signal_before_level`)

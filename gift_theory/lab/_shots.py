@@ -1,6 +1,6 @@
 """Stage 1 of the lab: a model of the device and its shots for a measurement's inputs.
 
-A :class:`Model` is the core's generative process (CONTRACTS §2) with the physics it believes
+A :class:`Model` is the core's generative process (reference §2) with the physics it believes
 and the weights it believes are programmed. Its shots come from the core: standard draws of
 :func:`gift_theory.sample_noise` (the physics' own noise law, each site from its own named
 subkey, so the draws of a site are common to every candidate model) through

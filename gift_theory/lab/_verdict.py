@@ -1,11 +1,11 @@
 """Stage 8 of the lab: is the measurement explained, and if not, what remains and where to look.
 
-**The rule** (CONTRACTS §6 ``explained``). The data are explained when
+**The rule** (reference §6 ``explained``). The data are explained when
 
 1. the baseline (awgn, s fitted) passes its held-out test (p >= 0.01) and the layer-wise
    identification rejects none of its assumptions (no test names a class:
    :func:`~gift_theory.lab._mechanisms.named`, Holm-adjusted 0.01): nothing is
-   missing. ``missing_effect_detected`` is still the held-out test's alone (CONTRACTS §4): when
+   missing. ``missing_effect_detected`` is still the held-out test's alone (reference §4): when
    only the identification rejects, the data are not explained while no missing effect is
    "detected". The held-out test compares per-input laws on half the inputs and has little
    power against a law or a variance pattern that the identification's signed tests see on all
@@ -169,6 +169,11 @@ def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None, flagged=
                   f"its fitted values"]
 
 
+def _pm(value: float, sd: float) -> str:
+    """``value +- sd`` as the verdict line prints it (``+- sd`` left out when it is not finite)."""
+    return f"{value:.4g} +- {sd:.2g}" if np.isfinite(sd) else f"{value:.4g}"
+
+
 def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failing, closest=None,
                  flagged=None) -> str:
     """The one plain line of ``gift diagnose``. It names ``top`` (ranking[0]); ``closest``, when
@@ -179,12 +184,14 @@ def verdict_line(explained: bool, reasons, top, baseline_cmp, mechanisms, failin
         if baseline_cmp.p_value >= ALPHA and not flagged:
             return (f"explained: the awgn model fits the data (p = {baseline_cmp.p_value:.3g}); no physical effect "
                     f"is missing")
+        # each number with its spread: a discrepancy of 8.8 reads as a failure against a floor of
+        # 0.73 until the floor's +- 5.2 and the model's own sd under it are beside them
         return (f"explained: awgn + {' + '.join(top.effects)} fits the held-out data (p = "
-                f"{top.comparison.p_value:.3g}, discrepancy {top.comparison.discrepancy:.4g} against a floor of "
-                f"{baseline_cmp.noise_floor:.4g})")
+                f"{top.comparison.p_value:.3g}, discrepancy {_pm(top.comparison.discrepancy, top.comparison.se)} "
+                f"against a floor of {_pm(baseline_cmp.noise_floor, baseline_cmp.floor_se)})")
     best = (f"the closest model, awgn + {' + '.join(closest.effects)}, leaves a held-out discrepancy of "
-            f"{closest.comparison.discrepancy:.4g} (p = {closest.comparison.p_value:.3g}) against a floor of "
-            f"{baseline_cmp.noise_floor:.4g} +- {baseline_cmp.floor_se:.2g}" if closest is not None else "")
+            f"{_pm(closest.comparison.discrepancy, closest.comparison.se)} (p = {closest.comparison.p_value:.3g}) "
+            f"against a floor of {_pm(baseline_cmp.noise_floor, baseline_cmp.floor_se)}" if closest is not None else "")
     where = ""
     if mechanisms:
         parts = [f"{m['mechanism']}" + (f" in layer(s) {', '.join(map(str, m['layers']))}" if m["layers"] else "")

@@ -7,6 +7,8 @@ from ._cache import load_or_train as load_or_train
 from ._cache import load_weights as load_weights
 from ._cache import save_weights as save_weights
 from ._sgd import METHODS as METHODS
+from ._sgd import Pinned as Pinned
+from ._sgd import pin as pin
 from ._sgd import TrainConfig as TrainConfig
 from ._sgd import empirical_sampler as empirical_sampler
 from ._sgd import minibatch_sgd as minibatch_sgd

@@ -1,6 +1,6 @@
 """Trained weights saved once and reused: a cache keyed by everything that shapes them.
 
-A weight file is an ``.npz`` with ``W1..WL, b1..bL`` (the CONTRACTS §3 names) and the
+A weight file is an ``.npz`` with ``W1..WL, b1..bL`` (the reference §3 names) and the
 metadata ``arch, activation, s0, seed, dataset, method, steps, config`` plus the train
 and test metrics measured when it was made. Files are written to a temporary name and
 renamed, so a killed run never leaves half a file.
@@ -119,7 +119,8 @@ def load_or_train(dataset: str, arch: Architecture, s0: float, seed: int = 0, *,
     t0 = time.perf_counter()
     label = f"train {dataset} {arch} s0={s0:g} seed={seed}"
     if progress:
-        sys.stderr.write(f"{label}: training ({config.method}) ...\n")
+        sys.stderr.write(f"{label}: training ({config.method}) on {ds.x_train.shape[0]} examples "
+                         f"({ds.x_test.shape[0]} held out for testing) ...\n")
     with phase("train"):
         params = train(jax.random.PRNGKey(seed), arch, ds.x_train, ds.y_train, physics, config,
                        progress=stderr_progress(label) if progress else None)
@@ -130,6 +131,7 @@ def load_or_train(dataset: str, arch: Architecture, s0: float, seed: int = 0, *,
             "s0": float(s0), "seed": int(seed), "method": config.method, "config": config.to_json(),
             "steps": int(config.steps if config.method == "projected_sgd"
                          else config.epochs * (ds.x_train.shape[0] // config.batch_size)),
-            "physics": physics.describe(), "train_seconds": seconds, **metrics}
+            "physics": physics.describe(), "train_seconds": seconds,
+            "train_examples": int(ds.x_train.shape[0]), "test_examples": int(ds.x_test.shape[0]), **metrics}
     save_weights(path, params, meta)
     return params, dict(meta, path=path, cached=False)

@@ -18,7 +18,7 @@ import functools
 import sys
 import time
 from functools import partial
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -90,8 +90,25 @@ def _batch_grad(params, key, xb, yb, physics, arch):
     return jax.value_and_grad(sample_loss)(params, xb, yb, noise, physics, arch)
 
 
+class Pinned(NamedTuple):
+    """Entries of the weights held at fixed values while training (a device's stuck weights or dead
+    neurons): ``mask`` and ``value`` are pytrees like the weights; where ``mask`` is true the entry
+    is ``value``'s, whatever the step says (masked training)."""
+
+    mask: tuple
+    value: tuple
+
+
+def pin(params, pinned: Pinned | None):
+    """``params`` with the entries ``pinned`` holds set to its values (unchanged for None)."""
+    if pinned is None:
+        return params
+    return jax.tree_util.tree_map(lambda p, m, v: jnp.where(m, jnp.asarray(v, p.dtype), p), params, pinned.mask,
+                                  pinned.value)
+
+
 @partial(jax.jit, static_argnames=("arch", "batch_size", "tx"))
-def _epoch(params, opt_state, key, x, y, physics, arch, batch_size, tx):
+def _epoch(params, opt_state, key, x, y, physics, arch, batch_size, tx, pinned=None):
     n = x.shape[0]
     n_batches = n // batch_size
     k_perm, k_noise = jax.random.split(key)
@@ -102,7 +119,7 @@ def _epoch(params, opt_state, key, x, y, physics, arch, batch_size, tx):
         idx, i = inp
         loss, g = _batch_grad(p, jax.random.fold_in(k_noise, i), x[idx], y[idx], physics, arch)
         updates, s = tx.update(g, s, p)
-        return (optax.apply_updates(p, updates), s), loss
+        return (pin(optax.apply_updates(p, updates), pinned), s), loss
 
     (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), (perm, jnp.arange(n_batches)))
     return params, opt_state, jnp.mean(losses)
@@ -119,19 +136,22 @@ def _transform(config: TrainConfig):
 
 
 def minibatch_sgd(key, params, x, y, physics: Physics, arch: Architecture, config: TrainConfig,
-                  progress: Callable | None = None):
+                  progress: Callable | None = None, pinned: Pinned | None = None):
     """The practical variant: ``config.epochs`` shuffled passes of mini-batch steps, no projection.
+    ``pinned``: entries held at fixed values (:class:`Pinned`).
 
     Returns ``(params, epoch_losses)``.
     """
     tx = _transform(config)
+    params = pin(params, pinned)
     opt_state = tx.init(params)
     x = jnp.asarray(x, params[0].W.dtype)
     y = jnp.asarray(y, params[0].W.dtype)
     bs = min(config.batch_size, x.shape[0])
     losses = []
     for epoch in range(config.epochs):
-        params, opt_state, loss = _epoch(params, opt_state, jax.random.fold_in(key, epoch), x, y, physics, arch, bs, tx)
+        params, opt_state, loss = _epoch(params, opt_state, jax.random.fold_in(key, epoch), x, y, physics, arch, bs, tx,
+                                         pinned)
         losses.append(float(loss))
         if progress is not None:
             progress(epoch + 1, config.epochs, losses[-1])
@@ -186,7 +206,7 @@ class empirical_sampler:
 
 
 def train(key, arch: Architecture, x, y, physics: Physics, config: TrainConfig = TrainConfig(), *,
-          params=None, dtype=jnp.float32, progress: Callable | None = None):
+          params=None, dtype=jnp.float32, progress: Callable | None = None, pinned: Pinned | None = None):
     """Train M_s on (x, y) with noise ``physics`` (noise-aware at s0 = physics.s).
 
     Parameters
@@ -194,24 +214,27 @@ def train(key, arch: Architecture, x, y, physics: Physics, config: TrainConfig =
     key : PRNG key (initialisation and all sampling derive from it)
     x : (n, d_0), y : (n, d_L) targets (one-hot for classification)
     params : starting weights (default: Glorot initialisation from ``key``)
+    pinned : entries held at fixed values throughout (:class:`Pinned`; mini-batch and optax methods)
 
     Returns
     -------
     params : tuple of Layer
     """
-    return train_with_history(key, arch, x, y, physics, config, params=params, dtype=dtype, progress=progress)[0]
+    return train_with_history(key, arch, x, y, physics, config, params=params, dtype=dtype, progress=progress,
+                              pinned=pinned)[0]
 
 
 def train_with_history(key, arch, x, y, physics, config=TrainConfig(), *, params=None, dtype=jnp.float32,
-                       progress=None):
+                       progress=None, pinned=None):
     """:func:`train`, also returning the loss history (per epoch or per step)."""
     k_init, k_run = jax.random.split(key)
     if params is None:
         params = init_params(k_init, arch, dtype=dtype, gain=config.init_gain)
     if config.method == "projected_sgd":
+        require(pinned is None, "training: pinned entries need the minibatch or optax method")
         sampler = empirical_sampler(jnp.asarray(x, dtype), jnp.asarray(y, dtype))
         return projected_sgd(k_run, params, sampler, physics, arch, config)
-    return minibatch_sgd(k_run, params, x, y, physics, arch, config, progress)
+    return minibatch_sgd(k_run, params, x, y, physics, arch, config, progress, pinned)
 
 
 def stderr_progress(label: str):

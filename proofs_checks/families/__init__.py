@@ -1,4 +1,4 @@
-"""Example J_s families for ``gift check theorem1 --family FILE.py`` (CONTRACTS §5b).
+"""Example J_s families for ``gift check theorem1 --family FILE.py`` (reference §5b).
 
 Each file defines ``s``, ``w``, ``J``, ``w0`` (sympy) or ``J(w, s)``, ``w0`` (numeric);
 :func:`path` returns a file's location, e.g. ``gift check theorem1 --family

@@ -161,6 +161,24 @@ def test_progress_counts_items_with_time_left_and_is_silent_when_quiet():
     assert quiet.getvalue() == ""
 
 
+def test_progress_reported_as_items_finish_estimates_what_is_left(monkeypatch):
+    """Items of 1 s each, reported as each is done (the diagnosis's candidates): after item k of n,
+    (n - k) s are left; counting the finished item as still to run said ~3 s left after the last."""
+    import io
+
+    from gift_theory.cli import _common
+    from gift_theory.cli._common import Progress
+
+    clock = iter(range(100))
+    monkeypatch.setattr(_common.time, "perf_counter", lambda: float(next(clock)))
+    buf = io.StringIO()
+    p = Progress("gift x", stream=buf, after=True)
+    for i in range(4):
+        p(i, 4, f"item{i}: done")
+    lines = buf.getvalue().splitlines()
+    assert [ln.split("(")[1] for ln in lines] == ["0 s)", "1 s, ~2 s left)", "2 s, ~1 s left)", "3 s)"]
+
+
 def test_import_gift_theory_changes_no_jax_setting():
     import subprocess
     import sys
@@ -271,3 +289,28 @@ def test_gift_theory_never_imports_the_packages_on_top():
                                if n.split(".")[0] in ("proofs_checks", "paper_figures", "studies", "linear_case")]
     assert not upward, upward
     assert {"check", "figures"} <= set(registered()), f"pip install -e . registers the {GROUP} entry points"
+
+
+def test_finetune_text_says_what_identify_retrain_identified():
+    from gift_theory.cli._finetune import render
+
+    r = {"dataset": "digits", "arch": [64, 16, 10], "s0": 0.05, "st": 0.2, "method": "identify-retrain",
+         **{k: 1.0 for k in ("loss_before", "loss_after", "accuracy_before", "accuracy_after", "test_loss_before",
+                             "test_loss_after", "test_accuracy_before", "test_accuracy_after", "seconds")},
+         "in_situ_evaluations": 2, "gift_info": None,
+         "info": {"physics": "awgn(s=0.19) + shot(q=0.01)", "inputs": 50, "shots": 16, "taps": True,
+                  "baseline_p": 1e-9, "missing_effect_detected": True, "ranking": ["shot", "multiplicative"]}}
+    last = render(r).splitlines()[-1]
+    assert "awgn(s=0.19) + shot(q=0.01)" in last and "50 inputs x 16 shots" in last and "shot, multiplicative" in last
+
+
+def test_training_on_a_few_mnist_images_says_so():
+    from gift_theory.cli._train import render
+
+    r = {"dataset": "mnist", "arch": "784-4-10", "s0": 0.1, "seed": 0, "cached": False, "train_seconds": 1.0,
+         "train_loss": 1.0, "train_accuracy": 0.5, "test_loss": 1.0, "test_accuracy": 0.5, "path": "w.npz",
+         "train_examples": 10, "test_examples": 10}
+    text = render(r)
+    assert "10 training / 10 test examples" in text and "not MNIST's 60000" in text
+    assert "not MNIST's" not in render(dict(r, train_examples=60000, test_examples=10000))
+    assert "not MNIST's" not in render(dict(r, dataset="digits"))

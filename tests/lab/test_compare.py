@@ -202,6 +202,26 @@ def test_each_layer_s_own_level_is_the_true_s_from_a_wrong_joint_one(setup):
         assert abs(np.log(got / 0.1)) < 5.0 * se_log_s, (layer, got, se_log_s)
 
 
+def test_a_square_law_readout_s_level_is_read_through_its_measured_transfer(setup):
+    """On a square-law detector y = beta v^2 at the output (a readout nonlinearity, beta = 0.15)
+    the output's measured variance is 4 beta^2 v^2 s^2: matched as is it read s = 0.004 on a chip
+    at s = 0.1 whose hidden layer read 0.1. The failing layer's level is read through its
+    measured transfer (per-neuron polynomial of the model's means), near the chip's s again;
+    the healthy layer keeps its own level."""
+    from gift_theory.lab._compare import layer_level
+
+    params, x = setup
+    phys = gt.Physics.create(s=0.1)
+    meas = simulate_measurement(jax.random.PRNGKey(7), params, x, phys, shots=24, taps=True)
+    meas = dataclasses.replace(meas, y=0.15 * np.asarray(meas.y, np.float64) ** 2)
+    rows = one_step_check(jax.random.PRNGKey(8), Model(phys), meas)
+    plain = layer_level(jax.random.fold_in(jax.random.PRNGKey(8), 2), Model(phys), meas, 2)
+    assert plain < 0.03  # the level read without the transfer: far from the chip's
+    assert rows[1]["p_value"] < 1e-6 and rows[1].get("s_through_transfer")
+    assert abs(np.log(rows[1]["s"] / 0.1)) < np.log(1.25), rows[1]["s"]
+    assert "s_through_transfer" not in rows[0] and abs(np.log(rows[0]["s"] / 0.1)) < np.log(1.25)
+
+
 def test_null_false_alarms_cheap(setup):
     """Cheap calibration: on 16 data sets from the model itself (true parameters), p < 0.01
     at most twice (P(X >= 3 | Bin(16, 0.01)) < 6e-4); the full study is
@@ -406,7 +426,16 @@ def test_compare_command_states_power_next_to_the_verdict(deep_setup, tmp_path, 
     text = render(out).splitlines()
     verdict = next(i for i, l in enumerate(text) if "p = " in l and "->" in l)
     assert text[verdict + 1: verdict + 1 + len(weak)] == ["  " + n for n in out["power_notes"]]
-    assert sorted(os.listdir(tmp_path / "figs")) == ["moments_layer3.png", "where.png"]
+    pngs = ["correlation.png", "law.png", "moments_layer3.png", "pit.png", "ppc_layer3.png", "where.png"]
+    assert sorted(os.listdir(tmp_path / "figs")) == sorted(pngs + [p[:-4] + ".nc" for p in pngs] + ["figures.json"])
+    with open(tmp_path / "figs" / "figures.json") as fh:
+        assert json.load(fh)["command"] == "compare"
+    # one command's folder is not another's: refused before any work, one line, exit 2, nothing written
+    before = sorted(os.listdir(tmp_path / "figs"))
+    assert main(["fit", str(path), "--add", "shot", "--figures", str(tmp_path / "figs")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds the figures of gift compare" in err[0]
+    assert sorted(os.listdir(tmp_path / "figs")) == before
 
 
 def test_the_moment_fit_compares_log_variances_net_of_their_bias(x64):

@@ -196,6 +196,8 @@ def test_fit_command_contract(tmp_path, capsys):
                  "--power-replicates", "0", "--replicates", "2"]) == 0
     text = capsys.readouterr().out
     assert "error ladder" in text and (tmp_path / "figs" / "ladder.png").stat().st_size > 1000
+    for name in ("pairs", "comparison", "law", "pit", "ppc_layer3"):  # each with its numbers beside it
+        assert (tmp_path / "figs" / f"{name}.png").exists() and (tmp_path / "figs" / f"{name}.nc").exists()
 
 
 @pytest.mark.slow

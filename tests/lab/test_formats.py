@@ -195,7 +195,13 @@ def test_import_export_command(meas, tmp_path, capsys):
         assert main(["import", str(src), *argv, "--json"]) == 2
         err = capsys.readouterr().err
         assert needle in err and len(err.strip().splitlines()) == 1
-    assert main(["import", str(tmp_path / "m.csv"), "--out", str(tmp_path / "y.nc")]) == 2
+    # the weights written beside the CSV are read back without --weights (and said so) ...
+    assert main(["import", str(tmp_path / "m.csv"), "--out", str(tmp_path / "y.nc"), "--json"]) == 0
+    assert "weights from " + str(tmp_path / "m.weights.npz") in capsys.readouterr().err
+    _identical(meas, load_measurement(tmp_path / "y.nc"))
+    # ... and a CSV with none beside it still needs --weights
+    os.rename(tmp_path / "m.csv", tmp_path / "alone.csv")
+    assert main(["import", str(tmp_path / "alone.csv"), "--out", str(tmp_path / "z.nc")]) == 2
     assert "give --weights" in capsys.readouterr().err
 
 

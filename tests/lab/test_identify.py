@@ -26,7 +26,7 @@ def _net(seed, widths=(6, 10, 8, 4)):
 
 def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, bias_drift=None, common=None,
         taps=True, act=np.tanh, errors=None, interleaved=False, gain_drift=None, ar1_gain=None, heavy=None,
-        levels=None, signal=None, detector=None, square_law=False, uniform=False):
+        levels=None, signal=None, detector=None, square_law=False, uniform=False, shot=None):
     """CONTRACTS §1-§2 in plain numpy: a_0 = x + n, z_l = g_l W_l a + b_l + n, a_l = tanh(z_l) + n,
     y = z_L; ``gains`` {layer: g} a fixed gain on the weighted sum (W_eff = g W), ``dead``
     (layer, neuron) whose output is its noise alone, ``bias_drift`` (layer, c): b_l + c t,
@@ -43,7 +43,8 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
     s (1 + beta |u|), u = W a; ``detector`` (gain_sd, offset_sd): every layer's output (the
     readout chain D) mapped to g_i v + o_i, g_i ~ 1 + N(0, gain_sd^2), o_i ~ N(0, offset_sd^2)
     per neuron, fixed; ``square_law``: the output detector measures intensity, y = z_L^2;
-    ``uniform``: every noise uniform on [-sqrt(3) s, sqrt(3) s] (standard deviation s)."""
+    ``uniform``: every noise uniform on [-sqrt(3) s, sqrt(3) s] (standard deviation s); ``shot`` q:
+    the readout adds sqrt(q |v|) xi to every layer output v (shot noise)."""
     Ws, bs = _net(seed, widths)
     rng = np.random.default_rng(seed + 1)
     x = rng.uniform(0, 1, (n, widths[0]))
@@ -86,6 +87,8 @@ def sim(seed, widths=(6, 10, 8, 4), n=80, r=24, s=0.05, gains=None, dead=None, b
         z = g * shared[:, :, None] * u + bb + grow * noise((n, r, W.shape[0]))
 
         a = (act(z) + noise(z.shape)) if l < L else z
+        if shot is not None:
+            a = a + np.sqrt(shot * np.abs(a)) * rng.normal(size=a.shape)
         if detector is not None:
             dr = np.random.default_rng(seed + 200 + l)
             a = (1.0 + detector[0] * dr.normal(size=a.shape[-1])) * a + detector[1] * dr.normal(size=a.shape[-1])
@@ -512,3 +515,18 @@ def test_the_wide_layer_covariance_blocks_are_the_sandwich_per_neuron(monkeypatc
         Binv = np.linalg.inv(X[:, i].T @ X[:, i] + 1e-12 * np.eye(k))
         M = (X[:, i] * (obs[:, i] / r)[:, None]).T @ X[:, i]
         np.testing.assert_allclose(S[i], Binv @ M @ Binv.T, rtol=1e-10, atol=1e-14)
+
+
+
+def test_shot_noise_is_input_dependent_noise_not_a_noise_law_and_a_law_on_top_still_shows():
+    # shot noise's variance q |v| mixes scales within a cell (tails beyond a Gaussian's at equal
+    # variance): the law is tested against the model with the fitted signal-dependent variance
+    # (before, noise_law was named at z = 11 on a 160 x 48 file); a heavy-tailed law on top must
+    # still show, in its layer
+    ident = identify(sim(3, n=120, r=32, s=0.1, shot=0.03))
+    assert {r["layer"] for r in _sig(ident, "input_dependent_noise")} == {1, 2, 3}
+    assert not _sig(ident, "noise_law")
+    law = [r for r in ident.rows() if r["class"] == "noise_law"]
+    assert all("variance fitted to the signal (readout" in r["evidence"] for r in law)
+    assert {r["layer"] for r in _sig(identify(sim(3, n=120, r=32, s=0.1, shot=0.03, heavy=(2, 5.0))),
+                                     "noise_law")} == {2}

@@ -1,6 +1,7 @@
 """Figures of the lab: each function returns a matplotlib Figure with labelled axes, draws into a
 given ax / fig, selects no backend and writes nothing; the CLI's savers write them atomically."""
 
+import dataclasses
 import os
 import types
 
@@ -86,21 +87,33 @@ def test_moments_figure_returns_a_labelled_figure_and_uses_a_given_fig(moments, 
     assert os.listdir(tmp_path) == []
 
 
-def test_where_figure_labels_axes_colourbars_and_bins(tmp_path):
+def test_where_figure_has_one_colour_scale_the_bin_edges_and_marks_the_significant_cells(tmp_path):
     stats = _where_stats()
+    stats["edges"] = np.linspace(-2.0, 2.0, 7)
+    stats["maps"]["mean_z"][2, 3] = 3.5        # beside an alarming value elsewhere: pale, not marked
+    stats["maps"]["log_var_ratio"][0, 0] = 15.0  # significant: outlined
+    stats["maps"]["excess_kurtosis"][1, 1] = 9.0  # not normal in its tails: shown, not marked
+    stats["maps"]["mean_z"][6, 5] = np.nan       # an empty bin
     fig = where_figure(stats)
     assert isinstance(fig, Figure)
     panels = [a for a in fig.axes if a.get_label() != "<colorbar>"]
     bars = [a for a in fig.axes if a.get_label() == "<colorbar>"]
-    assert len(panels) == 3 and len(bars) == 3
-    assert panels[0].get_ylabel().startswith("layer:neuron")
-    assert all(b.get_ylabel().strip() for b in bars)  # every colour bar says what its colour is
+    assert len(panels) == 3 and len(bars) == 1  # one scale for every panel: a 3 reads as a 3 everywhere
+    assert len({p.images[0].get_clim() for p in panels}) == 1 and panels[0].images[0].get_clim()[1] >= 15.0
+    assert panels[0].get_ylabel().startswith("layer:neuron") and bars[0].get_ylabel().strip()
+    assert [t.get_text() for t in panels[0].get_xticklabels()] == [f"{e:.2g}" for e in stats["edges"]]
+    assert "pre-activation" in panels[0].get_xlabel()
+    # outlined: the cells beyond the family-wise threshold over the two marked maps, no others
+    from scipy import stats as st
+
+    zc = st.norm.isf(0.01 / (2 * (2 * 7 * 6 - 1)))
+    for p, name in zip(panels, ["mean_z", "log_var_ratio", "excess_kurtosis"]):
+        want = 0 if name == "excess_kurtosis" else int(np.sum(np.nan_to_num(np.abs(stats["maps"][name])) > zc))
+        assert len(p.patches) == want, name
+    assert len(panels[1].patches) == 1 and f"{zc:.2f}" in fig._suptitle.get_text()
     texts = [t.get_text() for t in panels[1].texts]
-    assert len(texts) == 7 * 6 and f"{stats['maps']['log_var_ratio'][0, 0]:.1f}" in texts
-    assert fig.get_layout_engine() is not None  # constrained: colour bars do not overlap the next panel
-    fig.canvas.draw()  # resolve the layout
-    for bar, nxt in zip(bars[:-1], panels[1:]):
-        assert bar.get_position().x1 <= nxt.get_position().x0
+    assert len(texts) == 7 * 6 and f"{stats['maps']['log_var_ratio'][0, 1]:.1f}" in texts
+    assert fig.get_layout_engine() is not None
     given = Figure()
     assert where_figure(stats, fig=given) is given
     assert os.listdir(tmp_path) == []
@@ -122,15 +135,120 @@ def test_savers_write_atomically_where_told(meas, tmp_path):
                                 before=Model(gt.Physics.create(s=0.08)),
                                 after=Model(gt.Physics.parse(["awgn=0.05", "shot=0.02"])))
     out = fit_figures(res, str(tmp_path / "fit"), meas=meas)
-    assert sorted(os.path.basename(p) for p in out) == ["ladder.png", "moments_layer1.png", "moments_layer2.png"]
+    assert sorted(os.path.basename(p) for p in out) == ["ladder.png", "moments_layer1.png", "moments_layer2.png",
+                                                        "ppc_layer1.png", "ppc_layer2.png"]
+    # every PNG with its numbers beside it, as netCDF
+    assert sorted(os.listdir(tmp_path / "fit")) == sorted([os.path.basename(p) for p in out]
+                                                          + [os.path.basename(p)[:-4] + ".nc" for p in out])
     cand = types.SimpleNamespace(effects=("shot",), comparison=cmp, model=res.after)
     diag = types.SimpleNamespace(baseline_comparison=cmp, ranking=[cand], where=_where_stats(), baseline=res.before,
                                  held_out=np.arange(40))  # the shapes of the fit above: no new compilation
-    out = diagnosis_figures(diag, str(tmp_path / "diag"), meas=meas)
-    assert sorted(os.path.basename(p) for p in out) == ["ladder.png", "moments_layer1.png", "moments_layer2.png",
-                                                        "where.png"]
+    out = diagnosis_figures(diag, str(tmp_path / "diag"))  # the predictive figures are the fit's, above
+    assert sorted(os.path.basename(p) for p in out) == ["comparison.png", "ladder.png", "where.png"]
     for p in out:
         with open(p, "rb") as fh:
             assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
     assert save_figures({}, str(tmp_path / "none")) == []
     assert not [f for d, _, fs in os.walk(tmp_path) for f in fs if f.startswith(".tmp-")]
+
+
+def test_the_law_panels_numbers_are_calibrated_under_the_true_model_and_see_a_wrong_spread(meas):
+    from gift_theory.lab import where_it_fails
+    from gift_theory.lab._figures import correlation_figure, law_figure, pit_figure
+    from scipy import stats as st
+
+    truth = Model(gt.Physics.parse(["awgn=0.05", "shot=0.02"]))
+    w = where_it_fails(jax.random.PRNGKey(4), truth, meas)
+    assert len(w["edges"]) == 7 and np.all(np.diff(w["edges"]) > 0)
+    for l, counts in w["pit"].items():
+        share = counts / counts.sum()
+        band = np.sqrt(0.1 * 0.9 / w["pit_cells"][l])  # one value per cell: the conservative sd
+        assert np.all(np.abs(share - 0.1) < 4 * band), (l, share)
+    z = np.concatenate([C[np.triu_indices_from(C, 1)] for C in w["correlation"].values()])
+    assert abs(z.mean()) < 4 / np.sqrt(z.size) + 0.3 and np.all(np.abs(z) < st.norm.isf(0.005 / z.size))
+    for q in w["qq"].values():
+        assert np.max(np.abs(q["measured"][4:-4] - q["model"][4:-4])) < 0.3
+    narrow = where_it_fails(jax.random.PRNGKey(4), Model(gt.Physics.create(s=0.02)), meas)
+    for l, q in narrow["qq"].items():  # the model's spread too small: the measured shots' quantiles fan out
+        assert q["measured"][-2] > 1.5 * q["model"][-2] and q["measured"][1] < 1.5 * q["model"][1]
+        share = narrow["pit"][l] / narrow["pit"][l].sum()
+        assert share[0] + share[-1] > 0.3  # a U: many shots beyond every model shot
+    for f in (pit_figure(narrow), correlation_figure(narrow), law_figure(narrow)):
+        _labelled(f)
+
+
+def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error():
+    from gift_theory.lab._compare import Comparison, _q_of, discrepancy_difference
+    from gift_theory.lab._qtest import q_test
+
+    rng = np.random.default_rng(0)
+    n, C = 60, 10
+    shared = rng.normal(size=(n, C))  # what two models' channels share on the same inputs cancels in the difference
+    Ta = shared + 0.8 + 0.2 * rng.normal(size=(n, C))
+    Tb = shared + 0.6 + 0.2 * rng.normal(size=(n, C))
+
+    def comp(T):
+        Q = q_test(T)[0]
+        return Comparison(Q, 1.0, 0.0, 1.0, 0.5, np.zeros(n), np.zeros(1), (1,), np.zeros((n, 1)), channel_values=T)
+
+    a, b = comp(Ta), comp(Tb)
+    assert _q_of(Ta[None])[0] == pytest.approx(a.discrepancy)
+    delta, se = discrepancy_difference(a, b)
+    assert delta == pytest.approx(a.discrepancy - b.discrepancy)
+    # against the bootstrap of each alone, added as if independent: the shared part cancels in the pair
+    idx = np.random.default_rng(1).integers(0, n, size=(1000, n))
+    alone = np.hypot(np.std(_q_of(Ta[idx])), np.std(_q_of(Tb[idx])))
+    assert 0 < se < 0.5 * alone
+    assert discrepancy_difference(a, a) == (0.0, 0.0)
+    assert np.isnan(discrepancy_difference(a, dataclasses.replace(b, channel_values=None))[1])
+
+
+def test_the_pair_plot_draws_the_intervals_gift_fit_reports():
+    from gift_theory.lab._figures import pairs_data, pairs_figure
+    from scipy import stats as st
+
+    cov = np.array([[0.01, -0.008], [-0.008, 0.02]])
+    joint = {"params": ["s", "q"], "scale": ["log", "log"], "centre": [np.log(0.1), np.log(0.03)],
+             "estimate": [0.1, 0.031], "cov": cov.tolist(), "level": 0.95, "dof": 29}
+    fig = pairs_figure(joint)
+    assert len(fig.axes) == 4
+    t = st.t.ppf(0.975, 29)
+    lo, hi = np.exp(np.log(0.1) - t * 0.1), np.exp(np.log(0.1) + t * 0.1)  # moment_intervals' interval of s
+    labels = [tx.get_text() for ax in fig.axes if ax.get_legend() for tx in ax.get_legend().get_texts()]
+    assert f"95%: [{lo:.3g}, {hi:.3g}]" in labels
+    assert any("-0.57" in tx.get_text() for ax in fig.axes for tx in ax.texts)  # the correlation
+    ds = pairs_data(joint)
+    np.testing.assert_allclose(ds["cov_fit_scale"].values, cov)
+
+
+def test_the_demo_s_bars_say_what_their_colours_mean():
+    from gift_theory._demo import plot_finetune
+
+    rows = [{"method": m, "loss_before": 1.0, "loss_after": v} for m, v in (("gift", 0.9), ("spsa", 1.1), ("ift", 1.0))]
+    curve = {k: [0.0, 1.0] for k in ("alpha", "truth", "truth_se", "predicted", "predicted_model_C2", "chip_alpha",
+                                     "chip_dJ", "chip_se")}
+    curve["method"] = "gift"
+    host = Figure()
+    fig = plot_finetune(rows, curve, s0=0.05, st=0.2, ax=host.subplots(1, 2))
+    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert legend == ["w0 (no fine-tuning)", "lower loss than w0", "higher loss than w0", "w0 returned (the same loss)"]
+
+
+def test_each_command_has_a_figure_folder_of_its_own(tmp_path):
+    import argparse
+    import json
+
+    from gift_theory import GiftInputError
+    from gift_theory.cli._labargs import figure_dir
+
+    args = argparse.Namespace(measurement=str(tmp_path / "chip.npz"), figures=None, json=False)
+    folders = {c: figure_dir(args, c) for c in ("compare", "diagnose", "fit")}
+    assert folders == {c: str(tmp_path / "chip_gift" / c) for c in folders}
+    assert figure_dir(argparse.Namespace(measurement="chip.npz", figures=None, json=True), "fit") is None
+    os.makedirs(folders["compare"])
+    with open(os.path.join(folders["compare"], "figures.json"), "w") as fh:
+        json.dump({"command": "compare"}, fh)
+    given = argparse.Namespace(measurement="chip.npz", figures=folders["compare"], json=True)
+    assert figure_dir(given, "compare") == folders["compare"]  # its own folder: rewritten
+    with pytest.raises(GiftInputError, match="holds the figures of gift compare"):
+        figure_dir(given, "diagnose")

@@ -81,7 +81,7 @@ def test_plugins_page_bad_plugins_are_one_line_and_exit_2(page):
     lines = [l for l in bad.splitlines() if l]
     assert [l for l in lines if l.startswith("exit")] == ["exit 2"] * 4, bad
     for name, rule in (("broken.py", "syntax"), ("no_hook.py", "needs an activation"),
-                       ("wrong_class.py", "must be one of the CONTRACTS"), ("clash.py", "clashes with the built-in")):
+                       ("wrong_class.py", "must be one of the reference §6"), ("clash.py", "clashes with the built-in")):
         msg = [l for l in lines if l.startswith(name + ":")]
         assert len(msg) == 1 and rule in msg[0], (name, bad)
     assert "Traceback" not in bad

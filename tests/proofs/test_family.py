@@ -111,3 +111,14 @@ def test_per_sample_non_critical_family_is_outside_never_a_counterexample(x64):
     assert contract_json(r2)["inside_hypotheses"] is True and contract_json(r2)["counterexample"] is True
     dj = r2["wt"][0]["J_st_wt_minus_J_st_w0"]            # independent: 0.25 - 0.175^2/2 + (0 - 0) at w1* = -0.175
     assert dj["lo"] <= 0.25 - 0.175 ** 2 / 2 <= dj["hi"]
+
+
+def test_a_decimal_w0_is_not_critical_exactly_and_the_check_says_why_and_what_to_do():
+    s, w = sp.Symbol("s", positive=True), sp.Symbol("w", real=True)
+    J = (w - sp.sqrt(2) * s) ** 2 + s ** 2 * w ** 4 / 10
+    w0 = float(sp.nsolve(sp.diff(J, w).subs(s, 1), w, 1.3))  # a critical point to a float's precision
+    detail = next(h["detail"] for h in theorem1(family(J, w0, s=s, w=w), "1", "1.1")["hypotheses"]
+                  if h["name"] == "w0_critical")
+    assert "zero to a float's precision, not exactly" in detail and "sp.Rational" in detail
+    far = next(h for h in theorem1(family(J, 1.0, s=s, w=w), "1", "1.1")["hypotheses"] if h["name"] == "w0_critical")
+    assert far["verified"] is False and "float's precision" not in far["detail"]  # really not critical: no hint

@@ -124,3 +124,14 @@ def test_no_literal_verdicts_in_the_checks():
     pat = re.compile(r"verdict\s*=\s*[\"'](holds|fails|inconclusive)[\"']")
     hits = [f"{p.name}: {m.group(0)}" for p in root.glob("*.py") for m in pat.finditer(p.read_text())]
     assert hits == []
+
+
+def test_the_report_keeps_a_bar_in_the_evidence_a_bar():
+    from proofs_checks._report import render_markdown
+
+    rec = {"id": "x", "verdict": "holds", "claim": "c", "evidence": "P(B|A) = 0.5", "hypotheses": [],
+           "correction": None, "counterexample": None}
+    md = render_markdown([rec])
+    row = next(l for l in md.splitlines() if l.startswith("| `x`"))
+    assert "P(B\\|A)" in row and row.count(" | ") == 3  # escaped: the table keeps its four cells
+    assert "**Evidence.** P(B|A) = 0.5" in md            # the record in full, as written

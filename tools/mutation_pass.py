@@ -84,7 +84,7 @@ TARGETS = {
     "linear_example_bound": dict(
         code=[("_linear", "mc_cross_check"), ("_linear", "c1_closed_form"), ("_linear", "_example_hypotheses"),
               ("_linear", "linear_example_bound")],
-        tests=[f"{T}::test_linear_example_bound"]),
+        tests=[f"{T}::test_linear_example_bound", f"{T}::test_linear_example_bound_can_hold"]),
     "gift_never_worse": dict(
         code=[("_gift", "algorithm1"), ("_gift", "_clopper_pearson"), ("_gift", "_corrected_runs"),
               ("_gift", "gift_never_worse")],
@@ -107,7 +107,7 @@ TARGETS = {
         tests=[f"{T}::test_gift_taylor_rule"]),
     "linear_example_text_claim": dict(
         code=[("_linear", "linear_example_text_claim")],
-        tests=[f"{T}::test_linear_example_text_claim"]),
+        tests=[f"{T}::test_linear_example_text_claim", f"{T}::test_linear_example_text_claim_needs_v_zero_at_every_depth"]),
     "proposition2_unique_point": dict(
         code=[("_kushner", "proposition2_unique_point")],
         tests=[f"{T}::test_proposition2_unique_point"]),

@@ -180,6 +180,19 @@ def test_linear_example_text_claim():
     assert _hyp(r, "theorem1_s0_positive")["verified"] is False           # computed from the instance's s0 = 0
 
 
+def test_linear_example_text_claim_needs_v_zero_at_every_depth(monkeypatch):
+    """The refutation is "v = 0 at s0 = 0 at every depth": with v made nonzero at depth 2 there is none, and the
+    verdict is "inconclusive" (one example cannot prove the text's claim)."""
+    orig = _linear.lc.symbolic_example
+
+    def shifted(L):
+        e = orig(L)
+        return dict(e, v=e["v"] + sp.ones(L, 1)) if L == 2 else e
+    monkeypatch.setattr(_linear.lc, "symbolic_example", shifted)
+    r = _linear.linear_example_text_claim()
+    assert r["verdict"] == "inconclusive" and r["counterexample"] is None
+
+
 def test_linear_example_v_scaling():
     r = _linear.linear_example_v_scaling()
     assert r["verdict"] == "fails" and r["correction"] and ALL_VERIFIED(r)

@@ -80,14 +80,3 @@ def test_theorem1_bad_family_files_exit_2_one_line(tmp_path, capsys):
         assert out.out == "" and out.err.count("\n") == 1 and "Traceback" not in out.err, (name, out.err)
         assert name in out.err, out.err
 
-
-def test_theorem1_subcommand_per_sample_family_outside(capsys):
-    """The audit's per-sample family (issue 44) through the command: w0 = (-0.05, 1) is not critical for the
-    mean of the K = 100 values, so the instance is outside the theorem, never a counterexample."""
-    from proofs_checks.families import path
-
-    assert main(["check", "theorem1", "--family", path("per_sample"), "--s0", "1", "--st", "1.5", "--json"]) == 0
-    obj = json.loads(capsys.readouterr().out)
-    crit = next(h for h in obj["hypotheses"] if h["name"] == "w0_critical")
-    assert crit["verified"] is False and obj["inside_hypotheses"] is False and obj["counterexample"] is False
-    assert obj["conclusion"] == "fails" and "no counterexample" in obj["evidence"]

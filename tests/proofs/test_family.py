@@ -91,18 +91,23 @@ def test_trivial_point_certificate(x64):
     assert _mc.trivial_point_certificate(arch, draws, prob.y, unravel)(np.asarray(wt) + 0.1, 0.25) is None
 
 
-def test_per_sample_non_critical_family_is_outside_never_a_counterexample(x64):
+def test_per_sample_non_critical_family_is_outside_never_a_counterexample(x64, capsys):
     """The per-sample family's objective is the mean of its K values: its gradient at w0 is computed
     (-0.05 in w1), so w0 is not critical -- reported outside the hypotheses, never a counterexample
-    (before, a z-test that failed to reject made it "verified"). The same family at the critical
-    w0 = (0, 1) is a counterexample to Theorem 1 as printed (the saddle at w2 = 0)."""
+    (before, a z-test that failed to reject made it "verified"). Through the command, on the shipped
+    file. The same family at the critical w0 = (0, 1) is a counterexample to Theorem 1 as printed
+    (the saddle at w2 = 0)."""
+    import json
+
+    from gift_theory.cli import main
+
     fam = load_family(path("per_sample"))
-    r = theorem1(fam, 1.0, 1.5)
-    j = contract_json(r)
-    crit = next(h for h in r["hypotheses"] if h["name"] == "w0_critical")
+    assert main(["check", "theorem1", "--family", path("per_sample"), "--s0", "1", "--st", "1.5", "--json"]) == 0
+    j = json.loads(capsys.readouterr().out)
+    crit = next(h for h in j["hypotheses"] if h["name"] == "w0_critical")
     assert crit["verified"] is False and "-0.05" in crit["detail"]
-    assert r["conclusion"] == "fails" and j["inside_hypotheses"] is False and j["counterexample"] is False
-    assert "no counterexample" in r["evidence"] and "a counterexample to Theorem 1 as printed" not in r["evidence"]
+    assert j["conclusion"] == "fails" and j["inside_hypotheses"] is False and j["counterexample"] is False
+    assert "no counterexample" in j["evidence"] and "a counterexample to Theorem 1 as printed" not in j["evidence"]
     # the objective's gradient, computed independently: d/dw1 mean_i J_i = w1 - mean(a) = -0.05 at w0
     g = jax.grad(lambda w: jnp.mean(fam.J(w, 1.0)))(jnp.array([-0.05, 1.0]))
     assert np.allclose(g, [-0.05, 0.0], atol=1e-15)

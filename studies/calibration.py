@@ -173,6 +173,13 @@ def main(argv=None):
     from gift_theory.finetune import load_setting
 
     ds, arch, w0 = load_setting("digits", "64-32-32-10", 0.05, 0, progress=False)
+    import subprocess
+
+    try:  # each row names the code it was measured with
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=os.path.dirname(os.path.abspath(__file__))).stdout.strip() or None
+    except OSError:
+        commit = None
     done = set()
     if a.out and os.path.exists(a.out):
         with open(a.out) as fh:
@@ -184,7 +191,7 @@ def main(argv=None):
             for m in a.methods.split(","):
                 if (chip, not a.no_taps, seed, m) in done:
                     continue
-                row = run_one(ds, arch, w0, chip, seed, m, taps=not a.no_taps)
+                row = run_one(ds, arch, w0, chip, seed, m, taps=not a.no_taps) | {"commit": commit}
                 print(json.dumps(row), flush=True)
                 if a.out:
                     with open(a.out, "a") as fh:

@@ -9,6 +9,7 @@ measure again, and confirm on the chip.
 from ._fit import LayerMap as LayerMap
 from ._fit import fit_layers as fit_layers
 from ._loop import calibrate as calibrate
+from ._loop import noise_physics as noise_physics
 from ._file import FileCalibration as FileCalibration
 from ._file import calibrate_measurement as calibrate_measurement
 from ._model import ChipModel as ChipModel

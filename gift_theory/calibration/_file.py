@@ -34,13 +34,8 @@ import numpy as np
 from .._measurement import Measurement
 from .._params import Layer, params32
 from ._fit import fit_layers
-from ._loop import _SLOPES, _row_gain, correction
+from ._loop import _SLOPES, _row_gain, correction, noise_physics
 from ._model import ChipModel, LayerResponse
-
-#: the mechanism classes (docs/reference.md §6) the noise is read in: what is not a fixed map
-NOISE_CLASSES = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "correlated_noise",
-                 "readout_nonlinearity", "time_drift", "memory")
-
 
 @dataclasses.dataclass(frozen=True)
 class FileCalibration:
@@ -70,21 +65,6 @@ class FileCalibration:
                 "accuracy_before": self.accuracy_before,
                 "accuracy_before_interval": list(self.accuracy_before_interval),
                 "identified": self.identified, "not_identified": list(self.not_identified)}
-
-
-def _noise(key, meas: Measurement, effects):
-    from ..effects import REGISTRY
-    from ..lab import default_candidates, diagnose, fit_effects
-    from ..lab._offset_kinds import fitted_as_offsets
-
-    if effects:
-        return fit_effects(key, meas, list(effects)).after.physics
-    cands = [c for c in default_candidates(meas)
-             if REGISTRY[c].mechanism in NOISE_CLASSES and not fitted_as_offsets(c)]
-    d = diagnose(key, meas, candidates=cands)
-    if d.missing_effect_detected and d.ranking and d.ranking[0].as_json().get("status") == "passes":
-        return d.ranking[0].model.physics
-    return d.baseline.physics
 
 
 def _accuracy(key, params, x, labels, physics, arch, shots):
@@ -138,7 +118,7 @@ def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), retrain: bo
             "dead_neurons": [int(j) for j in np.where(pinned[i][0].all(axis=1))[0]], "noise_level": f.s}
     realised = dataclasses.replace(meas, params=tuple(Layer(W, b) for W, b in eff))
     k_noise, k_train, k_pred = jax.random.split(key, 3)
-    physics = _noise(k_noise, realised, effects)
+    physics, _ = noise_physics(k_noise, realised, effects)
     target = prog
     if retrain:
         start = [(np.where(pW, eW, W), np.where(pb, eb, b)) for (W, b), (eW, eb), (pW, pb) in zip(prog, eff, pinned)]

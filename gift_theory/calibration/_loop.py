@@ -32,6 +32,7 @@ significantly better than w0.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax
@@ -64,15 +65,48 @@ def _pinned(fixed, values, like):
     return Pinned(mask, val)
 
 
-def _retrain_target(problem, start, fixed, values, s_hat: float, seed: int):
-    """The target retrained in silico under awgn(s_hat) with the pinned entries held at their values."""
+def _retrain_target(problem, start, fixed, values, physics, seed: int):
+    """The target retrained in silico under the noise ``physics`` with the pinned entries held at their values."""
     from ..finetune._rivals import RETRAIN
     from ..training import train
 
     key = jax.random.fold_in(problem.key, 7100 + seed)
-    out = train(key, problem.arch, problem.x, problem.y, awgn(s_hat), RETRAIN, params=_layers32(start),
+    out = train(key, problem.arch, problem.x, problem.y, physics, RETRAIN, params=_layers32(start),
                 pinned=_pinned(fixed, values, start))
     return _np(out)
+
+
+#: the mechanism classes (docs/reference.md §6) a chip's noise is read in: what is not a fixed map
+NOISE_CLASSES = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "correlated_noise",
+                 "readout_nonlinearity", "time_drift", "memory")
+
+
+def noise_physics(key, meas, effects=()):
+    """The noise of the chip ``meas`` measured, read by the measurement lab with the realised maps as
+    the weights (so a fixed map is not read as noise): the ``effects`` named, fitted, or the
+    diagnosis' model over the noise-like classes and the loaded plugins of those classes (its
+    best passing model when the awgn model fails, else awgn at its fitted level).
+
+    Returns
+    -------
+    physics, info (``physics``, ``used``, ``baseline_p``)
+    """
+    from ..effects import REGISTRY
+    from ..lab import default_candidates, diagnose, fit_effects
+    from ..lab._offset_kinds import fitted_as_offsets
+
+    if effects:
+        ph = fit_effects(key, meas, list(effects)).after.physics
+        return ph, {"physics": ph.describe(), "used": "the effects named"}
+    cands = [c for c in default_candidates(meas)
+             if REGISTRY[c].mechanism in NOISE_CLASSES and not fitted_as_offsets(c)]
+    d = diagnose(key, meas, candidates=cands)
+    top = d.ranking[0] if d.ranking else None
+    use = d.missing_effect_detected and top is not None and top.status == "passes"
+    ph = top.model.physics if use else d.baseline.physics
+    return ph, {"physics": ph.describe(), "baseline_p": d.baseline_comparison.p_value,
+                "used": "the diagnosis' model" if use else
+                ("awgn (the best noise model fails its test)" if d.missing_effect_detected else "awgn (it fits)")}
 
 
 def _row_gain(W_eff, W):
@@ -83,7 +117,8 @@ def _row_gain(W_eff, W):
 
 def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None = None, reserve: float = 4.0,
               z_accept: float = 2.5, stuck_z: float = 5.0, stuck_ratio: float = 0.25, gain_clip=(0.4, 2.5),
-              noise_tolerance: float = 0.1, retrain: bool = True, ridge: float = 0.01, no_taps_rounds: int = 3):
+              noise_tolerance: float = 0.1, retrain: bool = True, ridge: float = 0.01, no_taps_rounds: int = 3,
+              noise_model: bool = True, effects=()):
     """Calibrate the chip of ``problem`` to realise w0 (module docstring).
 
     Parameters
@@ -99,6 +134,10 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
         than ``stuck_ratio`` of the row's gain
     gain_clip : the range a row's gain estimate is held in (a step never more than 1/0.4 of the residual)
     noise_tolerance : retrain under the identified noise level when it differs from s0 by more than this share
+    noise_model : with taps, read the noise beyond its level from the first round (the lab's diagnosis
+        over the noise-like classes, plugins included, on the realised maps: :func:`noise_physics`) and
+        retrain under it when it names more than awgn
+    effects : the effects to fit as the noise instead of the diagnosis' choice
     retrain : False never retrains (pre-compensation only)
     ridge : a correction acts on the directions the layer's inputs span; ``ridge`` (relative to their
         mean second moment) sets how weakly spanned a direction may be (:meth:`_LayerState.correct`)
@@ -123,6 +162,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     prog = [(W.copy(), b.copy()) for W, b in w0]
     lays = [_LayerState(W, b) for W, b in w0]
     prev, s_hat, taps, retrained, history, first = None, None, None, 0, [], {}
+    noise, info_noise = None, None
     for k in range(10 ** 6 if max_rounds is None else max_rounds):
         if problem.evaluations_left() < cost + reserve - 1e-9:
             break
@@ -143,12 +183,20 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
                 first[f.layer] = f
             else:
                 new_pins += lays[f.layer - 1].secant(f, prev[f.layer], stuck_z, stuck_ratio, gain_clip)
-        mismatch = abs(s_hat / problem.s0 - 1.0) > noise_tolerance
+        if prev is None and taps and retrain and noise_model:
+            with phase("calibration noise"):  # the noise beyond its level: law, signal-dependent parts
+                realised = dataclasses.replace(meas, params=tuple(Layer(f.W, f.b) for f in fits))
+                noise, info_noise = noise_physics(jax.random.fold_in(problem.key, 7300), realised, effects)
+        if noise is None or noise.names == ("awgn",):
+            mismatch = abs(s_hat / problem.s0 - 1.0) > noise_tolerance
+            physics = awgn(s_hat if mismatch else problem.s0)
+        else:
+            mismatch, physics = True, noise
         if retrain and (new_pins or (prev is None and mismatch)):
             with phase("calibration retrain"):
                 start = [st.pinned_start(W, b) for (W, b), st in zip(target, lays)]
                 target = _retrain_target(problem, start, [st.fixed for st in lays], [st.values for st in lays],
-                                         s_hat if mismatch else problem.s0, k)
+                                         physics, k)
             retrained += 1
             for st in lays:
                 st.best = None  # a new target: the residuals before it do not compare
@@ -162,7 +210,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
             prog[:L - 1] = [(W.copy(), b.copy()) for W, b in target[:L - 1]]
         history.append(row)
         prev = {f.layer: f for f in fits}
-    info = {"rounds": history, "taps": taps, "retrained": retrained, "noise_level": s_hat,
+    info = {"rounds": history, "taps": taps, "retrained": retrained, "noise_level": s_hat, "noise": info_noise,
             "identified": _identified(first, lays, L),
             "not_identified": [] if taps else
             ["the hidden layers' maps, stuck weights and dead neurons (no taps: only the output map is read)"]}

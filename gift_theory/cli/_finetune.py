@@ -22,6 +22,8 @@ def add_arguments(parser):
                              "(docs/hardware.md); it replaces the simulated chip, and the scores are measured on it "
                              "with fresh shots the budget does not pay for")
     parser.add_argument("--out", default=None, metavar="W.npz", help="write the returned weights (W1.., b1..) there")
+    from ._plugins import add_plugin_argument
+    add_plugin_argument(parser)  # calibrate, identify-retrain: effects of your own among the noise candidates
     parser.add_argument("--score-shots", type=int, default=32, metavar="N",
                         help="shots per input of the scores (the referee's, or the chip's with --chip; default 32)")
     parser.add_argument("--true-effect", action="append", default=[], metavar="NAME=VALUE",
@@ -60,6 +62,8 @@ def run(args) -> dict:
         raise GiftInputError("--chip: --st and --true-effect describe a simulated chip; your chip's physics is its own")
     if args.out is not None and not args.out.endswith(".npz"):
         raise GiftInputError(f"--out {args.out}: the weights are written as .npz (W1.., b1..)")
+    from ._plugins import load_plugins
+    load_plugins(args)
     if args.score_shots < 1:
         raise GiftInputError(f"--score-shots {args.score_shots}: must be at least 1")
     for name, v in (("--s0", args.s0), ("--st", 0.0 if args.st is None else args.st), ("--budget", args.budget)):

@@ -137,6 +137,8 @@ def test_calibrate_recovers_gains_offsets_and_bias_shifts(setting):
     assert problem.evaluations_used() <= 40
     gains = info["identified"]["1"]["rows_gain_median"]
     assert abs(gains - 0.7) < 0.1
+    # the chip's noise is awgn at s0: the gains and offsets are fixed maps, not read as noise
+    assert info["noise"]["used"] == "awgn (it fits)", info["noise"]
 
 
 def test_calibrate_pins_stuck_weights_and_retrains_around_them(setting):
@@ -351,3 +353,19 @@ def test_the_demos_calibration_part_recovers_the_lost_accuracy():
     assert c["accepted"] and c["accuracy_ideal"] - c["accuracy_before"] > 0.02, c
     assert c["recovered"] > 0.8, c
     assert c["evaluations"] <= 20 and "layer_gain" in c["chip"]
+
+
+@pytest.mark.slow
+def test_noise_physics_reads_a_signal_dependent_noise_through_a_fixed_map():
+    """Shot noise on top of awgn: with the realised maps as the weights the lab names the shot noise
+    (an effect of the input-dependent class), and the awgn model fails its test."""
+    from gift_theory.calibration import noise_physics
+    from gift_theory.lab import simulate_measurement
+
+    params = TEACHER.params()
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(3), (96, 4), minval=-1.0, maxval=1.0))
+    shot = gt.Physics.parse(["shot=0.02"], s=0.03)
+    meas = simulate_measurement(jax.random.PRNGKey(4), params, x, shot, shots=32, taps=True)
+    physics, info = noise_physics(jax.random.PRNGKey(5), meas)
+    assert info["baseline_p"] < 0.01 and info["used"] == "the diagnosis' model", info
+    assert set(physics.names) & {"shot", "multiplicative"}, info

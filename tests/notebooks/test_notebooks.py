@@ -20,6 +20,7 @@ import sys
 import time
 
 import nbformat
+import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -58,7 +59,8 @@ def _text(cell) -> str:
 
 def same_text(stored: str, fresh: str) -> bool:
     """The same words; every number equal within two units of its last printed digit (or 1e-3 of
-    it): the printed precision of a Monte-Carlo number may round either way on another machine."""
+    it): the printed precision of a Monte-Carlo number may round either way on another machine.
+    Numbers below 1e-6 (tail probabilities) agree within 5 % of their value."""
     a, b = NUMBER.split(stored), NUMBER.split(fresh)
     na, nb_ = NUMBER.findall(stored), NUMBER.findall(fresh)
     if a != b or len(na) != len(nb_):
@@ -68,6 +70,12 @@ def same_text(stored: str, fresh: str) -> bool:
         decimals = len(mant.split(".")[1]) if "." in mant else 0
         unit = 10.0 ** (-decimals) * (10.0 ** int(x.lower().split("e")[1]) if "e" in x.lower() else 1.0)
         fx, fy = float(x), float(y)
+        if 0 < abs(fx) < 1e-6 and 0 < abs(fy) < 1e-6 and (fx > 0) == (fy > 0):
+            # a tail probability far below any level: its leading digits move with the last bit of
+            # the statistic it comes from; the same within 5 %
+            if abs(np.log(abs(fx) / abs(fy))) > 0.05:
+                return False
+            continue
         if abs(fx - fy) > max(2.5 * unit, 1e-3 * abs(fx)):  # two units, with room for the float's own rounding
             return False
     return True
@@ -97,7 +105,8 @@ def test_there_are_at_least_four_notebooks_stored_executed_each_with_figures_of_
 
 def test_the_comparison_of_outputs_allows_the_last_digit_and_nothing_else():
     assert same_text("z = 5.12 > 3.08; C1 = 624/3125", "z = 5.13 > 3.08; C1 = 624/3125")
-    assert same_text("-2.157e-04", "-2.158e-04") and same_text("p = 7.34e-40", "p = 7.36e-40")
+    assert same_text("-2.157e-04", "-2.158e-04") and same_text("p = 7.34e-40", "p = 7.23e-40")
+    assert not same_text("p = 7.34e-40", "p = 6.34e-40") and not same_text("p = 7.34e-40", "p = 7.34e-30")
     assert not same_text("kept w0: True", "kept w0: False")
     assert not same_text("z = 5.12", "z = 5.19") and not same_text("loss 1.6893", "loss 1.6303")
 

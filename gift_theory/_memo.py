@@ -10,8 +10,13 @@ law repeats them at every point. :func:`memoized` computes such a result once an
   the scalars, the PRNG key's data, the physics' leaves, plus the source of ``gift_theory`` and
   the jax version (a change of the code is a different key, never a stale hit);
 * a result is kept in this process (the last :data:`KEEP` of them) and, when a folder is set
-  (:func:`use_folder`, or ``$GIFT_MEMO_DIR``), in ``<folder>/<tag>-<digest>.pkl``, written
+  (:func:`use_folder`, or ``$GIFT_MEMO_DIR``), in ``<folder>/<tag>-<digest>.npz``, written
   atomically, so that other worker processes and later runs reuse it;
+* an entry on disk holds data only, never code: its arrays, and the shape of the result as JSON
+  (tuples, lists, dicts with string keys, the weights' ``Layer``, numbers, strings, None),
+  read with ``allow_pickle=False``; it carries the digest of its content and its key, checked
+  on reading. An entry that fails either (truncated, damaged, planted) is computed again and
+  rewritten; a folder that cannot be written costs the reuse, never the result (one warning);
 * a hit returns exactly the bits the computation returned (the arrays as saved, put back on
   the device with their dtype).
 
@@ -24,13 +29,15 @@ from __future__ import annotations
 import collections
 import functools
 import hashlib
+import json
 import os
-import pickle
 import time
+import zipfile
 
 import jax
 import numpy as np
 
+from ._cachedir import unwritable, warn_once
 from ._io import atomic_write_bytes
 
 #: results kept in process
@@ -103,12 +110,90 @@ def digest(*parts) -> str:
     return h.hexdigest()[:32]
 
 
-def _to_host(value):
-    return jax.tree_util.tree_map(lambda a: np.asarray(a) if isinstance(a, jax.Array) else a, value)
+def _named_types() -> dict:
+    """The named tuples an entry may hold, by name (an entry never names a class to import)."""
+    from ._params import Layer
+
+    return {"Layer": Layer}
 
 
-def _to_device(value):
-    return jax.tree_util.tree_map(lambda a: jax.numpy.asarray(a) if isinstance(a, np.ndarray) else a, value)
+def _encode(value, arrays: list):
+    """``value`` as JSON-able data, its arrays appended to ``arrays`` (referred to by position)."""
+    if value is None or isinstance(value, (bool, str)):
+        return {"v": value}
+    if isinstance(value, int):
+        return {"int": value}
+    if isinstance(value, float):
+        return {"float": repr(value)}
+    if isinstance(value, (np.ndarray, np.generic, jax.Array)):
+        arrays.append(np.asarray(value))
+        return {"array": len(arrays) - 1, "jax": isinstance(value, jax.Array), "scalar": isinstance(value, np.generic)}
+    named = {cls: name for name, cls in _named_types().items()}
+    if type(value) in named:
+        return {"named": named[type(value)], "items": [_encode(v, arrays) for v in value]}
+    if isinstance(value, (tuple, list)) and type(value) in (tuple, list):
+        return {type(value).__name__: [_encode(v, arrays) for v in value]}
+    if isinstance(value, dict) and all(isinstance(k, str) for k in value):
+        return {"dict": [[k, _encode(v, arrays)] for k, v in value.items()]}
+    raise TypeError(f"memo: a result holding {type(value).__name__} cannot be kept as data")
+
+
+def _decode(node, arrays):
+    if "v" in node:
+        return node["v"]
+    if "int" in node:
+        return int(node["int"])
+    if "float" in node:
+        return float(node["float"])
+    if "array" in node:
+        a = arrays[int(node["array"])]
+        if node.get("scalar"):
+            return a[()]
+        return jax.numpy.asarray(a) if node.get("jax") else a
+    if "named" in node:
+        return _named_types()[node["named"]](*(_decode(v, arrays) for v in node["items"]))
+    if "tuple" in node:
+        return tuple(_decode(v, arrays) for v in node["tuple"])
+    if "list" in node:
+        return [_decode(v, arrays) for v in node["list"]]
+    if "dict" in node:
+        return {k: _decode(v, arrays) for k, v in node["dict"]}
+    raise ValueError("memo: an entry's skeleton holds an unknown node")
+
+
+def _content_digest(key: str, skeleton: str, arrays) -> str:
+    h = hashlib.sha256(f"{key};{skeleton};".encode())
+    for a in arrays:
+        _update(h, a)
+    return h.hexdigest()
+
+
+def _to_bytes(key: str, value) -> bytes:
+    import io
+
+    arrays: list = []
+    skeleton = json.dumps(_encode(value, arrays), separators=(",", ":"))
+    buf = io.BytesIO()
+    np.savez(buf, __key__=np.array(key), __skeleton__=np.array(skeleton),
+             __digest__=np.array(_content_digest(key, skeleton, arrays)), **{f"a{i}": a for i, a in enumerate(arrays)})
+    return buf.getvalue()
+
+
+def _read_entry(path: str, key: str):
+    """The value stored at ``path`` for ``key``; raises ValueError (or OSError) when the entry is not
+    a well-formed, untampered entry of that key."""
+    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as f:  # our handle: closed on a bad file
+        files = set(f.files)
+        if not {"__key__", "__skeleton__", "__digest__"} <= files:
+            raise ValueError("not a memo entry")
+        skeleton, digest_ = str(f["__skeleton__"]), str(f["__digest__"])
+        if str(f["__key__"]) != key:
+            raise ValueError("an entry of another key")
+        n = len([k for k in files if k.startswith("a") and k[1:].isdigit()])
+        arrays = [f[f"a{i}"] for i in range(n)]
+    if _content_digest(key, skeleton, arrays) != digest_:
+        raise ValueError("its digest does not match its content")
+    return _decode(json.loads(skeleton), arrays)
 
 
 def _key(tag: str, parts) -> str:
@@ -117,7 +202,7 @@ def _key(tag: str, parts) -> str:
 
 def _path(key: str) -> str | None:
     where = folder()
-    return os.path.join(where, key + ".pkl") if where else None
+    return os.path.join(where, key + ".npz") if where else None
 
 
 def lookup(tag: str, parts):
@@ -130,9 +215,9 @@ def lookup(tag: str, parts):
     path = _path(key)
     if path and os.path.isfile(path):
         try:
-            with open(path, "rb") as fh:
-                value = _to_device(pickle.load(fh))
-        except (OSError, EOFError, pickle.UnpicklingError):
+            value = _read_entry(path, key)
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+            warn_once("broken entry", f"memo entry {path} is unreadable ({type(exc).__name__}: {exc}); computed again")
             return None  # an unreadable entry is recomputed and rewritten
         _count[tag]["hits"] += 1
         _keep(key, value)
@@ -147,7 +232,10 @@ def store(tag: str, parts, value, seconds: float = 0.0) -> None:
     _count[tag]["misses"] += 1
     path = _path(key)
     if path:
-        atomic_write_bytes(path, pickle.dumps(_to_host(value), protocol=pickle.HIGHEST_PROTOCOL))
+        try:
+            atomic_write_bytes(path, _to_bytes(key, value))
+        except OSError as exc:  # a read-only or full folder: the result is kept in this process only
+            unwritable(os.path.dirname(path), exc, "in-silico results")
     _keep(key, value)
 
 

@@ -100,11 +100,18 @@ def _law_draws(law, k, shape, dtype):
     if _is_builtin(type(law)):
         return law.standard(k, shape, dtype)
     try:
-        return law.standard(k, shape, dtype)
+        out = law.standard(k, shape, dtype)
     except GiftInputError:
         raise
     except Exception as exc:
         raise GiftInputError(plugin_failure_line(type(law), "standard", exc)) from None
+    from .effects._physics import checked_result
+
+    out = checked_result(type(law), "standard", out, tuple(shape), jnp.zeros((), dtype))
+    if tuple(out.shape) != tuple(shape):  # the draws of every site, shot and neuron: no broadcasting
+        raise GiftInputError(f"{plugin_failure_line(type(law), 'standard', None)}: returned shape "
+                             f"{tuple(out.shape)}, expected {tuple(shape)}")
+    return out
 
 
 def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_shape=(), dtype=jnp.float32) -> dict:

@@ -63,8 +63,9 @@ def compilation_cache_dir() -> str | None:
         return None
     if env:
         return env
-    base = os.environ.get("GIFT_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "gift")
-    return os.path.join(base, "xla")
+    from ._cachedir import cache_dir
+
+    return os.path.join(cache_dir(), "xla")
 
 
 def use_compilation_cache() -> str | None:
@@ -76,6 +77,12 @@ def use_compilation_cache() -> str | None:
         return current
     folder = compilation_cache_dir()
     if folder is None:
+        return None
+    from ._cachedir import unwritable, writable
+
+    why = writable(folder)
+    if why is not None:  # JAX would warn on every program it fails to keep: one line, then none kept
+        unwritable(folder, why, "compiled programs")
         return None
     jax.config.update("jax_compilation_cache_dir", folder)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_SECONDS)

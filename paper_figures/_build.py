@@ -61,6 +61,15 @@ def _sweep_summary(name, ds) -> dict:
             "seconds_jobs_total": float(sec.sum())}
 
 
+def default_root() -> str:
+    """Where the sweep data and figures go unless told: this folder in a source checkout (its
+    ``data/`` and ``figures/`` are the repository's), else ``./gift_figures`` in the working
+    directory -- never inside an installed package."""
+    if os.path.isfile(os.path.join(os.path.dirname(HERE), "pyproject.toml")) and os.access(HERE, os.W_OK):
+        return HERE
+    return os.path.join(os.getcwd(), "gift_figures")
+
+
 def build(scale: str = "quick", *, only: str | None = None, scheduler: str | None = None, n_workers: int = 2,
           mnist_folder: str | None = None, data_dir: str | None = None, figure_dir: str | None = None,
           compute: bool = True, progress: bool = True, options: dict | None = None, cells=None) -> dict:
@@ -73,7 +82,8 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
     scheduler : None (local process pool), "synchronous", or a Dask scheduler address
     n_workers : worker processes of the local pool
     mnist_folder : an MNIST IDX folder (paper scale on full MNIST instead of mnist5k)
-    data_dir, figure_dir : default ``paper_figures/data/<scale>``, ``paper_figures/figures/<scale>``
+    data_dir, figure_dir : default ``data/<scale>``, ``figures/<scale>`` under :func:`default_root`
+        (``paper_figures/`` in a source checkout, else ``./gift_figures``)
     compute : False draws from existing data only
     options : extra keyword arguments for every fine-tuning job
     cells : a run in pieces: only the points at these (s0, st) cells, cell by cell in this
@@ -91,8 +101,8 @@ def build(scale: str = "quick", *, only: str | None = None, scheduler: str | Non
     matplotlib.use("agg")  # a batch build draws to files only; the figure functions choose no backend
     t0 = time.perf_counter()
     sc = get_scale(scale)
-    data_dir = data_dir or os.path.join(HERE, "data", sc.name)
-    figure_dir = figure_dir or os.path.join(HERE, "figures", sc.name)
+    data_dir = data_dir or os.path.join(default_root(), "data", sc.name)
+    figure_dir = figure_dir or os.path.join(default_root(), "figures", sc.name)
     names = FIGURES if only is None else (only,)
     mods = {n: importlib.import_module(f"paper_figures.{n}") for n in names}
     all_sweeps = sweeps(sc, mnist_folder=mnist_folder, options=options)
@@ -249,8 +259,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
     parser.add_argument("--data-folder", "--mnist-folder", dest="mnist_folder", default=None, metavar="DIR",
                         help="folder with the MNIST IDX files: fine-tune on full MNIST instead of mnist5k")
-    parser.add_argument("--data-dir", default=None, metavar="DIR", help="where the sweep data go")
-    parser.add_argument("--figure-dir", default=None, metavar="DIR", help="where the PNGs go")
+    parser.add_argument("--data-dir", default=None, metavar="DIR",
+                        help="where the sweep data go (default: paper_figures/data/SCALE in a source checkout, "
+                             "else ./gift_figures/data/SCALE)")
+    parser.add_argument("--figure-dir", default=None, metavar="DIR",
+                        help="where the PNGs go (default: paper_figures/figures/SCALE in a source checkout, else "
+                             "./gift_figures/figures/SCALE)")
     parser.add_argument("--draw-only", action="store_true", help="draw from saved data, run no sweep")
     parser.add_argument("--cells", default=None, metavar="key|S0:ST,...",
                         help="a run in pieces: only the points at these (s0, st) cells, in this order ('key': the "

@@ -181,7 +181,8 @@ def assemble(folder: str, sweep: Sweep):
     """The finished points of ``sweep`` as an :class:`xarray.Dataset`.
 
     Every numeric result key becomes a data variable over ``sweep.dims`` (NaN where a point is
-    missing), plus ``seconds`` (job wall time) and ``done`` (bool). Attributes record the job,
+    missing), plus ``seconds`` (job wall time) and ``done`` (bool); a result key named ``seconds``
+    or ``done`` itself is kept as ``result_seconds`` / ``result_done``. Attributes record the job,
     the fixed options (JSON) and how many points are done.
     """
     import xarray as xr
@@ -194,7 +195,10 @@ def assemble(folder: str, sweep: Sweep):
         for k, v in rec["result"].items():
             if _numeric(v) and k not in keys and k not in sweep.dims:  # a dim name cannot be a variable too
                 keys.append(k)
-    data = {k: np.full(shape, np.nan) for k in keys + ["seconds"]}
+    # a result's own "seconds" (a method's time) is kept as result_seconds: "seconds" is the job's
+    name = {k: f"result_{k}" if k in ("seconds", "done") else k for k in keys}
+    data = {name[k]: np.full(shape, np.nan) for k in keys}
+    data["seconds"] = np.full(shape, np.nan)
     done = np.zeros(shape, bool)
     for flat, p in enumerate(points):
         rec = records.get(point_id(sweep, p))
@@ -206,7 +210,7 @@ def assemble(folder: str, sweep: Sweep):
         for k in keys:
             v = rec["result"].get(k)
             if _numeric(v):
-                data[k][idx] = float(v)
+                data[name[k]][idx] = float(v)
     dims = list(sweep.dims)
     ds = xr.Dataset({k: (dims, v) for k, v in data.items()}, coords={d: list(vals) for d, vals in sweep.dims.items()})
     ds["done"] = (dims, done)

@@ -5,6 +5,8 @@
                                       [--seed 0] [--no-taps] [--setting random|reference]   physics outside it
     python -m studies.blind write DIR --physics new [--no-taps]        issue 24's second set (+ a null), reference setting
     python -m studies.blind write DIR --physics mesh [--strength default|small|large] [--no-taps]   the MZI-mesh chip
+    python -m studies.blind write DIR --physics time [--files-per-physics 3] [--nulls N] [--seed 0] [--no-taps]
+                                      issue 48's set: intensity wander, drifting weights, memory, shapes
     python -m studies.blind score DIR [--limit N] [--match TEXT] [--runner inprocess|subprocess] [--keep JSONDIR]
     python -m studies.blind rescore DIR --keep JSONDIR                 score kept diagnose JSONs again
     python -m studies.blind table A.jsonl [B.jsonl ...]                markdown tables of scored rows
@@ -264,14 +266,14 @@ def _shape(path):
         return {"arch": widths, "n": int(z["y"].shape[0]), "r": int(z["y"].shape[1]), "taps": "a1" in z.files}
 
 
-def run_diagnose(path, seed: int, runner: str = "inprocess"):
+def run_diagnose(path, seed: int, runner: str = "inprocess", extra=()):
     """``gift diagnose PATH --json --seed SEED --quiet``; returns (JSON object or None, error line or None).
 
     ``inprocess``: the ``gift`` console entry point called in this process (the command's own
     code path; JAX's compilations are reused across files). ``subprocess``: the ``gift``
     program on PATH, one fresh process per file, exactly as a user types it.
     """
-    argv = ["diagnose", path, "--json", "--seed", str(seed), "--quiet"]
+    argv = ["diagnose", path, "--json", "--seed", str(seed), "--quiet", *extra]
     if runner == "subprocess":
         exe = shutil.which("gift")
         if exe is None:
@@ -365,6 +367,7 @@ def score_row(out, label, taps: bool) -> dict:
                               else bool(mechs) and mechs[0].get("mechanism") in classes)
     row["container_explained"] = None if wrong is None else bool(wrong and top in label.get("contained_in", []))
     row["status_first"] = ranking[0].get("status") if ranking else None
+    row["explained_by"] = out.get("explained_by")  # reference §8 (several: the data cannot choose)
     row["rejected_first"] = rejected_first(ranking)
     steps = {int(w["layer"]): w.get("p_value") for w in out.get("where") or [] if "layer" in w}
     row["one_step_p"] = steps or None
@@ -552,7 +555,8 @@ def table(paths, out=None):
             out.write(f"| {r['file']} | {'/'.join(classes) or 'none'}; {r['layers_label']} "
                       f"| {_mark(r['detected'])} ({r['baseline_p']:.2g}) | {_mark(r.get('explained'))} "
                       f"| {_mark(r.get('wrong_explanation'))} | {'+'.join(r.get('first_entry') or []) or '-'} "
-                      f"({'-' if p_after is None else f'{p_after:.2g}'}, {r.get('status_first') or '-'}) "
+                      f"({'-' if p_after is None else f'{p_after:.2g}'}, {r.get('status_first') or '-'})"
+                      f"{' or ' + ' or '.join(r['explained_by'][1:]) if len(r.get('explained_by') or []) > 1 else ''} "
                       f"| {(r.get('mechanisms') or ['-'])[0] if r.get('mechanisms') else '-'} "
                       f"| {_mark(r.get('mechanism_first'))} | {r.get('failing_layers')} "
                       f"| {_mark(r.get('failing_layers_exact'))} | {_mark(r.get('rejected_first'))} |\n")
@@ -577,10 +581,11 @@ def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m studies.blind", description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("write", "score", "rescore", "table"))
     p.add_argument("folder", nargs="+", help="the study folder (table: the JSONL files)")
-    p.add_argument("--physics", choices=("builtin", "open", "new", "mesh"), default="builtin",
+    p.add_argument("--physics", choices=("builtin", "open", "new", "mesh", "time"), default="builtin",
                    help="write: the built-in catalogue's effects, physics outside it (open; new: issue 24's second "
                         "set, one file each and a null on the reference setting), or the MZI-mesh chip "
-                        "(labels in labels.json)")
+                        "(labels in labels.json); time: issue 48's physics in acquisition time and activation "
+                        "shapes (studies.time_physics)")
     p.add_argument("--strength", choices=("default", "small", "large"), default="default",
                    help="mesh study: every physics small or large (default: weight errors small, loss and "
                         "crosstalk large)")
@@ -619,6 +624,9 @@ def main(argv=None):
         elif a.physics == "new":
             write_open(a.folder, a.files or 1, a.seed, a.taps, NEW_PHYSICS, 1 if a.nulls is None else a.nulls,
                        a.setting or "reference")
+        elif a.physics == "time":
+            from .time_physics import write_time
+            write_time(a.folder, a.files or 3, a.seed, a.taps, nulls=a.nulls)
         elif a.physics == "mesh":
             write_mesh(a.folder, a.files or 1, a.seed, a.taps, strength=None if a.strength == "default" else a.strength)
         else:

@@ -103,8 +103,14 @@ def markdown(table, methods=("calibrate", "identify-retrain", "pat", "gift")) ->
         cells = []
         for m in methods:
             c = row["methods"].get(m)
-            cells.append("-" if c is None else f"{c['after']:.3f} ({c['recovered']:+.2f}; min {c['recovered_min']:+.2f}; "
-                                                f"{c['evaluations']:.0f} ev)")
+            if c is None:
+                cells.append("-")
+            elif c["recovered"] is None:  # the chip lost less than half a point: nothing to recover
+                cells.append(f"{c['after']:.3f} (no loss; {c['evaluations']:.0f} ev)")
+            else:
+                worse = f"; {c['worse_than_w0']} below w0" if c["worse_than_w0"] else ""
+                cells.append(f"{c['after']:.3f} ({c['recovered']:+.2f}; min {c['recovered_min']:+.2f}; "
+                             f"{c['evaluations']:.0f} ev{worse})")
         lines.append(f"| {LABELS.get(row['chip'], row['chip'])} ({row['before']:.3f}; {row['ideal']:.3f}) | "
                      f"{'yes' if row['taps'] else 'no'} | " + " | ".join(cells) + " |")
     for taps in (True, False):
@@ -146,10 +152,11 @@ def figure(table, path, methods=("calibrate", "identify-retrain", "pat", "gift")
         ax.set_xticklabels([LABELS.get(r["chip"], r["chip"]) for r in sub], rotation=35, ha="right", fontsize=8)
         ax.set_title(f"{'with' if taps else 'without'} taps")
         ax.set_ylim(-1.0, 1.15)
-    axes[0].set_ylabel("share of the lost accuracy recovered\n(after - w0) / (ideal chip - w0); bars: mean, whisker: worst seed")
+    axes[0].set_ylabel("share of the lost accuracy recovered\n(after - w0) / (ideal chip - w0)")
     axes[0].legend(fontsize=8, loc="lower left")
     fig.suptitle("Calibrating chips with fixed per-device errors (digits 64-32-32-10, s0 = st = 0.05, 20 chip evaluations; "
-                 "dashed: all recovered, dotted: 90 %)", fontsize=9)
+                 "dashed: all recovered, dotted: 90 %)\nbars: mean over seeds, whisker down to the worst seed; "
+                 "no bar: not run, or the chip lost no accuracy", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)
 

@@ -118,7 +118,7 @@ def calibrate_measurement(key, meas: Measurement, ds, *, effects=(), retrain: bo
             "dead_neurons": [int(j) for j in np.where(pinned[i][0].all(axis=1))[0]], "noise_level": f.s}
     realised = dataclasses.replace(meas, params=tuple(Layer(W, b) for W, b in eff))
     k_noise, k_train, k_pred = jax.random.split(key, 3)
-    physics, _ = noise_physics(k_noise, realised, effects)
+    physics, _ = noise_physics(k_noise, realised, effects, s=float(np.median([f.s for f in fits])))
     target = prog
     if retrain:
         start = [(np.where(pW, eW, W), np.where(pb, eb, b)) for (W, b), (eW, eb), (pW, pb) in zip(prog, eff, pinned)]

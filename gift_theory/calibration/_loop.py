@@ -81,9 +81,10 @@ NOISE_CLASSES = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluc
                  "readout_nonlinearity", "time_drift", "memory")
 
 
-def noise_physics(key, meas, effects=()):
+def noise_physics(key, meas, effects=(), *, s: float | None = None, alpha: float = 0.01):
     """The noise of the chip ``meas`` measured, read by the measurement lab with the realised maps as
-    the weights (so a fixed map is not read as noise): the ``effects`` named, fitted, or the
+    the weights (so a fixed map is not read as noise): the ``effects`` named, fitted; else awgn at
+    the level ``s`` read off the shots when it passes the lab's test (p >= ``alpha``); else the
     diagnosis' model over the noise-like classes and the loaded plugins of those classes (its
     best passing model when the awgn model fails, else awgn at its fitted level).
 
@@ -98,6 +99,13 @@ def noise_physics(key, meas, effects=()):
     if effects:
         ph = fit_effects(key, meas, list(effects)).after.physics
         return ph, {"physics": ph.describe(), "used": "the effects named"}
+    if s is not None:  # the diagnosis only where awgn at the shots' level does not fit
+        from ..lab import Model, compare
+
+        c = compare(jax.random.fold_in(key, 1), Model(awgn(s)), meas)
+        if c.p_value >= alpha:
+            ph = awgn(s)
+            return ph, {"physics": ph.describe(), "baseline_p": c.p_value, "used": "awgn (it fits)"}
     cands = [c for c in default_candidates(meas)
              if REGISTRY[c].mechanism in NOISE_CLASSES and not fitted_as_offsets(c)]
     d = diagnose(key, meas, candidates=cands)
@@ -156,13 +164,15 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     n = int(min(inputs, problem.K1, max(32, spend // (4 * int(shots)))))
     max_rounds = None if rounds is None else int(rounds)
     order = np.asarray(jax.random.permutation(jax.random.fold_in(problem.key, 7000), problem.K1))
-    x_cal = problem.x_ft[np.sort(order[:n])]
+    idx_cal = np.sort(order[:n])
+    x_cal, y_cal = problem.x_ft[idx_cal], np.asarray(problem.y_ft[idx_cal], np.float64)
     cost = n * int(shots) / problem.unit_shots
     target = [(W.copy(), b.copy()) for W, b in w0]
     prog = [(W.copy(), b.copy()) for W, b in w0]
     lays = [_LayerState(W, b) for W, b in w0]
     prev, s_hat, taps, retrained, history, first = None, None, None, 0, [], {}
     noise, info_noise = None, None
+    measured = []  # (chip loss on the round's shots, its standard error, the weights measured)
     for k in range(10 ** 6 if max_rounds is None else max_rounds):
         if problem.evaluations_left() < cost + reserve - 1e-9:
             break
@@ -170,11 +180,18 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
             break
         with phase("chip"):
             meas = problem.chip.measure(_layers32(prog), x_cal, int(shots), taps=True)
-        with phase("calibration fit"):
-            fits = fit_layers(meas, s=s_hat)
         taps = meas.has_taps
         if k == 0:
             first_meas = meas
+        # the round's shots price the programmed weights on the chip at no extra cost: the loss
+        # E|y - y_target|^2 each round reached, so that a loop that wanders off is seen
+        per_input = np.mean(np.sum((np.asarray(meas.y, np.float64) - y_cal[:, None, :]) ** 2, axis=-1), axis=1)
+        measured.append((float(per_input.mean()), float(per_input.std(ddof=1) / math.sqrt(n)),
+                         [(W.copy(), b.copy()) for W, b in prog]))
+        if len(measured) >= 3 and measured[-1][0] > measured[-2][0] > measured[-3][0]:
+            break  # the chip's loss rose twice running: the corrections no longer help; the budget goes to the confirmation
+        with phase("calibration fit"):
+            fits = fit_layers(meas, s=s_hat)
         s_hat = float(np.median([f.s for f in fits]))
         new_pins = 0
         for f in fits:
@@ -186,7 +203,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
         if prev is None and taps and retrain and noise_model:
             with phase("calibration noise"):  # the noise beyond its level: law, signal-dependent parts
                 realised = dataclasses.replace(meas, params=tuple(Layer(f.W, f.b) for f in fits))
-                noise, info_noise = noise_physics(jax.random.fold_in(problem.key, 7300), realised, effects)
+                noise, info_noise = noise_physics(jax.random.fold_in(problem.key, 7300), realised, effects, s=s_hat)
         if noise is None or noise.names == ("awgn",):
             mismatch = abs(s_hat / problem.s0 - 1.0) > noise_tolerance
             physics = awgn(s_hat if mismatch else problem.s0)
@@ -201,7 +218,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
             for st in lays:
                 st.best = None  # a new target: the residuals before it do not compare
         row = {"round": k, "inputs": n, "shots": int(shots), "noise_level": s_hat, "pinned_new": new_pins,
-               "layers": {}}
+               "chip_loss": measured[-1][0], "chip_loss_se": measured[-1][1], "layers": {}}
         for f in fits:
             st = lays[f.layer - 1]
             prog[f.layer - 1], row["layers"][str(f.layer)] = st.correct(f, target[f.layer - 1], w0[f.layer - 1], ridge,
@@ -220,6 +237,12 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     from ..finetune._linesearch import confirm_best
     candidates = [_layers32(prog)]
     names = ["the calibrated weights"]
+    best = 1 + int(np.argmin([m[0] for m in measured[1:]])) if len(measured) > 1 else None
+    if best is not None and best < len(measured) - 1 and measured[best][0] < measured[-1][0]:
+        # a round before the last measured lower: the corrections after it went astray (a chip whose
+        # map is not the row-wise response the loop models); the chip chooses between the two
+        candidates.append(_layers32(measured[best][2]))
+        names.append(f"the weights of round {best} (the lowest loss the rounds measured)")
     if not taps and retrain:
         # the output alone cannot show the hidden layers' maps: the lab's diagnosis of the first round
         # (every effect but per-device offsets, as identify-retrain) may name a global one -- a layer's

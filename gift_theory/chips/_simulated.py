@@ -12,6 +12,7 @@ import numpy as np
 
 from .._arch import Architecture
 from .._errors import require
+from .._finite import check_all_finite
 from .._model import forward, sample_noise
 from .._params import Layer, check_params, params32
 from ..effects import Physics
@@ -42,6 +43,7 @@ class SimulatedChip:
     """
 
     def __init__(self, arch: Architecture, physics: Physics, key=None, budget_shots: int | None = None):
+        physics.check_scope(arch, "chip physics")
         self.arch = arch
         self.widths = arch.widths
         self.physics = physics
@@ -55,7 +57,8 @@ class SimulatedChip:
         Returns a :class:`~gift_theory.Measurement` with ``y`` of shape (n, shots, d_L), the
         programmed weights (float64) and, with ``taps``, the hidden layers. The shots are
         acquired input by input, shot by shot: t = (i shots + j) / (n shots - 1), recorded when
-        ``times`` is true (default: when the device drifts). Charges ``n * shots`` shots to the
+        ``times`` is true (default: when an effect of the device acts through them -- drift, memory: ``needs_times``;
+        ``times=False`` then is a bad input). Charges ``n * shots`` shots to the
         ledger first (raises BudgetExceeded without measuring).
         """
         params = check_params(params, self.arch, "chip weights")
@@ -67,9 +70,21 @@ class SimulatedChip:
         self.ledger.charge(x.shape[0] * shots)
         k = jax.random.fold_in(self.key, self._calls) if key is None else key
         self._calls += 1
-        with_t = "drift" in self.physics if times is None else bool(times)
+        need = self.physics.needs_times()
+        require(times is None or times or not need, f"chip: effect {', '.join(need)} acts through the acquisition "
+                                                   f"times t; a campaign without times cannot run it")
+        with_t = bool(need) if times is None else bool(times)
+        tapped = bool(taps) and self.arch.depth > 1
         y, tp, t = _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots,
-                            taps=bool(taps) and self.arch.depth > 1, with_t=with_t)
+                            taps=tapped, with_t=with_t)
+
+        def rerun(j, at):  # the campaign again, eagerly: a plugin hook that made the bad value is named
+            with jax.disable_jit():
+                _measure(k, params, jnp.asarray(x), self.physics, arch=self.arch, shots=shots, taps=tapped,
+                         with_t=with_t)
+        check_all_finite(tuple(tp) + (y,), [f"the simulated shots of layer {l} ({self.physics.describe()})"
+                                            for l in (range(1, self.arch.depth + 1) if tapped
+                                                      else (self.arch.depth,))], rerun)
         programmed = tuple(Layer(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in params)
         return Measurement(np.asarray(x, np.float64), np.asarray(y, np.float64), programmed,
                            tuple(np.asarray(a, np.float64) for a in tp) if taps and self.arch.depth > 1 else None,

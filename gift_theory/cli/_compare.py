@@ -12,7 +12,7 @@ this file's size (inputs, shots, taps or not), from the power computed on the fi
 from __future__ import annotations
 
 from .._errors import require
-from ._labargs import add_common, figure_dir, key, load, write_manifest
+from ._labargs import MIN_INPUTS_FITTED, MIN_INPUTS_SCORED, add_common, figure_dir, key, load, write_manifest
 
 
 def add_arguments(parser):
@@ -34,7 +34,7 @@ def run(args):
     from ..lab._figures import compare_figures
 
     folder = figure_dir(args, "compare")  # a folder of another command's: refused before any work
-    meas = load(args)  # plugins first: --effect may name one
+    meas = load(args, MIN_INPUTS_SCORED if args.effect else MIN_INPUTS_FITTED)  # plugins first: --effect may name one
     physics = None
     if args.chip_model is not None:
         import dataclasses
@@ -53,7 +53,11 @@ def run(args):
         specs = list(args.effect)
         if not any(s.strip().split("=")[0].strip() == "awgn" for s in specs):
             raise gt.GiftInputError("--effect: the model needs awgn=S among its effects (the baseline noise level)")
-        physics = gt.Physics.parse(specs, where="--effect")
+        physics = gt.Physics.parse(specs, where="--effect").check_scope(meas.arch, "--effect")
+        need = physics.needs_times()
+        if need and meas.t is None:
+            raise gt.GiftInputError(f"--effect {need[0]}: {args.measurement} has no acquisition times t, and "
+                                    f"{need[0]} acts through them (a hook that takes t)")
         offsets = [n for n in physics.names if gt.effects.REGISTRY[n].offsets_of]
         if offsets:
             raise gt.GiftInputError(f"--effect {offsets[0]}: a model cannot know the device's fixed draws; "

@@ -6,6 +6,7 @@ other half (reference §4 JSON with ``--json``; a text report and a figure folde
 
 from __future__ import annotations
 
+import argparse
 
 from ._common import Progress
 from ._fit import no_taps_caveat
@@ -17,6 +18,9 @@ def add_arguments(parser):
     parser.add_argument("--candidates", default=None,
                         help="comma-separated effects to try (default: every registered effect but awgn)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--design", action=argparse.BooleanOptionalAction, default=True,
+                        help="design the next measurement when the data do not choose between models or nothing "
+                             "explains them (reference §8; --no-design: next_measurement null, the rest unchanged)")
     parser.add_argument("--power-replicates", type=int, default=20, metavar="B",
                         help="when nothing is found missing: simulated files behind the power figures next to "
                              "that verdict (default 20; 0: none)")
@@ -34,7 +38,7 @@ def run(args):
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
-                   progress=Progress("gift diagnose: candidates", args.quiet, after=True))
+                   progress=Progress("gift diagnose: candidates", args.quiet, after=True), design=args.design)
     out = res.as_json()
     if not res.missing_effect_detected:
         # "nothing missing" is only as strong as the test's power at this file's size (the
@@ -79,6 +83,12 @@ def render(out) -> str:
                          + ("explains  " if c["explains"] else "          ") + c["candidate"])
     if not out.get("explained", True) and out.get("reasons"):
         lines.append("why not explained: " + "; ".join(out["reasons"]))
+    if len(out.get("explained_by") or []) > 1:
+        lines.append("explained by each of: " + ", ".join("awgn + " + e for e in out["explained_by"]))
+    nxt = out.get("next_measurement")
+    if nxt:
+        lines.append(f"next measurement: {nxt['design']} -- separates {' / '.join(nxt['separates'])} with power "
+                     f"{nxt['power']:.2f} at 0.01 (gift design MEAS --out INPUTS.npz writes the inputs)")
     lines.append("ranking (held-out discrepancy after fitting): the models that pass (by parsimony-penalised "
                  "discrepancy), then those refused by a check of their fitted values, then those the data reject:")
     for i, r in enumerate(out["ranking"], 1):

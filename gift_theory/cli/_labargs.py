@@ -23,13 +23,30 @@ def add_common(parser):
                              "another command's figures is refused")
 
 
-def load(args):
-    """Load the plugins (a bad one stops here, before any work), then the measurement file."""
+#: inputs a command needs: a fit on half of them and a held-out test over the other half
+#: (compare --effect scores every input: the test over inputs needs 3)
+MIN_INPUTS_FITTED, MIN_INPUTS_SCORED = 4, 3
+
+
+def load(args, min_inputs: int = MIN_INPUTS_FITTED):
+    """Load the plugins (a bad one stops here, before any work), then the measurement file,
+    refusing one with fewer than ``min_inputs`` inputs (one line naming the file)."""
+    from ..effects import REGISTRY
+    from ..effects._physics import scope_error
     from ..lab import load_measurement
 
     load_plugins(args)
     require(args.shots is None or args.shots >= 2, f"--shots {args.shots}: needs at least 2")
-    return load_measurement(args.measurement, weights=weights_of(args))
+    meas = load_measurement(args.measurement, weights=weights_of(args))
+    for name in getattr(args, "plugin_effects", ()):  # a plugin given for this file must act on it
+        err = scope_error(REGISTRY[name], meas.arch.depth)
+        require(err is None, f"--plugin: {err}")
+    require(meas.n >= min_inputs, f"{args.measurement}: has {meas.n} input(s); "
+            + ("fitting on half the inputs and testing on the other half needs at least 4"
+               if min_inputs == MIN_INPUTS_FITTED else f"the test over inputs needs at least {min_inputs}"))
+    require(meas.r >= 4, f"{args.measurement}: has {meas.r} shots per input; the noise floor (random halves of the "
+                         f"shots) needs at least 4")
+    return meas
 
 
 def weights_of(args, measurement: str | None = None):

@@ -36,6 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "compare": ("gift_theory.cli._compare", "compare a model with a measurement file"),
     "diagnose": ("gift_theory.cli._diagnose", "find the physical effect the model is missing"),
     "fit": ("gift_theory.cli._fit", "add effects to the model, fit them, report the error before and after"),
+    "design": ("gift_theory.cli._design", "the next measurement that would tell the models left standing apart"),
     "calibrate": ("gift_theory.cli._calibrate", "corrected weights for a chip from a measurement of the programmed ones"),
     "import": ("gift_theory.cli._import", "convert a measurement file (npz, long or wide CSV, netCDF/HDF5) to npz, netCDF or CSV"),
     "export": ("gift_theory.cli._import", "the same as import: write a measurement file as netCDF (.nc), wide CSV or npz"),
@@ -160,7 +161,10 @@ def main(argv=None) -> int:
         sys.stdout.write(f"gift {__version__}\n")
         return 0
     name = argv[0]
+    from .._process import fewer_malloc_arenas
     from .._xla import use_compilation_cache
+
+    fewer_malloc_arenas()  # the work's freed temporaries go back to fewer pools: a lower peak
 
     use_compilation_cache()  # compiled programs persist on disk across gift runs (GIFT_COMPILATION_CACHE=off: not)
     try:

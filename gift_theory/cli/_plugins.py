@@ -19,9 +19,11 @@ def load_plugins(args) -> list[str]:
     from ..effects import load_entry_points, load_plugin
 
     names = load_entry_points()
+    mine = []
     for path in getattr(args, "plugin", None) or []:
-        names += load_plugin(path)
-    return names
+        mine += load_plugin(path)
+    args.plugin_effects = tuple(mine)  # the effects of the --plugin files (the commands check them against the file)
+    return names + mine
 
 
 def plugin_failure(exc: BaseException) -> str | None:

@@ -28,7 +28,9 @@ def add_arguments(parser):
                         help="a chip effect (reference §2), repeatable: awgn=0.1 shot=0.01 laplace "
                              "quantization=6,2.0 weight_error=e:0.05,seed:3 (default awgn=0.1)")
     parser.add_argument("--taps", action="store_true", help="also record the hidden layers a1..a{L-1}")
-    parser.add_argument("--times", action="store_true", help="also record acquisition times t (drift needs them)")
+    parser.add_argument("--times", action="store_true",
+                        help="also record acquisition times t (always recorded when an effect acts through them: drift, "
+                             "a plugin hook that takes t)")
     parser.add_argument("--csv", action="store_true", help="write the long CSV format (weights go to OUT.weights.npz)")
     parser.add_argument("--out", required=True,
                         help="the measurement file to write: .npz, .nc / .h5 (netCDF-4), or .csv (wide; long with "
@@ -72,6 +74,7 @@ def run(args):
         params = gt.init_params(named_subkey(key, "weights"), arch, gain=args.gain)
     activation = activation or "tanh"
     require(activation in gt.ACTIVATIONS, f"--activation {activation!r}: known {', '.join(gt.ACTIVATIONS)}")
+    physics.check_scope(arch, "--effect")
     x = np.asarray(jax.random.uniform(named_subkey(key, "inputs"), (args.inputs, arch.widths[0])), np.float64)
     meas = simulate_measurement(named_subkey(key, "shots"), params, x, physics, shots=args.shots,
                                 activation=activation, taps=args.taps, times=args.times)
@@ -84,7 +87,7 @@ def run(args):
         save_file(out, meas)  # the format its extension names
     return {"out": out, "n": meas.n, "r": meas.r, "arch": list(meas.arch.widths), "activation": activation,
             "effects": list(physics.names), "params": physics.params_json(), "taps": bool(args.taps),
-            "times": bool(args.times)}
+            "times": meas.t is not None}
 
 
 def render(result) -> str:

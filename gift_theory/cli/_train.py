@@ -63,4 +63,5 @@ def render(r: dict) -> str:
     return (f"{r['dataset']} {r['arch']} at s0={r['s0']:g}, seed {r['seed']} ({src}{size}){note}\n"
             f"  train: loss {r['train_loss']:.4f}  accuracy {100 * r['train_accuracy']:.2f} %\n"
             f"  test:  loss {r['test_loss']:.4f}  accuracy {100 * r['test_accuracy']:.2f} %\n"
-            f"  weights: {r['path']}" + (f"\n  copied to: {r['out']}" if r.get("out") else ""))
+            f"  weights: {r['path'] or 'not kept (the cache could not be written)'}"
+            + (f"\n  copied to: {r['out']}" if r.get("out") else ""))

@@ -18,10 +18,11 @@ quantization       bits, v_range           readout         readout_nonlinearity 
 bias_offset        sigma (device: seed)    bias            bias_offset            :mod:`.bias_offset`
 activation_gain    kappa (hidden layers)   activation      activation_mismatch    :mod:`.activation_gain`
 layer_gain         g (one per layer)       weights         gain_error             :mod:`.layer_gain`
+memory             alpha (needs t)         readout         memory                 :mod:`.memory`
 =================  ======================  ==============  =====================  ======================
 
 The first eleven are reference §2's original table (:data:`EFFECT_NAMES`); :data:`BUILTIN`
-lists all fourteen built-in ones (the §2 table now lists every one of them). A user adds an
+lists all fifteen built-in ones (the §2 table now lists every one of them). A user adds an
 effect in a file of their own (reference §2b)::
 
     from gift_theory.effects import Effect, register
@@ -73,6 +74,7 @@ from .weight_error import WeightError as WeightError
 from .bias_offset import BiasOffset as BiasOffset
 from .activation_gain import ActivationGain as ActivationGain
 from .layer_gain import LayerGain as LayerGain
+from .memory import Memory as Memory
 from ._physics import Physics as Physics
 from ._physics import awgn as awgn
 from ._plugins import load_entry_points as load_entry_points
@@ -83,7 +85,7 @@ EFFECT_NAMES = ("awgn", "laplace", "uniform", "multiplicative", "common_mode", "
                 "crosstalk", "weight_error", "shot", "saturation", "quantization")
 
 #: every built-in effect, in catalogue order: reference §2's first eleven, then the ones added since
-BUILTIN = EFFECT_NAMES + ("bias_offset", "activation_gain", "layer_gain")
+BUILTIN = EFFECT_NAMES + ("bias_offset", "activation_gain", "layer_gain", "memory")
 
 if set(BUILTIN) != set(REGISTRY):  # pragma: no cover - a module was added without listing it
     raise ImportError(f"effect registry and catalogue disagree: {sorted(set(BUILTIN) ^ set(REGISTRY))}")

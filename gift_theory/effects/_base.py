@@ -43,7 +43,7 @@ STAGES = ("level", "law", "weights", "bias", "gain", "activation", "readout")
 #: the mechanism classes of reference §6, in the table's order.
 MECHANISMS = ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation", "time_drift",
               "correlated_noise", "gain_error", "weight_error", "bias_offset", "activation_mismatch",
-              "readout_nonlinearity")
+              "readout_nonlinearity", "memory")
 
 #: the hook a stage's effect must define: (method name, signature shown in error messages)
 _HOOKS = {

@@ -22,6 +22,7 @@ from typing import Iterable, Mapping
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .. import _random
 from .._errors import GiftInputError
@@ -271,12 +272,42 @@ class Physics:
         """The names of the effects that need acquisition times (``needs_times``)."""
         return tuple(e.name for e in self.effects if getattr(e, "needs_times", False))
 
+    def check_scope(self, arch, where: str = "effects") -> "Physics":
+        """Refuse an effect whose ``layers`` scope names a layer the network ``arch`` does not have,
+        or leaves it no layer to act on (:func:`scope_error`); returns ``self``."""
+        for e in self.effects:
+            err = scope_error(type(e), arch.depth)
+            if err:
+                raise GiftInputError(f"{where}: {err}")
+        return self
+
     def validate(self, where: str = "effects", arch=None) -> "Physics":
         """Check every effect's parameters (:meth:`Effect.validate`); ``arch`` also checks
         the per-neuron arrays against the network's widths."""
         for e in self.effects:
             e.validate(where, arch)
         return self
+
+
+def scope_error(cls, depth: int) -> str | None:
+    """Why effect class ``cls`` cannot act on a ``depth``-layer network as its ``layers`` scope
+    says -- it names a layer beyond ``depth``, or leaves its stage no layer (an activation hook
+    acts on hidden layers only) -- or None. A plugin is named by its file."""
+    layers = getattr(cls, "layers", "all")
+    who = f"effect {cls.name}" + ("" if _is_builtin(cls) else f" ({plugin_file(cls)})")
+    if isinstance(layers, (tuple, list)):
+        beyond = [int(l) for l in layers if int(l) > depth]
+        if beyond:
+            return (f"{who}: layers={tuple(layers)} names layer {beyond[0]}, but the network has {depth} "
+                    f"layer{'s' if depth > 1 else ''} (1..{depth})")
+    acting = [l for l in range(1, depth + 1)
+              if (layers == "all" or (layers == "hidden" and l < depth) or (layers == "output" and l == depth)
+                  or (isinstance(layers, (tuple, list)) and l in layers))
+              and not (cls.stage == "activation" and l == depth)]
+    if not acting:
+        return (f"{who}: layers={layers!r} leaves its stage {cls.stage!r} no layer of this {depth}-layer network"
+                + (" (an activation acts on hidden layers only)" if cls.stage == "activation" else ""))
+    return None
 
 
 class _Composed:
@@ -312,11 +343,54 @@ def _call(effect: Effect, hook: str, layer: int, t, trailing: int, *args):
     if _is_builtin(type(effect)):
         return fn(*args, **kwargs)
     try:
-        return fn(*args, **kwargs)
+        out = fn(*args, **kwargs)
     except GiftInputError:
         raise
     except Exception as exc:  # a plugin's own failure while running
         raise GiftInputError(plugin_failure_line(type(effect), hook, exc)) from None
+    return checked_result(type(effect), hook, out, _natural_shape(hook, args, kwargs.get("t")), args[0])
+
+
+def _natural_shape(hook: str, args, t) -> tuple:
+    """The shape a hook's result must broadcast to without growing it: its first argument's
+    (weights, bias, activation, readout), with the time's batch axes when it took ``t``, or the
+    ``shape`` a gain is asked for."""
+    if hook == "gain":
+        return tuple(args[3])
+    shape = tuple(jnp.shape(args[0]))
+    return shape if t is None else tuple(jnp.broadcast_shapes(shape, jnp.shape(t)))
+
+
+def checked_result(cls, hook: str, out, shape: tuple, like):
+    """A plugin hook's result, checked (reference §2b: a plugin that breaks the contract is a bad
+    input naming its file, effect and hook): a floating array whose shape broadcasts to
+    ``shape`` without growing it -- a weights hook keeps W's trailing (d_l, d_{l-1}) exactly --
+    cast to the dtype of ``like`` (the stage's input); finite where its values are known (an
+    eager run; inside a compiled program the stage's output is checked by the caller)."""
+    where = plugin_failure_line(cls, hook, None)
+    try:
+        arr = jnp.asarray(out)
+    except (TypeError, ValueError):
+        raise GiftInputError(f"{where}: returned {type(out).__name__}, not an array of numbers") from None
+    if not (jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer)):
+        raise GiftInputError(f"{where}: returned dtype {arr.dtype}; a hook returns real numbers")
+    try:
+        grown = tuple(jnp.broadcast_shapes(arr.shape, shape)) != tuple(shape)
+    except ValueError:
+        grown = True
+    if hook == "weights" and tuple(arr.shape[-2:]) != tuple(shape[-2:]):
+        grown = True
+    if grown:
+        want = f"(..., {shape[-2]}, {shape[-1]})" if hook == "weights" else f"{tuple(shape)} or one that broadcasts to it"
+        raise GiftInputError(f"{where}: returned shape {tuple(arr.shape)}, expected {want}")
+    arr = arr.astype(jnp.result_type(like)) if hasattr(like, "dtype") else arr
+    if not isinstance(arr, jax.core.Tracer):
+        bad = ~np.isfinite(np.asarray(arr))
+        if bad.any():
+            i = np.unravel_index(int(np.argmax(bad)), bad.shape)
+            raise GiftInputError(f"{where}: returned {float(np.asarray(arr)[i])!r} at index {list(map(int, i))} "
+                                 f"(values must be finite)")
+    return arr
 
 
 def plugin_file(cls) -> str:
@@ -333,12 +407,15 @@ def plugin_file(cls) -> str:
     return getattr(cls, "__module__", "?")
 
 
-def plugin_failure_line(cls, hook: str, exc: BaseException) -> str:
-    """``FILE: effect NAME (class C), hook HOOK(...): raised TYPE: message`` (one line)."""
-    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+def plugin_failure_line(cls, hook: str, exc: BaseException | None) -> str:
+    """``FILE: effect NAME (class C), hook HOOK(...): raised TYPE: message`` (one line); without
+    ``exc``, the part before ``: raised`` (what a check of the hook's result names)."""
     sig = _HOOKS.get(cls.stage, (hook, hook))[1] if hook == _HOOKS.get(cls.stage, ("",))[0] else hook
-    return (f"{plugin_file(cls)}: effect {cls.name} (class {cls.__name__}), hook {sig}: raised "
-            f"{type(exc).__name__}{': ' + msg if msg else ''}")
+    head = f"{plugin_file(cls)}: effect {cls.name} (class {cls.__name__}), hook {sig}"
+    if exc is None:
+        return head
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return f"{head}: raised {type(exc).__name__}{': ' + msg if msg else ''}"
 
 
 def _brief(v) -> str:

@@ -5,6 +5,7 @@ site; ``laplace`` and ``uniform`` change the law, never the standard deviation."
 from __future__ import annotations
 
 import jax
+import numpy as np
 
 from ._base import Effect, register
 
@@ -34,3 +35,17 @@ class Awgn(Effect):
 
     def draws(self, arch):
         return additive_sites(arch)
+
+    @classmethod
+    def search(cls, param, layers):
+        """s is scanned relative to the data's own scale, not from a fixed floor: 16 log-spaced
+        values over [sd / 100, 2 sd], sd the rms within-input spread of the measured layers
+        (each noise site adds s^2 to a layer's variance, the weighted sum and its input noise
+        more: s lies below sd, by at most ~10 for a layer whose |W_row|^2 is 100). Data with no
+        spread at all fall back on the default scan."""
+        if param == "s" and layers:
+            v = [float(np.mean(np.var(np.asarray(a, np.float64), axis=1, ddof=1))) for a in layers if a.shape[1] > 1]
+            sd = float(np.sqrt(np.mean(v))) if v else 0.0
+            if np.isfinite(sd) and sd > 0:
+                return np.geomspace(sd / 100.0, 2.0 * sd, 16)
+        return super().search(param, layers)

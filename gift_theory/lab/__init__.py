@@ -10,9 +10,14 @@ The stages, one module each, in the order one :func:`diagnose` runs them::
     _qtest       the discrepancy test
     _compare     one model against one measurement; the one-step check per layer
     _identify    each layer's transfer and noise read off the shots; a test per mechanism class
+    _time        a gain that wanders and a map that drifts over the acquisition (within _identify)
+    _memory      the lag test of memory: a shot carrying the shot acquired before it (within _identify)
     _fit*        fitting a model: moments, per-device offsets, values read off the data
     _localise    where a model fails; each effect's signature
     _diagnose    the pipeline: split, fit, score, rank
+    _neurons     per-neuron values identified neuron by neuron: an explanation (the verdict's rule a)
+    _ambiguity   the models the data cannot tell apart (reference §8)
+    _design      the next measurement that would tell them apart (reference §8, ``gift design``)
 
 Public API (a notebook can do everything ``gift simulate/compare/diagnose/fit`` do)::
 

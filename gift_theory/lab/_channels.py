@@ -42,6 +42,7 @@ import numpy as np
 
 from .. import _xla
 from .._errors import GiftInputError
+from .._finite import check_finite
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._qtest import q_test
@@ -96,7 +97,40 @@ def energy_cells(M, Y, paired: bool = False):
     E1 : (n, d) U-statistic energy distance of each neuron's marginal (1-D, sharper on shape)
     wy1 : (n, d) its within-data spread
     """
-    E, wy = _vector_energy(jnp.asarray(M), jnp.asarray(Y), paired)
+    n, K, d = np.shape(M)
+    r = np.shape(Y)[1]
+    # inputs in chunks: the pair distances are (K + r)^2 floats per input (a 50 MB file's 1740
+    # inputs x 256 model shots held 0.5 GB of them at once); each chunk the same shape, the last
+    # padded, so one compiled program serves them all
+    c = _input_chunk(n, K, r, d)
+    E, wy = np.empty(n), np.empty(n)
+    E1, wy1 = np.empty((n, d)), np.empty((n, d))
+    for c0 in range(0, n, c):
+        sl = slice(c0, min(c0 + c, n))
+        m_, y_ = np.asarray(M[sl]), np.asarray(Y[sl])
+        k = m_.shape[0]
+        if k < c and n > c:  # pad the last chunk to the common shape
+            m_ = np.concatenate([m_, np.repeat(m_[-1:], c - k, axis=0)])
+            y_ = np.concatenate([y_, np.repeat(y_[-1:], c - k, axis=0)])
+        e, w = _vector_energy(jnp.asarray(m_), jnp.asarray(y_), paired)
+        E[sl], wy[sl] = np.asarray(e, np.float64)[:k], np.asarray(w, np.float64)[:k]
+        E1[sl], wy1[sl] = _marginal_energy(m_[:k], y_[:k], paired)
+    return E, wy, E1, wy1
+
+
+#: bytes of pair distances and sorted shots held at once per chunk of inputs
+CHUNK_BYTES = 64 << 20
+
+
+def _input_chunk(n: int, K: int, r: int, d: int) -> int:
+    """Inputs per chunk of :func:`energy_cells`: the (K + r)^2 distances (float32, a few temporaries)
+    and the (K + r) d sorted values (float64) of each input within :data:`CHUNK_BYTES`."""
+    per_input = 12 * (K + r) ** 2 + 24 * (K + r) * d
+    return int(max(1, min(n, CHUNK_BYTES // max(per_input, 1))))
+
+
+def _marginal_energy(M, Y, paired: bool):
+    """(E1, wy1) of :func:`energy_cells` for one chunk of inputs (float64 numpy)."""
     Mn, Yn = np.asarray(M, np.float64), np.asarray(Y, np.float64)
     c = Yn.mean(axis=1, keepdims=True)
     Mn, Yn = Mn - c, Yn - c
@@ -109,7 +143,7 @@ def energy_cells(M, Y, paired: bool = False):
         c1 = c1 / (K * r)
     wm1 = 2.0 * pm / (K * (K - 1))
     wy1 = 2.0 * py / (r * (r - 1))
-    return np.asarray(E, np.float64), np.asarray(wy, np.float64), 2.0 * c1 - wm1 - wy1, wy1
+    return 2.0 * c1 - wm1 - wy1, wy1
 
 
 def cell_statistic(M, Y, paired: bool = False, scales=None):
@@ -135,7 +169,7 @@ def within_spreads(Y):
     n, r, d = Y.shape
     Yc = Y - Y.mean(axis=1, keepdims=True)
     wy = np.empty(n)
-    chunk = max(1, int(2e7 // max(r * r, 1)))
+    chunk = max(1, int(4e6 // max(r * r, 1)))
     for c0 in range(0, n, chunk):
         Z = Yc[c0:c0 + chunk]
         sq = np.sum(Z * Z, -1)
@@ -247,9 +281,8 @@ def moment_channels(M, Y, split, rng):
         the next h half B (fixed per measurement, the same for every model)
     rng : numpy Generator for the model's disjoint sets of h shots
     """
-    M = np.asarray(M, np.float64)
     Y = np.asarray(Y, np.float64)
-    n, r, _ = Y.shape
+    n, r, d = Y.shape
     h = r // 2
     K = M.shape[1]
     if K < 2 * h:
@@ -257,10 +290,15 @@ def moment_channels(M, Y, split, rng):
     eps = _variance_floor(Y)
     reps = K // (2 * h)
     perm = rng.permuted(np.tile(np.arange(K), (n, 1)), axis=1)
-    Mp = _take(M, perm[:, :2 * reps * h])  # the model's shots in the permuted order, sets of h in a row
-    MA = [Mp[:, 2 * q * h:(2 * q + 1) * h] for q in range(reps)]
-    MB = [Mp[:, (2 * q + 1) * h:(2 * q + 2) * h] for q in range(reps)]
-    return _product_channels(_take(Y, split[:, :h]), _take(Y, split[:, h:2 * h]), MA, MB, eps)
+    out = np.empty((n, 3))
+    c = _input_chunk(n, K, r, d)  # the model's shots in float64, a chunk of inputs at a time
+    for c0 in range(0, n, c):
+        sl = slice(c0, min(c0 + c, n))
+        Mp = _take(np.asarray(M[sl], np.float64), perm[sl, :2 * reps * h])  # permuted: sets of h in a row
+        MA = [Mp[:, 2 * q * h:(2 * q + 1) * h] for q in range(reps)]
+        MB = [Mp[:, (2 * q + 1) * h:(2 * q + 2) * h] for q in range(reps)]
+        out[sl] = _product_channels(_take(Y[sl], split[sl, :h]), _take(Y[sl], split[sl, h:2 * h]), MA, MB, eps)
+    return out
 
 
 def paired_moment_channels(M, Y, split):
@@ -335,6 +373,9 @@ def reference(key, meas: Measurement, splits: int = 2) -> Reference:
             F[:, li, :2] += cell_statistic(A, B, scales=scales[li]) / splits
         if moments:
             F[:, li, 2:] = floor_moment_channels(Y, split)
+        check_finite(F[:, li], lambda: f"the noise floor's channels of layer {meas.layer_ids()[li]} (the measured "
+                                       f"shots' distances and moments in float32; values up to "
+                                       f"{float(np.max(np.abs(Y))):.3g})")
     sd = F.std(axis=0, ddof=1)
     weights = 1.0 / np.maximum(sd, 1e-12 * max(float(sd.max()), 1e-300))
     Q, _, _, null_sd, _ = q_test(F.reshape(meas.n, -1))

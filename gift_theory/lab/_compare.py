@@ -16,6 +16,7 @@ import jax
 import numpy as np
 from scipy import optimize, stats
 
+from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
 from ..chips import simulate_measurement
@@ -100,6 +101,10 @@ def compare(key, model: Model, meas: Measurement, *, shots: int | None = None, r
     -------
     Comparison
     """
+    need = model.physics.needs_times()
+    if need and meas.t is None:
+        raise GiftInputError(f"model {model.describe()}: {need[0]} acts through the acquisition times t, and the "
+                             f"measurement has none")
     k_model, k_floor = jax.random.split(key)
     if ref is None:
         ref = reference(k_floor, meas, floor_splits)
@@ -159,16 +164,22 @@ def layer_level(key, model: Model, meas: Measurement, layer: int, xtol: float = 
     measured ones (mean log variance over the layer's cells, both from r shots, so their
     small-sample bias is the same): the root in log s over [s / 20, 20 s] (Brent's method to
     ``xtol`` in log s, 0.01 % of s; the gap grows with s), or the end the gap does not change
-    sign beyond."""
+    sign beyond. The search starts from the model's s, or -- a model without additive noise --
+    from the layer's own spread: no fixed floor (at s = 1e-6 a floor of 1e-4 set every layer's
+    level 5e-6 and failed each one at z = 89-328)."""
     li = meas.layer_ids().index(layer)
-    target = float(np.mean(np.log(np.var(meas.layers()[li], axis=1, ddof=1) + 1e-30)))
-    s0 = max(float(model.physics.s), 1e-4)
+    v = np.var(meas.layers()[li], axis=1, ddof=1)
+    tiny = 1e-12 * max(float(np.mean(v)), np.finfo(np.float64).tiny)  # log of a cell with no spread: bounded
+    target = float(np.mean(np.log(v + tiny)))
+    s0 = float(model.physics.s)
+    if not s0 > 0:
+        s0 = float(np.sqrt(np.mean(v) / 2.0)) or 1.0
 
     @functools.lru_cache(maxsize=None)  # brentq evaluates the ends again
     def gap(log_s):
         m = Model(model.physics.replace(s=float(np.exp(log_s))), model.params, model.offsets)
         M = np.asarray(one_step_shots(key, m, meas, layer), np.float64)
-        return float(np.mean(np.log(np.var(M, axis=1, ddof=1) + 1e-30))) - target
+        return float(np.mean(np.log(np.var(M, axis=1, ddof=1) + tiny))) - target
 
     lo, hi = float(np.log(s0 / 20.0)), float(np.log(s0 * 20.0))
     if gap(lo) >= 0:
@@ -285,7 +296,9 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
             # how far the layer's variability is from the joint level's (log variances of r shots
             # on both sides: the same small-sample bias), then the layer at its own level
             M0 = np.asarray(one_step_shots(k_l, model, meas, l), np.float64)
-            gap = np.mean(np.log(np.var(Y, axis=1, ddof=1) + 1e-30) - np.log(np.var(M0, axis=1, ddof=1) + 1e-30), 1)
+            vy = np.var(Y, axis=1, ddof=1)
+            tiny = 1e-12 * max(float(np.mean(vy)), np.finfo(np.float64).tiny)
+            gap = np.mean(np.log(vy + tiny) - np.log(np.var(M0, axis=1, ddof=1) + tiny), 1)
             level_z = over_inputs(gap)
             level = layer_level(k_l, model, meas, l)
             m = Model(model.physics.replace(s=level), model.params, model.offsets)
@@ -402,14 +415,18 @@ def predictive_moments(key, model: Model, meas: Measurement, *, shots: int | Non
 
 # ---- power: what a "consistent" verdict can and cannot rule out on this file ---------------------
 
-def _power_on(key, model: Model, big: Measurement, n: int, alpha: float) -> tuple[float, float]:
-    """The rejection rate of :func:`compare`'s test of ``model`` over the B = big.n / n files of
-    n inputs that ``big`` holds one after another, and its standard error."""
+def _power_p(key, model: Model, big: Measurement, n: int) -> np.ndarray:
+    """The p-values of :func:`compare`'s test of ``model`` on the B = big.n / n files of n inputs
+    that ``big`` holds one after another."""
     k_ref, k_model = jax.random.split(key)
     ref = reference(k_ref, big)
     C = channel_values(k_model, model, big, ref)
-    B = big.n // n
-    p = np.array([q_test(C[g * n:(g + 1) * n].reshape(n, -1))[1] for g in range(B)])
+    return np.array([q_test(C[g * n:(g + 1) * n].reshape(n, -1))[1] for g in range(big.n // n)])
+
+
+def _rate(p, alpha: float) -> tuple[float, float]:
+    """The rejection rate of p-values ``p`` at ``alpha`` and its binomial standard error."""
+    B = len(p)
     rate = float(np.mean(p < alpha))
     return rate, float(np.sqrt(max(rate * (1 - rate), 1.0 / B) / B))
 
@@ -463,25 +480,38 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
         q = q0 * 0.5 * v_model / max(v_shot, 1e-300)
         probes.append(("input_dependent_noise", "shot", phys.replace(s=s / np.sqrt(2.0)).with_effect("shot", q=q)))
     params = model.weights(meas)
-    x = np.tile(meas.x, (replicates, 1))
     hidden = len(meas.params) > 1
     common = {"replicates": replicates, "n": meas.n, "r": meas.r, "taps": meas.has_taps,
               "layers": list(meas.layer_ids())}
+    # the replicate files in batches of at most POWER_BYTES (one batch for a small file; a 50 MB
+    # file's 20 replicates at once were 1 GB of shots)
+    per_file = 8 * meas.n * meas.r * (sum(meas.arch.widths[1:]) + meas.arch.widths[0])
+    batch = int(max(1, min(replicates, POWER_BYTES // max(per_file, 1))))
     out = []
     for mech, name, phys in probes:
         k = named_subkey(key, f"power_{name}")
-        big = simulate_measurement(named_subkey(k, "files"), params, x, phys, shots=meas.r,
-                                   activation=meas.activation, taps=hidden)
-        if meas.t is not None:
-            big = dataclasses.replace(big, t=np.tile(meas.t, (replicates, 1)))
-        seen = big if meas.has_taps else dataclasses.replace(big, taps=None)
-        p, se = _power_on(named_subkey(k, "score"), model, seen, meas.n, alpha)
-        pt = None
-        if not meas.has_taps and hidden:
-            pt, _ = _power_on(named_subkey(k, "score"), model, big, meas.n, alpha)
+        ps, pts = [], []
+        for b0 in range(0, replicates, batch):
+            kb = k if batch >= replicates else jax.random.fold_in(k, b0)
+            nb = min(batch, replicates - b0)
+            big = simulate_measurement(named_subkey(kb, "files"), params, np.tile(meas.x, (nb, 1)), phys,
+                                       shots=meas.r, activation=meas.activation, taps=hidden)
+            if meas.t is not None:
+                big = dataclasses.replace(big, t=np.tile(meas.t, (nb, 1)))
+            seen = big if meas.has_taps else dataclasses.replace(big, taps=None)
+            ps.append(_power_p(named_subkey(kb, "score"), model, seen, meas.n))
+            if not meas.has_taps and hidden:
+                pts.append(_power_p(named_subkey(kb, "score"), model, big, meas.n))
+            del big, seen
+        p, se = _rate(np.concatenate(ps), alpha)
+        pt = _rate(np.concatenate(pts), alpha)[0] if pts else None
         out.append({"mechanism": mech, "probe": name, "power": p, "se": se, "power_with_taps": pt,
                     "probe_params": phys.params_json(), **common})
     return out
+
+
+#: bytes of simulated replicate files :func:`power_of` holds at once
+POWER_BYTES = 128 << 20
 
 
 def power_notes(power: list[dict], verdict_passes: bool, threshold: float = 0.8) -> list[str]:

@@ -63,6 +63,7 @@ from scipy import stats
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from ..effects import BUILTIN, REGISTRY
+from ..effects._physics import scope_error
 from .._model import named_subkey
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, failing_layers, one_step_check
@@ -79,11 +80,13 @@ from ._localise import (
     where_it_fails,
 )
 from ._identify import _shots_law, _subset, _two_sided, identify
+from ._budget import candidate_threads
 from ._qtest import over_inputs
 from ._explain_output import also_explaining, mean_refusal, summary
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named, named_classes
 from ._shots import Model, model_shots
 from ._verdict import as_json_fields, refusals, time_free, verdict
+from . import _ambiguity
 
 #: the significance level of the goodness-of-fit test (reference §4)
 ALPHA = 0.01
@@ -106,7 +109,8 @@ def default_candidates(meas: Measurement) -> list[str]:
     """Every registered effect a diagnosis of ``meas`` tries: all but awgn, and those silent
     without acquisition times only when the file has them."""
     names = list(BUILTIN) + [n for n in REGISTRY if n not in BUILTIN]  # catalogue order, then plugins
-    return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)]
+    return [n for n in names if n != "awgn" and (meas.t is not None or not REGISTRY[n].needs_times)
+            and scope_error(REGISTRY[n], meas.arch.depth) is None]
 
 
 #: a candidate's status (reference §6), in ranking order
@@ -274,7 +278,7 @@ class Session:
         put("meas", meas)
         put("shots", shots)
         # threads for the refit nulls' replicates and the candidates (the numbers do not depend on it)
-        put("workers", default_workers() if workers is None else max(1, int(workers)))
+        put("workers", default_workers(meas) if workers is None else max(1, int(workers)))
         k_split, k_fit, k_cmp, k_ref, k_step = jax.random.split(key, 5)
         for name, v in (("k_fit", k_fit), ("k_cmp", k_cmp), ("k_step", k_step)):
             put(name, v)
@@ -427,6 +431,12 @@ class Diagnosis:
     #: the verdict names the awgn model itself (it passes and the identification flags nothing):
     #: the JSON ranking then starts with it (reference §6: ranking[0] is what the verdict names)
     names_baseline: bool = False
+    #: the models that explain the data, ranking[0] first (reference §8; empty when not explained)
+    explained_by: tuple = ()
+    #: the candidates the data cannot tell from ranking[0] (:mod:`._ambiguity`)
+    ambiguous_with: tuple = ()
+    #: the measurement that would tell the hypotheses left standing apart (:mod:`._design`), or None
+    next_measurement: dict | None = None
 
     @property
     def missing_effect_detected(self) -> bool:
@@ -449,8 +459,11 @@ class Diagnosis:
                              "se": c.se, "floor_se": c.floor_se, "channel_z": c.as_dict()["channel_z"]},
                 "missing_effect_detected": self.missing_effect_detected,
                 **as_json_fields(self.explained, self.reasons, self.verdict, self.failing_layers, self.mechanisms),
-                "ranking": ([self._baseline_entry()] if self.names_baseline else [])
-                           + [cand.as_json() for cand in self.ranking],
+                "ranking": _ambiguity.mark(([self._baseline_entry()] if self.names_baseline else [])
+                                           + [cand.as_json() for cand in self.ranking],
+                                           self.ranking[0] if self.ranking else None, self.ambiguous_with),
+                "explained_by": list(self.explained_by),
+                "next_measurement": _public_design(self.next_measurement),
                 "not_fitted": [dict(r) for r in self.not_fitted],
                 **({"output_explanations": list(self.output_explanations)} if self.output_explanations else {}),
                 "evidence": list(self.evidence),
@@ -461,6 +474,12 @@ class Diagnosis:
                 **({"refit_null_calibrated": self.has_taps} if any(c.comparison.replicates for c in self.ranking)
                    else {}),
                 "seconds": self.seconds}
+
+
+def _public_design(nxt):
+    from ._design import public
+
+    return public(nxt)
 
 
 def _status(c: Candidate) -> str:
@@ -513,6 +532,8 @@ def _check_candidates(names, meas: Measurement) -> list:
                                      f"{', '.join(n for n in REGISTRY if n != 'awgn')}")
             if REGISTRY[e].needs_times and meas.t is None:
                 raise GiftInputError(f"--candidates {e}: needs acquisition times t in the measurement")
+            if scope_error(REGISTRY[e], meas.arch.depth):
+                raise GiftInputError(f"--candidates {e}: {scope_error(REGISTRY[e], meas.arch.depth)}")
     return list(names)
 
 
@@ -722,7 +743,13 @@ def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> lis
     * b'': a trend in acquisition time (a time_drift test). The held-out test compares
       per-input means, which average an interleaved acquisition's trend away (a bias drift
       passed as layer_gain without taps, a gain drift as activation_gain). Refused: a candidate
-      with no effect that acts through the times.
+      with no effect that acts through the times (other than a memory).
+    * b'' for memory (issue 48): the shots carry the shot acquired before them (the memory
+      class's lag test). The held-out test compares each input's shots, whatever order they
+      were taken in (a detector's memory passed as bias offsets). Refused: a candidate with no
+      effect of class memory; and the converse, a candidate with a memory where the lag test
+      names none (a memory's shift and excess variance of each neuron are what other physics
+      gives too).
     * b''': any class, when the baseline itself passes its held-out test (``base_cmp``): that
       test has no power against what the identification finds (Student-t noise in one layer of a
       tapped chip passed as awgn at p = 0.40 while the kurtosis test rejected awgn with z = 10.7). Refused: a
@@ -744,15 +771,26 @@ def _identification_refusals(cands: list, ident, base_cmp=None, law=None) -> lis
     rows = [r for r in ident.rows() if named(r, ident.taps)]
     cands_out = getattr(ident, "output_candidates", ()) if not ident.taps else ()
     trend = [r for r in rows if r["class"] == "time_drift"]
+    memory = [r for r in rows if r["class"] == "memory"]  # issue 48 (lab/_memory.py)
+    t_ok = any(r["class"] == "memory" and r["test"] == "lag" for r in ident.rows())  # the lag test ran
     silent = base_cmp is not None and base_cmp.p_value >= ALPHA
     flagged = sorted({r["class"] for r in rows})
     out = []
     for c in cands:
         name = " + ".join(c.effects)
-        if c.status == "passes" and trend and not any(REGISTRY[e].needs_times for e in c.effects):
+        if c.status == "passes" and trend and not any(REGISTRY[e].needs_times and REGISTRY[e].mechanism != "memory"
+                                                       for e in c.effects):
             c = _refuse(c, f"the identification finds a trend in acquisition time (time_drift {_where(trend)}) that "
                            f"awgn + {name} has no term for: its held-out test compares per-input means, which "
                            f"average the trend away", lacks=True)
+        if (c.status == "passes" and not memory and t_ok and any(REGISTRY[e].mechanism == "memory" for e in c.effects)):
+            c = _refuse(c, f"awgn + {name} has a memory the identification does not find (its lag test names no "
+                           f"layer at Holm-adjusted 0.01): through each input's shots a memory is a shift and an excess "
+                           f"variance of each neuron, which other physics gives too")
+        if c.status == "passes" and memory and not any(REGISTRY[e].mechanism == "memory" for e in c.effects):
+            c = _refuse(c, f"the identification finds that the shots carry the shot acquired before them (memory "
+                           f"{_where(memory)}), which awgn + {name} has no term for: its held-out test compares each "
+                           f"input's shots, not the order they were taken in", lacks=True)
         why = mean_refusal(_classes("+".join(c.effects)), cands_out) if c.status == "passes" and cands_out else None
         if why:
             c = _refuse(c, f"awgn + {name}: {why}", lacks=True)
@@ -788,6 +826,11 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
     law = _checks(_law_check(session, ident), _cov_check(session, ident))
 
     flagged = flagged_classes(ident)
+    # issue 48: the built-in memory is fitted only where the lag test names memory (through each
+    # input's shots a memory is a shift and an excess variance per neuron, which the held-out test
+    # cannot tell from other physics; lab/_memory.py)
+    quiet = ident is not None and "memory" not in flagged and "memory" in names and len(names) > 1
+    names = [n for n in names if not (quiet and n == "memory")]
     first = [n for n in names if _classes(n) & set(flagged)]
     rest = [n for n in names if n not in first]
     todo = first if first and rest else list(names)
@@ -803,6 +846,9 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
         else:
             ranking += fitted([_single(n) for n in rest])
             todo = first + rest
+    if quiet:
+        not_fitted.append({"effect": "memory", "mechanism": "memory",
+                           "reason": "the identification's lag test names no memory at Holm-adjusted 0.01"})
     for name, cand in zip(todo, ranking):
         _log(f"  + {name:<15s} {cand.model.describe():<60s} discrepancy {cand.comparison.discrepancy:.3g} "
              f"p = {cand.comparison.p_value:.3g} [{cand.status}] ({cand.seconds:.1f} s)", verbose)
@@ -831,6 +877,36 @@ def _rank(session: Session, names, second, verbose: bool, ident=None, progress=N
     return ranked(ranking), not_fitted
 
 
+def _alternatives(session: Session, ranking: list, not_fitted: list, ident, verbose: bool, progress=None):
+    """Issue 48 (reference §8): without taps, when ranking[0] passes and the output's candidate
+    mechanisms (:mod:`._explain_output`) say the output's mean is reproduced as well by classes
+    of another group, the candidates of those classes left unfitted are fitted too, so the
+    verdict can say when the data cannot choose between them (:mod:`._ambiguity`). Among models
+    the data cannot tell apart, the one whose class the identification flags keeps the lead; one
+    better by more than the ambiguity's margin leads. Returns ``(ranking, not_fitted)``."""
+    from ._ambiguity import APART
+    from ._explain_output import MAP_CLASSES, _group
+
+    if ident is None or ident.taps or not ranking or ranking[0].status != "passes" or not not_fitted:
+        return ranking, not_fitted
+    top = ranking[0]
+    mine = {_group(c) for c in _classes("+".join(top.effects))}
+    also = {c.mechanism for c in getattr(ident, "output_candidates", ()) if c.explains
+            and c.mechanism in MAP_CLASSES and _group(c.mechanism) not in mine}
+    extra = [r["effect"] for r in not_fitted if _classes(r["effect"]) & also]
+    if not extra:
+        return ranking, not_fitted
+    _log(f"  also fitted (the output's mean is reproduced as well by {', '.join(sorted(also))}): "
+         f"{', '.join(extra)}", verbose)
+    new = _identification_refusals(session.candidates([_single(n) for n in extra], progress), ident,
+                                   session.baseline_comparison)
+    out = ranked(list(ranking) + new)
+    unit = session.baseline_comparison.se if session.baseline_comparison.se > 0 else 1.0
+    if out[0] is not top and out[0].status == "passes" and top.score - out[0].score < APART * unit:
+        out = [top] + [c for c in out if c is not top]
+    return out, [r for r in not_fitted if r["effect"] not in extra]
+
+
 def _localise(session: Session, base: Model, meas: Measurement, shots):
     """Where the baseline fails, each layer on its own: the one-step checks (with taps), the
     failing layers, the layer evidence, the signatures and where-it-fails (pure: keyed by
@@ -845,8 +921,10 @@ def _localise(session: Session, base: Model, meas: Measurement, shots):
     return steps, failing, evidence, sigs, where
 
 
-def default_workers() -> int:
-    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``)."""
+def default_workers(meas: Measurement | None = None) -> int:
+    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``),
+    and -- given ``meas`` -- no more than :func:`~._budget.candidate_threads` allows for its size
+    (each thread holds a candidate's model shots and statistics; the numbers do not depend on it)."""
     env = os.environ.get("GIFT_LAB_THREADS", "").strip()
     if env.isdigit() and int(env) >= 1:
         return int(env)
@@ -854,11 +932,11 @@ def default_workers() -> int:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
         cores = os.cpu_count() or 1
-    return max(1, min(4, cores))
+    return max(1, min(4, cores, candidate_threads(meas) if meas is not None else 4))
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
-             verbose: bool = False, workers: int | None = None, progress=None) -> Diagnosis:
+             verbose: bool = False, workers: int | None = None, progress=None, design: bool = False) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
     Parameters
@@ -878,6 +956,9 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     progress : ``progress(i, n, label)``, called as each candidate of a batch is done (the
         candidates of the flagged classes, the others if none of those passes, the second
         stage: each batch counts from 0 to its own n)
+    design : whether to design the next measurement (:mod:`._design`) when the data do not choose
+        between models, or nothing explains them (``gift diagnose`` does; it simulates a few
+        hundred campaigns, so it is asked for here); without it ``next_measurement`` is None
 
     Returns
     -------
@@ -885,7 +966,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     """
     t0 = time.time()
     names = default_candidates(meas) if candidates is None else _check_candidates(candidates, meas)
-    threads = default_workers() if workers is None else max(1, int(workers))
+    threads = default_workers(meas) if workers is None else max(1, int(workers))
     # the layer-wise identification (closed form, numpy: the mechanisms' backbone, and which
     # candidates to fit first) needs only the data: with threads to spare it runs beside the
     # baseline's fit, and localising -- which needs only the baseline -- beside the candidates
@@ -900,6 +981,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
                  if threads > 1 else None)
         ranking, not_fitted = _rank(session, names, second, verbose, ident, progress)
+        ranking, not_fitted = _alternatives(session, ranking, not_fitted, ident, verbose, progress)  # issue 48
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))
     taps = meas.has_taps
@@ -916,11 +998,26 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         if also:  # said, not hidden: the explanation is one of several the output allows
             reasons = list(reasons) + [also]
             line += "; " + also
+    names_baseline = bool(explained and base_cmp.p_value >= ALPHA and not flagged)
+    # ---- issue 48 hooks: the models the data cannot tell apart (lab/_ambiguity.py), and the
+    # measurement that would (lab/_design.py)
+    others = _ambiguity.peers(ranking, base_cmp) if explained and not names_baseline else []
+    if others:
+        amb = _ambiguity.sentence(ranking[0], others, base_cmp)
+        reasons = list(reasons) + [amb]
+        line += "; " + amb
+    by = (["awgn"] if names_baseline else _ambiguity.explained_by(ranking[0], others)) if explained else []
+    nxt = None
+    if design and not names_baseline and (others or not explained):
+        from ._design import next_measurement
+        nxt = next_measurement(named_subkey(key, "design"), meas, ranking, mechs, others if explained else None,
+                               base_cmp)
     _log(line, verbose)
     return Diagnosis(base, base_cmp, tuple(ranking), steps, session.test, time.time() - t0, taps, sigs, where,
                      explained, tuple(reasons), line, None if failing is None else tuple(failing), tuple(mechs),
                      tuple(evidence), tuple(not_fitted), tuple(summary(ident.output_candidates)),
-                     names_baseline=bool(explained and base_cmp.p_value >= ALPHA and not flagged))
+                     names_baseline=names_baseline, explained_by=tuple(by), ambiguous_with=tuple(others),
+                     next_measurement=nxt)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -968,6 +1065,8 @@ def fit_effects(key, meas: Measurement, effects, *, shots: int | None = None, ve
             raise GiftInputError(f"--add: unknown effect {e!r}; known: {', '.join(REGISTRY)}")
         if REGISTRY[e].needs_times and meas.t is None:
             raise GiftInputError(f"--add {e}: the measurement has no acquisition times t; {e} is silent without them")
+        if scope_error(REGISTRY[e], meas.arch.depth):
+            raise GiftInputError(f"--add {e}: {scope_error(REGISTRY[e], meas.arch.depth)}")
     session = Session(key, meas, shots)
     base, base_cmp = session.baseline, session.baseline_comparison
     ladder = [("awgn", base_cmp)]

@@ -543,6 +543,30 @@ def moments_figure(moments, layer: int, *, fig=None, title: str | None = None):
     return _root(fig)
 
 
+def time_figure(data: dict, *, title: str = "residual against acquisition time", fig=None):
+    """Each measured layer's residual along the signal (the shot's relative gain against the
+    model's mean of its input) in bins of acquisition time, with 2 se bands
+    (:func:`gift_theory.lab._time.residual_in_time` computes it). A gain that drifts or wanders
+    shows as a curve, a fixed error as a level away from 0, white noise as a flat band."""
+    layers = [l for l in data if isinstance(l, int)]
+    if fig is None:
+        fig = _new_figure((6.4, 1.9 * max(len(layers), 1) + 0.6))
+    axes = fig.subplots(max(len(layers), 1), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, l in zip(axes, layers):
+        d = data[l]
+        ok = d["count"] > 1
+        ax.axhline(0.0, color="0.5", lw=0.8)
+        ax.fill_between(d["t"][ok], (d["mean"] - 2 * d["se"])[ok], (d["mean"] + 2 * d["se"])[ok],
+                        color="tab:blue", alpha=0.25, lw=0)
+        ax.plot(d["t"][ok], d["mean"][ok], color="tab:blue", lw=1.2)
+        ax.set_ylabel(f"layer {l}\nrelative gain", fontsize=8)
+        ax.grid(alpha=0.3, lw=0.5)
+    how = {"blocked": "each input's shots one after the other", "random": "each input's shots spread over the campaign"}
+    axes[-1].set_xlabel(f"acquisition time t ({how.get(data.get('order'), 'order unknown')})")
+    fig.suptitle(title, fontsize=10)
+    return _root(fig)
+
+
 def save_figures(figures: dict, folder: str, data: dict | None = None) -> list[str]:
     """Write ``{file name: Figure}`` into ``folder`` (created), each atomically; beside each PNG
     whose name ``data`` holds, its numbers as netCDF (same stem, ``.nc``: an ``xarray.Dataset``
@@ -637,6 +661,19 @@ def ppc_data(pred, layer: int):
                       coords={"model": [p.label for p in plist]}, attrs={"layer": int(layer)})
 
 
+def time_data(data: dict):
+    """The time figure's numbers: per layer, the residual's mean, se and count in each bin of
+    acquisition time (bin), the bins' centres, and the acquisition order in the attributes."""
+    xr = _xr()
+    layers = [l for l in data if isinstance(l, int)]
+    v = {}
+    for l in layers:
+        for k in ("mean", "se", "count"):
+            v[f"{k}_layer{l}"] = (("bin",), np.asarray(data[l][k], float))
+    centres = np.asarray(data[layers[0]]["t"], float) if layers else np.zeros(0)
+    return xr.Dataset(v, coords={"t": (("bin",), centres)}, attrs={"order": str(data.get("order", ""))})
+
+
 def ladder_data(rungs, noise_floor: float, floor_se: float):
     xr = _xr()
     return xr.Dataset({"discrepancy": (("model",), np.array([r[1] for r in rungs], float)),
@@ -711,7 +748,8 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
     ranking[0] with their paired standard errors); where the baseline fails and its law of the
     shots (PIT, correlations, quantiles); given the measurement, each measured layer's moments
     and posterior-predictive overlay under the baseline and the top-ranked model on the
-    held-out inputs."""
+    held-out inputs, and with acquisition times each layer's residual against them
+    (:func:`time_figure`)."""
     c = diagnosis.baseline_comparison
     rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
         ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
@@ -738,6 +776,13 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
         f, d = predictive_figures(key, models, meas.subset(diagnosis.held_out))
         figs.update(f)
         data.update(d)
+        if meas.t is not None:  # the residual against acquisition time, per layer (reference §8)
+            from .._model import named_subkey
+            from ._time import residual_in_time
+
+            td = residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas)
+            figs["time.png"] = time_figure(td, title="baseline: residual along the signal against acquisition time")
+            data["time.png"] = time_data(td)
     return save_figures(figs, folder, data)
 
 

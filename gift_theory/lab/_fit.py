@@ -12,6 +12,7 @@ from __future__ import annotations
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from ..effects import REGISTRY, Physics, make_effect
+from ..effects._physics import scope_error
 from ._fit_moments import MomentProblem, fit_moments
 from ._offset_fit import fit_offsets
 from ._offset_kinds import fitted_as_offsets
@@ -28,6 +29,9 @@ def check_addable(name: str, physics, meas: Measurement, where: str = "--add") -
         raise GiftInputError(f"{where} {name}: the model already has the noise law {physics.law}")
     if getattr(cls, "needs_times", False) and meas.t is None:
         raise GiftInputError(f"{where} {name}: the measurement has no acquisition times t, {name} is silent without them")
+    err = scope_error(cls, meas.arch.depth)
+    if err:
+        raise GiftInputError(f"{where} {name}: {err}")
 
 
 def baseline_physics() -> Physics:

@@ -26,10 +26,11 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import optimize
 
+from .._finite import NotFinite, check_finite
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._qtest import log_variance_bias
-from ._shots import draws, layer_outputs, params32, strong32, tiled_times, to32
+from ._shots import draws, eager_forward_at, layer_outputs, params32, strong32, tiled_times, to32
 
 
 def _moments(A, t):
@@ -92,6 +93,10 @@ def _theta_values(theta, positive):
     return jnp.where(positive, jnp.exp(theta), theta)
 
 
+_MOMENT_NAMES = {"m": "mean", "v": "variance", "sv": "variance of the layer sum", "beta": "slope in time",
+                 "vt": "variance of the times"}
+
+
 class MomentProblem:
     """The fitting data of one measurement (its per-cell moments), shared by every candidate."""
 
@@ -104,8 +109,18 @@ class MomentProblem:
         t = None if meas.t is None else to32(meas.t)
         dat = tuple(_moments_jit(to32(Y), t) for Y in meas.layers())
         ids = meas.layer_ids()
+        for l, d in zip(ids, dat):  # the data's own moments in float32: an overflow here is no fit
+            for name, v in d.items():
+                check_finite(v, f"the measured shots' {_MOMENT_NAMES.get(name, name)} of layer {l} (float32; values up "
+                                f"to {float(np.max(np.abs(meas.layers()[ids.index(l)]))):.3g})")
         # forward returns every layer; only measured ones enter the loss
         self.dat = tuple(dat[ids.index(l)] if l in ids else None for l in range(1, meas.arch.depth + 1))
+
+    def probe(self, physics, params) -> None:
+        """The model's shots of the fitting inputs, run eagerly: a plugin hook whose result is not
+        finite (or breaks its contract) raises its own one-line GiftInputError here."""
+        noise = draws(self.key, physics, self.meas, self.K)
+        eager_forward_at(params32(params), self.x, noise, strong32(physics), self.meas.arch, self.t)
 
     def loss(self, physics, params, free):
         """``theta -> moment loss`` for the free parameters (common random numbers: one set of
@@ -289,5 +304,9 @@ def fit_moments(problem: MomentProblem, physics, params, scan, rescan_s: bool = 
         i = free.index("s")
         grids.pop(i, None)
         grids[i] = np.log(max(float(physics.s), 1e-12)) + np.log([0.4, 0.55, 0.7, 0.85, 1.0, 1.1])
-    theta, _ = optimise(f, theta0, grids)
+    theta, loss = optimise(f, theta0, grids)
+    if not np.isfinite(loss):  # every value tried gave a non-finite loss: nothing was fitted
+        problem.probe(physics, params)  # a plugin hook behind it is named there (a bad input)
+        raise NotFinite(f"the moment fit of {', '.join(free)} ({physics.describe()}): its loss is not finite at any "
+                        f"value tried (the model's or the data's moments overflow float32)")
     return with_values(physics, {p: np.float64(v) for p, v in values_of(physics, free, theta).items()})

@@ -27,8 +27,11 @@ itself is :class:`gift_theory.Measurement`, the type chips return.
 
 from __future__ import annotations
 
+import gc
 import os
 import re
+import stat
+import sys
 import zipfile
 
 import numpy as np
@@ -40,12 +43,39 @@ from .._measurement import Measurement
 from .._params import Layer
 
 
+#: the largest magnitude a float32 holds: gift computes in float32 (:func:`gift_theory.to32`), so a
+#: value beyond it is an infinity there, whatever the file's dtype
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 def _float_array(arrays, key, where):
     a = arrays[key]
     require(a.dtype.kind in "fiu", f"{where}: {key} has dtype {a.dtype}, expected float")
     a = np.asarray(a, dtype=np.float64)
-    require(bool(np.all(np.isfinite(a))), f"{where}: {key} contains NaN or Inf")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        i = np.unravel_index(int(np.argmax(bad)), a.shape)
+        raise GiftInputError(f"{where}: {key} contains NaN or Inf ({float(a[i])!r} at index {list(map(int, i))})")
+    with np.errstate(over="ignore"):
+        big = ~np.isfinite(a.astype(np.float32))
+    if big.any():
+        i = np.unravel_index(int(np.argmax(big)), a.shape)
+        raise GiftInputError(f"{where}: {key} holds {a[i]:.4g} at index {list(map(int, i))}, beyond float32's range "
+                             f"(|v| <= {FLOAT32_MAX:.4g}), the precision gift computes in")
     return a
+
+
+def _layer_keys(keys, where):
+    """L from the keys W1..WL, b1..bL, refusing a gap or an unpaired key (naming the missing one)."""
+    num = {c: sorted(int(k[1:]) for k in keys if re.fullmatch(c + r"[1-9]\d*", k)) for c in "Wb"}
+    L = max(num["W"] + num["b"], default=0)
+    for l in range(1, L + 1):
+        for c, other in (("W", "b"), ("b", "W")):
+            if l not in num[c]:
+                have = [f"{k}{m}" for k in (other, c) for m in num[k] if m >= l and f"{k}{m}" != f"{c}{l}"]
+                raise GiftInputError(f"{where}: has {have[0]} but no {c}{l} (a network needs W1..W{L} and "
+                                     f"b1..b{L})")
+    return L
 
 
 def validate_arrays(arrays, where: str = "measurement") -> Measurement:
@@ -68,10 +98,9 @@ def validate_arrays(arrays, where: str = "measurement") -> Measurement:
     require(y.shape[0] == n, f"{where}: y has {y.shape[0]} inputs, x has {n}")
     r = y.shape[1]
     require(r >= 2, f"{where}: y has {r} shot(s) per input; comparing distributions needs at least 2")
+    L = _layer_keys(keys, where)
     params = []
-    l = 1
-    while f"W{l}" in keys:
-        require(f"b{l}" in keys, f"{where}: has W{l} but no b{l}")
+    for l in range(1, L + 1):
         W = _float_array(arrays, f"W{l}", where)
         b = _float_array(arrays, f"b{l}", where)
         require(W.ndim == 2, f"{where}: W{l} has shape {W.shape}, expected a matrix (d_{l}, d_{l - 1})")
@@ -80,11 +109,6 @@ def validate_arrays(arrays, where: str = "measurement") -> Measurement:
                 + (" (the width of x)" if l == 1 else f" (the rows of W{l - 1})"))
         require(b.shape == (W.shape[0],), f"{where}: b{l} has shape {b.shape}, W{l} needs ({W.shape[0]},)")
         params.append(Layer(W, b))
-        l += 1
-    L = len(params)
-    extra_b = sorted(k for k in keys if k.startswith("b") and k[1:].isdigit() and int(k[1:]) > L)
-    if extra_b:
-        raise GiftInputError(f"{where}: has {extra_b[0]} but no W{extra_b[0][1:]}")
     require(y.shape[2] == params[-1].W.shape[0],
             f"{where}: y has {y.shape[2]} outputs per shot, W{L} has {params[-1].W.shape[0]} rows")
     tap_keys = sorted((k for k in keys if k.startswith("a") and k[1:].isdigit()), key=lambda k: int(k[1:]))
@@ -114,14 +138,14 @@ def validate_arrays(arrays, where: str = "measurement") -> Measurement:
         require(bool(np.all((t >= 0) & (t <= 1))), f"{where}: t has values outside [0, 1]")
     activation = "tanh"
     if "activation" in keys:
-        act = arrays["activation"]
-        try:
-            activation = str(np.asarray(act).item()) if np.asarray(act).dtype.kind in "USO" else None
-        except ValueError:
-            activation = None
-        require(activation is not None, f"{where}: activation must be a string, got {np.asarray(act)!r}")
-        if isinstance(activation, bytes):
-            activation = activation.decode()
+        act = np.asarray(arrays["activation"])
+        activation = act.item() if act.dtype.kind in "USO" and act.size == 1 else None
+        if isinstance(activation, bytes):  # a string stored as bytes (numpy's "S" dtype, h5py)
+            try:
+                activation = activation.decode("utf-8")
+            except UnicodeDecodeError:
+                activation = None
+        require(isinstance(activation, str), f"{where}: activation must be a string, got {act!r}")
         require(activation in ACTIVATIONS, f"{where}: unknown activation {activation!r}; known: {', '.join(ACTIVATIONS)}")
     return Measurement(x=x, y=y, params=tuple(params), taps=taps, t=t, activation=activation)
 
@@ -132,6 +156,27 @@ _MAGIC = {b"PK\x03\x04": "npz", b"\x89HDF\r\n\x1a\n": "netcdf", b"CDF\x01": "net
           b"CDF\x05": "netcdf3"}
 
 
+def read_head(path, size: int = 8) -> bytes:
+    """The first ``size`` bytes of the regular file ``path``; anything else -- no file, a folder, a
+    FIFO or a device (which would block or never end), an unreadable file -- is a bad input."""
+    path = os.fspath(path)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise GiftInputError(f"{path}: no such file" if isinstance(exc, FileNotFoundError)
+                             else f"{path}: cannot be read ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a folder" if stat.S_ISDIR(st.st_mode) else "a pipe (FIFO)" if stat.S_ISFIFO(st.st_mode) else
+                "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "not a plain file")
+        raise GiftInputError(f"{path}: is {kind}, not a file to read" if kind != "not a plain file"
+                             else f"{path}: not a regular file")
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(size)
+    except OSError as exc:
+        raise GiftInputError(f"{path}: cannot be read ({exc.strerror})") from None
+
+
 def detect_format(path) -> str:
     """``"npz"``, ``"netcdf"`` (HDF5-based), ``"netcdf3"``, ``"csv-long"`` or ``"csv-wide"``.
 
@@ -140,18 +185,16 @@ def detect_format(path) -> str:
     long; ``x1 .. y1 ..``: wide).
     """
     path = os.fspath(path)
-    require(os.path.exists(path), f"{path}: no such file")
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(8)
-    except OSError as exc:
-        raise GiftInputError(f"{path}: cannot be read ({exc.strerror})") from None
+    head = read_head(path)
     for magic, fmt in _MAGIC.items():
         if head.startswith(magic):
             return fmt
     ext = os.path.splitext(path)[1].lower()
+    if head.startswith(b"\x93NUMPY"):
+        raise GiftInputError(f"{path}: a single .npy array, not a measurement (an .npz with x, y, W1.., b1..)")
     if ext == ".npz":
-        return "npz"
+        raise GiftInputError(f"{path}: not an .npz file (an .npz is a zip archive; this file starts with "
+                             f"{head[:8]!r})")
     if ext in NETCDF_EXTENSIONS:
         raise GiftInputError(f"{path}: not a netCDF / HDF5 file (its first bytes are {head[:4]!r})")
     try:
@@ -185,15 +228,25 @@ def load_measurement(path, *, weights=None) -> Measurement:
         return load_wide_csv(path, weights=weights)
     if fmt in ("netcdf", "netcdf3"):
         return load_netcdf(path, weights=weights)
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            arrays = {k: f[k] for k in f.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
-        raise GiftInputError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+    arrays = _npz_arrays(path, "")
     if weights is not None:
         w = load_weight_arrays(weights)
         arrays = {**w, **arrays}
     return validate_arrays(arrays, where=path)
+
+
+def _npz_arrays(path, what: str, keep=None) -> dict:
+    """The arrays of an .npz (those ``keep`` accepts), never unpickled; a damaged archive or an array
+    too large to hold is a bad input."""
+    try:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as f:  # our handle: closed on a bad file
+            return {k: f[k] for k in f.files if keep is None or keep(k)}
+    except MemoryError:
+        raise GiftInputError(f"{path}: an array in this .npz is too large to load into memory") from None
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else ""
+        raise GiftInputError(f"{path}: not a readable .npz {what}file ({type(exc).__name__}"
+                             f"{': ' + msg if msg else ''})") from None
 
 
 def weights_arrays(weights) -> dict:
@@ -241,15 +294,34 @@ def load_netcdf(path, *, weights=None) -> Measurement:
     path = os.fspath(path)
     engine = "scipy" if detect_format(path) == "netcdf3" else "h5netcdf"
     kw = {"phony_dims": "sort"} if engine == "h5netcdf" else {}  # plain HDF5 has no dimension names
+    hook, failure = sys.unraisablehook, None
     try:
         with xr.open_dataset(path, engine=engine, mask_and_scale=False, decode_times=False, **kw) as ds:
             arrays = dataset_arrays(ds.load(), where=path)
     except GiftInputError:
         raise
     except Exception as exc:  # h5py / scipy raise many kinds on a damaged file
-        raise GiftInputError(f"{path}: not a readable netCDF / HDF5 file ({type(exc).__name__}: "
-                             f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+        failure = (f"{path}: not a readable netCDF / HDF5 file ({type(exc).__name__}: "
+                   f"{str(exc).splitlines()[0] if str(exc) else ''})")
+        sys.unraisablehook = _quiet_half_open(hook)
+    if failure is not None:
+        try:  # the half-opened h5netcdf File is collected here, before the one-line error
+            gc.collect()
+        finally:
+            sys.unraisablehook = hook
+        raise GiftInputError(failure) from None
     return validate_arrays(_needs_weights(path, arrays, weights), where=path)
+
+
+def _quiet_half_open(hook):
+    """An unraisable hook that drops h5netcdf's File.close failing on a File whose opening failed
+    (it has no ``_writable`` yet: 'Exception ignored in File.close' on stderr after the one-line
+    error) and passes everything else to ``hook``."""
+    def quiet(u):
+        if isinstance(u.exc_value, AttributeError) and "h5netcdf" in getattr(u.object, "__module__", ""):
+            return None
+        return hook(u)
+    return quiet
 
 
 def save_netcdf(path, meas: Measurement) -> None:
@@ -275,6 +347,128 @@ def _line_of(rows, k) -> int:
     return int(rows[k]) + 2  # the header is line 1
 
 
+class _Table:
+    """A CSV's columns by lower-case name, read once as float64 (pandas' C parser: compact and
+    fast); a cell that is not a finite number is named by its line, its text read back then."""
+
+    def __init__(self, path, kind: str):
+        import csv
+
+        import pandas as pd
+
+        self.path = path
+        read_head(path)  # a regular file, not a FIFO or a device
+        try:
+            with open(path, newline="", encoding="utf-8-sig") as fh:
+                header = next(csv.reader(fh), None)
+        except (OSError, UnicodeDecodeError) as exc:
+            raise GiftInputError(f"{path}: not a readable CSV ({type(exc).__name__})") from None
+        require(header, f"{path}: empty (a {kind} CSV needs a header row)")
+        cols = [h.strip().lower() for h in header]
+        dup = sorted({c for c in cols if cols.count(c) > 1})
+        require(not dup, f"{path}: column {dup[0] if dup else ''!r} appears twice")
+        self.cols = cols
+        kw = dict(skipinitialspace=True, encoding="utf-8-sig", header=0, names=cols)
+        try:
+            self.df = pd.read_csv(path, dtype=np.float64, **kw)
+            self.text = None
+        except (ValueError, TypeError):  # some cell is not a number: read as text to name it
+            self.df = None
+        except (OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+            raise GiftInputError(f"{path}: not a readable CSV ({type(exc).__name__}: "
+                                 f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+        self.numeric = self.df is not None
+        if self.df is None:
+            self.df = self._strings(kw)
+        self.rows = len(self.df)
+        require(self.rows > 0, f"{path}: no data rows (only a header)")
+
+    def _strings(self, kw):
+        import pandas as pd
+
+        try:
+            df = pd.read_csv(self.path, dtype=str, keep_default_na=False, **kw)
+        except (OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+            raise GiftInputError(f"{self.path}: not a readable CSV ({type(exc).__name__}: "
+                                 f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+        return df
+
+    def _raw(self, c, k) -> str:
+        if not self.numeric:
+            return str(self.df[c].iloc[k]).strip()
+        if self.text is None:
+            self.text = self._strings(dict(skipinitialspace=True, encoding="utf-8-sig", header=0, names=self.cols))
+        return str(self.text[c].iloc[k]).strip()
+
+    def numbers(self, c, integer: bool = False, low=None):
+        """Column ``c`` as float64, every cell a finite number (``integer``: an integer >= ``low``)."""
+        col = self.df[c]
+        if not self.numeric:
+            raw = col.str.strip()
+            try:  # numpy parses decimal strings exactly (the shortest repr reads back to the same float)
+                v = raw.to_numpy().astype(np.float64)
+            except ValueError:
+                v = np.array([_float_or_nan(u) for u in raw.tolist()])
+        else:
+            v = col.to_numpy(np.float64)
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            k = int(bad[0])
+            raw = self._raw(c, k)
+            what = "is empty" if raw == "" else f"is not a finite number ({raw!r})"
+            inp = self._raw("input", k) if c != "input" and "input" in self.cols else "?"
+            raise GiftInputError(f"{self.path}: line {k + 2} (input {inp}): column {c} {what}")
+        if integer:
+            bad = np.flatnonzero((v != np.round(v)) | ((v < low) if low is not None else False))
+            if bad.size:
+                k = int(bad[0])
+                lim = "" if low is None else f" >= {low}"
+                raise GiftInputError(f"{self.path}: line {k + 2}: column {c} must hold integers{lim} (got "
+                                     f"{self._raw(c, k)!r})")
+        return v
+
+
+def _grid(path, inp, shot, what: str, lines=None):
+    """The (input, shot) grid of rows sorted by (input, shot): inputs numbered consecutively, every
+    input holding every shot, no pair twice -- the wide CSV's rules, with every index bounded by
+    the rows there are before anything is allocated. Returns (order, ids, shots)."""
+    lines = np.arange(len(inp)) if lines is None else lines
+    order = np.lexsort((shot, inp))
+    si, ss = inp[order], shot[order]
+    ids = np.unique(si)
+    gap = np.flatnonzero(np.diff(ids) > 1)
+    if gap.size:
+        raise GiftInputError(f"{path}: input {int(ids[gap[0]]) + 1} has no rows{what} (inputs are numbered "
+                             f"consecutively from {int(ids[0])} to {int(ids[-1])})")
+    same = np.flatnonzero((np.diff(si) == 0) & (np.diff(ss) == 0))
+    if same.size:
+        k = int(same[0])
+        raise GiftInputError(f"{path}: input {int(si[k])} shot {int(ss[k])} appears twice{what} "
+                             f"(lines {_line_of(lines[order], k)} and {_line_of(lines[order], k + 1)})")
+    shots = np.unique(ss)
+    n, r = len(ids), len(shots)
+    if len(si) != n * r:
+        counts = np.bincount(si - ids[0], minlength=n)
+        i = int(np.argmin(counts))
+        have = set(ss[si == ids[i]].tolist())
+        miss = [int(s) for s in shots if int(s) not in have]
+        raise GiftInputError(f"{path}: input {int(ids[i])} misses shot {miss[0]}{what} ({counts[i]} of the {r} shots "
+                             f"{int(shots[0])}..{int(shots[-1])} the file holds; every input needs every shot)")
+    return order, ids, shots
+
+
+def _same_on_every_row(path, values, group, label, lines, between: str = "its rows"):
+    """Refuse rows of one group (sorted by group) whose ``values`` differ: ``label(g, j)`` names it."""
+    if values.ndim == 1:
+        values = values[:, None]
+    differs = np.flatnonzero(np.any(values[1:] != values[:-1], axis=1) & (group[1:] == group[:-1]))
+    if differs.size:
+        k = int(differs[0])
+        j = int(np.argmax(values[k + 1] != values[k]))
+        raise GiftInputError(f"{path}: {label(int(group[k]), j)} differs between {between} ({float(values[k, j])!r} on "
+                             f"line {int(lines[k]) + 2}, {float(values[k + 1, j])!r} on line {int(lines[k + 1]) + 2})")
+
+
 def load_wide_csv(path, *, weights=None) -> Measurement:
     """Wide CSV: one row per (input, shot), columns ``input, shot, x1..x{d_0}, y1..y{d_L}``, an
     optional ``t`` and optional taps ``a{l}_{j}`` (layer l, neuron j, 1-based); any order,
@@ -284,18 +478,9 @@ def load_wide_csv(path, *, weights=None) -> Measurement:
     the same shots, x is the same on every shot of an input. Rows are sorted by (input, shot).
     A bad row is named by its line and its input. Weights come from ``weights`` (a ``.npz``).
     """
-    import pandas as pd
-
     path = os.fspath(path)
-    try:
-        df = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig")
-    except (OSError, ValueError, UnicodeDecodeError) as exc:
-        raise GiftInputError(f"{path}: not a readable CSV ({type(exc).__name__}: {str(exc).splitlines()[0]})") from None
-    cols = [str(c).strip().lower() for c in df.columns]
-    dup = sorted({c for c in cols if cols.count(c) > 1})
-    require(not dup, f"{path}: column {dup[0] if dup else ''!r} appears twice")
-    df.columns = cols
-    require(len(df) > 0, f"{path}: no data rows")
+    tab = _Table(path, "wide")
+    cols = tab.cols
     for c in ("input", "shot"):
         require(c in cols, f"{path}: missing column {c!r} (a wide CSV needs input, shot, x1.., y1..)")
     groups = {"x": {}, "y": {}}
@@ -307,68 +492,27 @@ def load_wide_csv(path, *, weights=None) -> Measurement:
         elif m:
             taps.setdefault(int(m.group(3)), {})[int(m.group(4))] = c
 
-    def numbers(c, integer=False):
-        raw = df[c].str.strip()
-        try:  # numpy parses decimal strings exactly (the shortest repr reads back to the same float)
-            v = raw.to_numpy().astype(np.float64)
-        except ValueError:
-            v = np.array([_float_or_nan(u) for u in raw.tolist()])
-        bad = np.flatnonzero(~np.isfinite(v))
-        if bad.size:
-            k = int(bad[0])
-            what = "is empty" if raw.iloc[k] == "" else f"is not a finite number ({raw.iloc[k]!r})"
-            inp = df["input"].iloc[k].strip() if c != "input" else "?"
-            raise GiftInputError(f"{path}: line {k + 2} (input {inp}): column {c} {what}")
-        if integer:
-            bad = np.flatnonzero(v != np.round(v))
-            require(not bad.size, f"{path}: line {int(bad[0]) + 2 if bad.size else 0}: column {c} must hold integers")
-        return v
-
-    def block(name, cmap, label):
+    def block(cmap, label):
         require(cmap, f"{path}: no columns {label}1.. (a wide CSV needs x1..x{{d_0}} and y1..y{{d_L}})")
         width = max(cmap)
         missing = [j for j in range(1, width + 1) if j not in cmap]
         require(not missing, f"{path}: has column {label}{width} but not {label}{missing[0] if missing else ''} "
                              f"(columns {label}1..{label}{width} are needed)")
-        return np.stack([numbers(cmap[j]) for j in range(1, width + 1)], axis=1)
+        return np.stack([tab.numbers(cmap[j]) for j in range(1, width + 1)], axis=1)
 
-    inp = numbers("input", integer=True).astype(np.int64)
-    shot = numbers("shot", integer=True).astype(np.int64)
-    order = np.lexsort((shot, inp))
-    inp, shot = inp[order], shot[order]
-    ids = np.unique(inp)
-    gap = np.flatnonzero(np.diff(ids) > 1)
-    if gap.size:
-        raise GiftInputError(f"{path}: input {int(ids[gap[0]]) + 1} has no rows (inputs are numbered "
-                             f"consecutively from {int(ids[0])} to {int(ids[-1])})")
-    same = np.flatnonzero((np.diff(inp) == 0) & (np.diff(shot) == 0))
-    if same.size:
-        k = int(same[0])
-        raise GiftInputError(f"{path}: input {int(inp[k])} shot {int(shot[k])} appears twice "
-                             f"(lines {_line_of(order, k)} and {_line_of(order, k + 1)})")
-    shots = np.unique(shot)
+    inp = tab.numbers("input", integer=True).astype(np.int64)
+    shot = tab.numbers("shot", integer=True).astype(np.int64)
+    order, ids, shots = _grid(path, inp, shot, "")
     n, r = len(ids), len(shots)
-    if len(inp) != n * r:
-        counts = np.bincount(inp - ids[0], minlength=n)
-        i = int(np.argmin(counts))
-        have = set(shot[inp == ids[i]].tolist())
-        miss = [int(s) for s in shots if int(s) not in have]
-        raise GiftInputError(f"{path}: input {int(ids[i])} misses shot {miss[0]} ({counts[i]} of the {r} shots "
-                             f"{int(shots[0])}..{int(shots[-1])} the file holds; every input needs every shot)")
     # rows sorted by (input, shot), every input holding every shot: a plain reshape
-    x_rows = block("x", groups["x"], "x")[order].reshape(n, r, -1)
-    differs = np.any(x_rows != x_rows[:, :1], axis=(1, 2))
-    if differs.any():
-        i = int(np.flatnonzero(differs)[0])
-        s_, j = np.argwhere(x_rows[i] != x_rows[i, :1])[0]
-        raise GiftInputError(f"{path}: input {int(ids[i])}: x{j + 1} differs between its shots "
-                             f"({x_rows[i, 0, j]!r} on line {_line_of(order, i * r)}, {x_rows[i, s_, j]!r} on line "
-                             f"{_line_of(order, i * r + s_)})")
-    arrays = {"x": x_rows[:, 0], "y": block("y", groups["y"], "y")[order].reshape(n, r, -1)}
+    x_rows = block(groups["x"], "x")[order]
+    _same_on_every_row(path, x_rows, inp[order], lambda i, j: f"input {i}: x{j + 1}", order,
+                       "its shots")
+    arrays = {"x": x_rows.reshape(n, r, -1)[:, 0], "y": block(groups["y"], "y")[order].reshape(n, r, -1)}
     for l, cmap in taps.items():
-        arrays[f"a{l}"] = block(f"a{l}", cmap, f"a{l}_")[order].reshape(n, r, -1)
+        arrays[f"a{l}"] = block(cmap, f"a{l}_")[order].reshape(n, r, -1)
     if "t" in cols:
-        arrays["t"] = numbers("t")[order].reshape(n, r)
+        arrays["t"] = tab.numbers("t")[order].reshape(n, r)
     return validate_arrays(_needs_weights(path, arrays, weights), where=path)
 
 
@@ -429,12 +573,10 @@ def load_weight_arrays(path) -> dict:
     checked to exist -- what the CSV and table readers pair with their values.
     (:func:`gift_theory.training.load_weights` reads a trained network: ``(params, meta)``.)"""
     path = os.fspath(path)
-    require(os.path.exists(path), f"{path}: no such weights file")
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            arrays = {k: f[k] for k in f.files if (k[:1] in "Wb" and k[1:].isdigit()) or k == "activation"}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
-        raise GiftInputError(f"{path}: not a readable .npz weights file ({type(exc).__name__})") from None
+    head = read_head(path)
+    require(head.startswith(b"PK"), f"{path}: not an .npz weights file (an .npz is a zip archive; this file "
+                                    f"starts with {head[:8]!r})")
+    arrays = _npz_arrays(path, "weights ", keep=lambda k: (k[:1] in "Wb" and k[1:].isdigit()) or k == "activation")
     require("W1" in arrays, f"{path}: no weights (expected keys W1, b1, ...)")
     return arrays
 
@@ -442,78 +584,126 @@ def load_weight_arrays(path) -> dict:
 def load_csv(path, *, weights=None) -> Measurement:
     """Long-format CSV: one row per value, columns ``input, shot, layer, neuron, value``.
 
-    ``layer`` 0 holds the inputs x (one row per input and feature; the shot column is
-    ignored there), layers 1..L-1 the taps, layer L the outputs y. An optional column
-    ``t`` gives the shot's acquisition time. Weights (W1..WL, b1..bL) come from the
-    ``weights`` .npz file; columns may appear in any order, a header row is required.
+    ``layer`` 0 holds the inputs x (one row per input and feature, any shot; repeated rows must
+    agree), layers 1..L-1 the taps (all of them or none), layer L the outputs y; neurons are
+    numbered from 1 in each layer (x1.. of the wide CSV is neuron 1 of layer 0). The wide CSV's
+    rules hold: inputs are numbered consecutively, every input holds every shot of every neuron
+    of a layer, no value is given twice. An optional column ``t`` gives the shot's acquisition
+    time (the same on every row of an (input, shot); ignored on layer 0). Weights (W1..WL,
+    b1..bL) come from the ``weights`` .npz file; columns may appear in any order, a header row
+    is required. Every bad row is named by its line.
     """
     path = os.fspath(path)
     require(weights is not None, f"{path}: a CSV measurement needs --weights FILE.npz with W1..WL, b1..bL")
     warrays = load_weight_arrays(weights)
-    try:
-        with open(path, newline="") as fh:
-            header = fh.readline().strip().split(",")
-            header = [h.strip().lower() for h in header]
-            rows = np.loadtxt(fh, delimiter=",", ndmin=2, dtype=np.float64)
-    except (OSError, ValueError, UnicodeDecodeError) as exc:
-        raise GiftInputError(f"{path}: not a readable numeric CSV ({exc})") from None
-    need = ["input", "shot", "layer", "neuron", "value"]
-    for c in need:
-        require(c in header, f"{path}: missing column {c!r} (need input, shot, layer, neuron, value)")
-    require(rows.shape[0] > 0 and rows.shape[1] == len(header), f"{path}: rows do not match the header's {len(header)} columns")
-    require(bool(np.all(np.isfinite(rows))), f"{path}: contains NaN or Inf")
-    col = {c: rows[:, header.index(c)] for c in header}
-    idx = {}
-    for c in ("input", "shot", "layer", "neuron"):
-        v = col[c]
-        require(bool(np.all(v == np.round(v))) and bool(np.all(v >= 0)), f"{path}: column {c} must hold non-negative integers")
-        idx[c] = v.astype(np.int64)
-    L = sum(1 for k in warrays if k.startswith("W"))
-    widths = [int(np.shape(warrays["W1"])[1])] + [int(np.shape(warrays[f"W{l}"])[0]) for l in range(1, L + 1) if f"W{l}" in warrays]
-    require(int(idx["layer"].max()) <= L, f"{path}: layer {int(idx['layer'].max())} but the weights have {L} layers")
-    n = int(idx["input"].max()) + 1
-    out_rows = idx["layer"] == L
-    require(bool(out_rows.any()), f"{path}: no rows of the output layer {L}")
-    r = int(idx["shot"][out_rows].max()) + 1
+    tab = _Table(path, "long")
+    for c in ("input", "shot", "layer", "neuron", "value"):
+        require(c in tab.cols, f"{path}: missing column {c!r} (need input, shot, layer, neuron, value)")
+    L = _layer_keys(set(warrays), weights)
+    widths = [int(np.shape(warrays["W1"])[1])] + [int(np.shape(warrays[f"W{l}"])[0]) for l in range(1, L + 1)]
+    inp, shot, layer = (tab.numbers(c, integer=True, low=0).astype(np.int64) for c in ("input", "shot", "layer"))
+    neuron = tab.numbers("neuron", integer=True, low=1).astype(np.int64)
+    value = tab.numbers("value")
+    t = tab.numbers("t") if "t" in tab.cols else None
+    big = np.flatnonzero(layer > L)
+    require(not big.size, f"{path}: line {int(big[0]) + 2 if big.size else 0}: layer "
+                          f"{int(layer[big[0]]) if big.size else 0}, but the weights {weights} have {L} layers")
+    width = np.asarray(widths)[layer]
+    wide = np.flatnonzero(neuron > width)
+    if wide.size:
+        k = int(wide[0])
+        raise GiftInputError(f"{path}: line {k + 2}: layer {int(layer[k])} neuron {int(neuron[k])}, but the layer has "
+                             f"{int(width[k])} neurons (numbered from 1)")
+    rows = np.arange(tab.rows)
+    out_rows = rows[layer == L]
+    require(out_rows.size, f"{path}: no rows of the output layer {L}")
     arrays = dict(warrays)
-    for l in range(0, L + 1):
-        sel = idx["layer"] == l
-        if not sel.any():
-            require(l not in (0, L), f"{path}: no rows for layer {l}")
+    n = r = None
+    ids = shots = None
+    for l in range(1, L + 1):
+        sel = rows[layer == l]
+        if not sel.size:
             continue
         d = widths[l]
-        require(int(idx["neuron"][sel].max()) < d, f"{path}: layer {l} has neuron {int(idx['neuron'][sel].max())}, width is {d}")
-        if l == 0:
-            a = np.full((n, d), np.nan)
-            a[idx["input"][sel], idx["neuron"][sel]] = col["value"][sel]
-            require(not np.isnan(a).any(), f"{path}: the inputs (layer 0) miss some (input, neuron) values")
-            arrays["x"] = a
-        else:
-            require(int(idx["shot"][sel].max()) < r, f"{path}: layer {l} has more shots than the output layer")
-            a = np.full((n, r, d), np.nan)
-            flat = (idx["input"][sel] * r + idx["shot"][sel]) * d + idx["neuron"][sel]
-            require(len(np.unique(flat)) == len(flat), f"{path}: layer {l} repeats an (input, shot, neuron) row")
-            a.reshape(-1)[flat] = col["value"][sel]
-            require(not np.isnan(a).any(), f"{path}: layer {l} misses some (input, shot, neuron) values")
-            arrays["y" if l == L else f"a{l}"] = a
-    if "t" in col:
-        sel = out_rows
-        t = np.full((n, r), np.nan)
-        t[idx["input"][sel], idx["shot"][sel]] = col["t"][sel]
-        require(not np.isnan(t).any(), f"{path}: column t misses some (input, shot) values")
-        arrays["t"] = t
+        # sorted by (input, shot, neuron): each (input, shot) pair must hold its d neurons once
+        order = np.lexsort((neuron[sel], shot[sel], inp[sel]))
+        s_sel = sel[order]
+        dup = np.flatnonzero((np.diff(inp[s_sel]) == 0) & (np.diff(shot[s_sel]) == 0) & (np.diff(neuron[s_sel]) == 0))
+        if dup.size:
+            k = int(dup[0])
+            raise GiftInputError(f"{path}: layer {l}: input {int(inp[s_sel[k]])} shot {int(shot[s_sel[k]])} neuron "
+                                 f"{int(neuron[s_sel[k]])} appears twice (lines {int(s_sel[k]) + 2} and "
+                                 f"{int(s_sel[k + 1]) + 2})")
+        starts = np.flatnonzero(np.r_[True, (np.diff(inp[s_sel]) != 0) | (np.diff(shot[s_sel]) != 0)])
+        first = s_sel[starts]
+        counts = np.diff(np.r_[starts, len(s_sel)])
+        short = np.flatnonzero(counts != d)
+        if short.size:
+            k = first[short[0]]
+            have = set(neuron[sel][(inp[sel] == inp[k]) & (shot[sel] == shot[k])].tolist())
+            miss = next(j for j in range(1, d + 1) if j not in have)
+            raise GiftInputError(f"{path}: layer {l}: input {int(inp[k])} shot {int(shot[k])} misses neuron {miss} "
+                                 f"(every (input, shot) needs all {d} neurons)")
+        g_order, g_ids, g_shots = _grid(path, inp[first], shot[first], f" in layer {l}", lines=first)
+        if ids is None:
+            ids, shots = g_ids, g_shots
+            n, r = len(ids), len(shots)
+        elif not (np.array_equal(g_ids, ids) and np.array_equal(g_shots, shots)):
+            raise GiftInputError(f"{path}: layer {l} has inputs {int(g_ids[0])}..{int(g_ids[-1])} x shots "
+                                 f"{int(g_shots[0])}..{int(g_shots[-1])}, the layers before it "
+                                 f"{int(ids[0])}..{int(ids[-1])} x {int(shots[0])}..{int(shots[-1])}")
+        # rows sorted by (input, shot, neuron), each pair holding all d neurons: a plain reshape
+        arrays["y" if l == L else f"a{l}"] = value[s_sel].reshape(n, r, d)
+        if t is not None:
+            tt = t[s_sel].reshape(n, r, d)
+            bad = np.argwhere(tt != tt[:, :, :1])
+            if bad.size:
+                i, s_, j = (int(v) for v in bad[0])
+                k0, k1 = s_sel[(i * r + s_) * d], s_sel[(i * r + s_) * d + j]
+                raise GiftInputError(f"{path}: input {int(ids[i])} shot {int(shots[s_])}: t differs between its rows "
+                                     f"({float(t[k0])!r} on line {int(k0) + 2}, {float(t[k1])!r} on line {int(k1) + 2})")
+            if "t" in arrays:
+                bad = np.argwhere(arrays["t"] != tt[:, :, 0])
+                if bad.size:
+                    i, s_ = (int(v) for v in bad[0])
+                    raise GiftInputError(f"{path}: input {int(ids[i])} shot {int(shots[s_])}: t differs between "
+                                         f"layers (layer {l} has {float(tt[i, s_, 0])!r}, an earlier one {float(arrays['t'][i, s_])!r})")
+            arrays["t"] = tt[:, :, 0]
+    sel = rows[layer == 0]
+    require(sel.size, f"{path}: no rows of layer 0 (the inputs x)")
+    d0 = widths[0]
+    order = np.lexsort((neuron[sel], inp[sel]))
+    s_sel = sel[order]
+    key = inp[s_sel] * (d0 + 1) + neuron[s_sel]
+    _same_on_every_row(path, value[s_sel], key, lambda g, j: f"input {g // (d0 + 1)}: x{g % (d0 + 1)}", s_sel)
+    first = s_sel[np.r_[True, np.diff(key) != 0]]
+    stray = np.flatnonzero((inp[first] < ids[0]) | (inp[first] > ids[-1]))
+    if stray.size:
+        k = int(first[stray[0]])
+        raise GiftInputError(f"{path}: line {k + 2}: input {int(inp[k])} has x (layer 0) but no outputs (layer {L})")
+    if len(first) != n * d0:
+        have = np.zeros((n, d0), bool)
+        have[inp[first] - ids[0], neuron[first] - 1] = True
+        i, j = (int(v) for v in np.argwhere(~have)[0])
+        raise GiftInputError(f"{path}: input {int(ids[i])} has no x{j + 1} (layer 0, neuron {j + 1})")
+    arrays["x"] = value[first].reshape(n, d0)
+    taps = [f"a{l}" for l in range(1, L) if f"a{l}" in arrays]
+    if taps and len(taps) < L - 1:
+        missing = next(l for l in range(1, L) if f"a{l}" not in arrays)
+        raise GiftInputError(f"{path}: taps are partial: has rows of layer {taps[0][1:]} but none of layer {missing} "
+                             f"(give all hidden layers 1..{L - 1} or none)")
     return validate_arrays(arrays, where=path)
 
 
 def save_csv(path, meas: Measurement) -> None:
-    """Write ``meas`` in the long CSV format of :func:`load_csv` (atomically)."""
+    """Write ``meas`` in the long CSV format of :func:`load_csv` (atomically; neurons numbered from 1)."""
     rows = []
     n, r = meas.n, meas.r
     ii, jj = np.meshgrid(np.arange(n), np.arange(meas.x.shape[1]), indexing="ij")
-    rows.append(np.stack([ii.ravel(), np.zeros(ii.size), np.zeros(ii.size), jj.ravel(), meas.x.ravel()], 1))
+    rows.append(np.stack([ii.ravel(), np.zeros(ii.size), np.zeros(ii.size), jj.ravel() + 1, meas.x.ravel()], 1))
     for l, a in zip(meas.layer_ids(), meas.layers()):
         i, s, k = np.meshgrid(np.arange(n), np.arange(r), np.arange(a.shape[2]), indexing="ij")
-        rows.append(np.stack([i.ravel(), s.ravel(), np.full(i.size, l), k.ravel(), a.ravel()], 1))
+        rows.append(np.stack([i.ravel(), s.ravel(), np.full(i.size, l), k.ravel() + 1, a.ravel()], 1))
     data = np.concatenate(rows)
     header = "input,shot,layer,neuron,value"
     if meas.t is not None:

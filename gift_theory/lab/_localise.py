@@ -99,8 +99,8 @@ class Residuals:
         arrays, or one array): per input sum_j e_ij w_ij, tested over inputs."""
         e = e if isinstance(e, list) else [e]
         w = w if isinstance(w, list) else [w]
-        T = sum(np.nansum(np.asarray(a) * np.asarray(b), axis=-1) for a, b in zip(e, w))
-        return over_inputs(T)
+        T = sum(np.sum(np.asarray(a) * np.asarray(b), axis=-1) for a, b in zip(e, w))
+        return over_inputs(T, "a residual score's per-input values (the residuals along a signature's direction)")
 
     def mean_derivative(self, effect: str, param: str, at: float, h: float):
         """Per layer (n, d), d(noiseless model mean)/d param of ``effect`` added at ``at``

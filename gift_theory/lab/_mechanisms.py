@@ -95,11 +95,12 @@ def _significant(ctx, cls, layers=None):
             and (layers is None or r["layer"] in layers)]
 
 
-def _identified(ctx, cls, exclude=()):
+def _identified(ctx, cls, exclude=(), tests=None):
     """(score, layers, evidence, p_value) of ``cls`` from the identification's tests: the layers
-    where a test of the class rejects after Holm's correction (less ``exclude``), the strongest
-    such test's z and evidence, the smallest adjusted p-value; None when none rejects."""
-    rows = [r for r in _significant(ctx, cls) if r["layer"] not in exclude]
+    where a test of the class rejects after Holm's correction (less ``exclude``; only the tests
+    ``tests`` accepts, when given), the strongest such test's z and evidence, the smallest
+    adjusted p-value; None when none rejects."""
+    rows = [r for r in _significant(ctx, cls) if r["layer"] not in exclude and (tests is None or tests(r["test"]))]
     if not rows:
         return None
     best = max(rows, key=lambda r: r["z"])
@@ -181,7 +182,8 @@ def rule_activation(ctx):
     if ctx.ident is not None:
         if ctx.taps:
             return _identified(ctx, "activation_mismatch")
-        r = _identified(ctx, "readout_nonlinearity")
+        # a lattice is a digitising readout's, never an activation's (continuous by nature)
+        r = _identified(ctx, "readout_nonlinearity", tests=lambda test: test != "lattice")
         if r is None or ctx.depth < 2:
             return None
         return (r[0] * 0.99, list(range(1, ctx.depth)), "the output's transfer is distorted; without taps a hidden "
@@ -320,6 +322,8 @@ RULES = {
     "bias_offset": rule_bias,
     "activation_mismatch": rule_activation,
     "readout_nonlinearity": rule_readout,
+    # issue 48: the lag test of lab/_memory.py (a layer's shots depend on the shot acquired before)
+    "memory": rule_fitted_only("memory"),
 }
 assert set(RULES) == set(MECHANISMS), "every reference §6 class has a rule"
 
@@ -399,6 +403,7 @@ def mechanisms(ctx: Context) -> list[dict]:
                         "evidence": text, "p_value": float(p)})
     out.sort(key=lambda m: -m["score"])
     out = _fluctuation_before_trend(ctx, out)
+    out = _wander_before_gain(ctx, out)  # issue 48 (lab/_time.py)
     out = _signal_before_level(ctx, out)
     if ctx.ident is not None and not ctx.taps and getattr(ctx.ident, "output_candidates", ()):
         out = order_map_classes(out, ctx.ident.output_candidates)
@@ -424,6 +429,41 @@ def _fluctuation_before_trend(ctx, out: list) -> list:
         return out
     return _put_before(out, *pair, f"; the time trend carries {best['share']:.0%} of the gain's variance within "
                                     "the inputs' shots: the gain fluctuates")
+
+
+#: a layer's fixed gain is read as its wandering gain's mean over the campaign when it is within
+#: this many rms of the wander's path
+WANDER_SPAN = 3.0
+#: the tests that read a fixed gain of a layer: W_eff = g W, or z scaled as a whole (an
+#: activation's slope on a hidden layer, a readout's gain on the output)
+_GAIN_TESTS = {("gain_error", "gain"), ("activation_mismatch", "transfer"), ("readout_nonlinearity", "transfer")}
+
+
+def _wander_before_gain(ctx, out: list) -> list:
+    """A gain that wanders over the campaign (time_drift by the wander test of
+    :mod:`~gift_theory.lab._time`) has a mean over this campaign, and that mean is a gain of the
+    layer too: a wandering laser's gain was named gain_error first (W_eff = 1.05 W, the path's rms
+    0.037), and on a hidden layer an activation's slope. When every class listed before
+    time_drift is such a fixed gain -- each of its named tests a gain or a scaled z, at a layer
+    whose gain wanders, within :data:`WANDER_SPAN` rms of the path -- time_drift goes before
+    them (all stay listed): the gain is what the wander averages to."""
+    names = [m["mechanism"] for m in out]
+    if ctx.ident is None or "time_drift" not in names:
+        return out
+    i_t = names.index("time_drift")
+    rms = {}
+    for r in _significant(ctx, "time_drift"):
+        if r["test"] == "wander":
+            rms[r["layer"]] = max(rms.get(r["layer"], 0.0), float(r.get("path_rms", 0.0)))
+    if not rms or i_t == 0:
+        return out
+    for m in out[:i_t]:
+        rows = _significant(ctx, m["mechanism"])
+        if not rows or not all((r["class"], r["test"]) in _GAIN_TESTS and r["layer"] in rms
+                               and abs(r["effect"]) <= WANDER_SPAN * rms[r["layer"]] for r in rows):
+            return out
+    return _put_before(out, i_t, 0, f"; the gain of layer(s) {', '.join(map(str, sorted(rms)))} wanders over the "
+                                    f"campaign, and the fixed gain read there is within {WANDER_SPAN:g} rms of its path")
 
 
 def _signal_before_level(ctx, out: list) -> list:

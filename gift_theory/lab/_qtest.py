@@ -23,6 +23,8 @@ import functools
 import numpy as np
 from scipy import special, stats
 
+from .._finite import check_finite
+
 #: Monte Carlo draws of the null distribution of Q (fixed seed: same data, same p-value)
 NULL_DRAWS = 20_000
 
@@ -88,6 +90,7 @@ def q_test(T, shift=None, extra_var=None):
     -------
     Q, p_value, null_mean, null_sd, z (C,)
     """
+    check_finite(T, "the discrepancy test's channel values (model shots against measured shots, per input)")
     z, ok = _z_scores(T, shift, extra_var)
     Q = float(np.sum(np.maximum(z, 0.0) ** 2))
     Tk = T[:, ok]
@@ -117,10 +120,12 @@ def t_to_z(mean: float, se: float, df: int) -> float:
     return float(np.sign(t) * (z if np.isfinite(z) else abs(t)))
 
 
-def over_inputs(T) -> float:
-    """z of the mean of per-input values T (n,) against zero (Student t over inputs)."""
+def over_inputs(T, what: str = "per-input values of a test") -> float:
+    """z of the mean of per-input values T (n,) against zero (Student t over inputs); NaN with
+    fewer than 3 inputs. A non-finite value is never dropped: :class:`~gift_theory._finite.NotFinite`
+    names ``what``."""
     T = np.asarray(T, np.float64)
-    T = T[np.isfinite(T)]
+    check_finite(T, what)
     if T.size < 3:
         return float("nan")
     return t_to_z(float(T.mean()), float(T.std(ddof=1) / np.sqrt(T.size)), T.size - 1)

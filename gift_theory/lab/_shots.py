@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._finite import check_all_finite, check_finite
 from .._measurement import Measurement
 from .._model import (
     compiled_draws,
@@ -88,7 +89,7 @@ def tiled_times(meas: Measurement, K: int):
 
 
 #: bytes of standard draws kept between calls (least recently used first out)
-DRAW_CACHE_BYTES = 256 << 20
+DRAW_CACHE_BYTES = 64 << 20
 _draw_cache: "collections.OrderedDict[tuple, jax.Array]" = collections.OrderedDict()
 _draw_lock = threading.Lock()
 _draw_bytes = [0]
@@ -154,10 +155,26 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     x = to32(meas.x)
     t = tiled_times(meas, chunk)
     physics = strong32(model.physics)  # the fit's leaf types: its compiled forward serves here
-    parts = [layer_outputs(params, x, draws(jax.random.fold_in(key, c), model.physics, meas, chunk), physics,
-                           meas.arch, t) for c in range(K // chunk)]
+    parts = []
+    for c in range(K // chunk):
+        noise = draws(jax.random.fold_in(key, c), model.physics, meas, chunk)
+        part = layer_outputs(params, x, noise, physics, meas.arch, t)
+        check_all_finite(part, [lambda l=l: f"the model's shots of layer {l} ({model.describe()})"
+                                for l in range(1, len(part) + 1)],
+                         lambda k, i: eager_forward_at(params, x, noise, physics, meas.arch, t, i))
+        parts.append(part)
     outs = parts[0] if len(parts) == 1 else tuple(jnp.concatenate(p, axis=1) for p in zip(*parts))
     return tuple(outs[l - 1] for l in meas.layer_ids())
+
+
+def eager_forward_at(params, x, noise, physics, arch, t, at=None):
+    """The forward pass of a batch of draws ``noise`` run again eagerly (the failure path of a
+    non-finite stage; ``at``, the first bad index, is not needed: a hook's fault may depend on the
+    whole batch): every plugin hook's result is then checked as it returns, and a hook that
+    returned NaN or inf is named in one line."""
+    with jax.disable_jit():
+        forward(params, jnp.asarray(x)[:, None, :], noise, physics, arch, t=None if t is None else jnp.asarray(t),
+                taps=True)
 
 
 def strong32(physics):
@@ -194,7 +211,18 @@ def one_step_shots(key, model: Model, meas: Measurement, layer: int, draws: int 
     else:
         a = to32(meas.taps[layer - 2])
     t = None if meas.t is None else to32(meas.t)
-    return _one_step(key, W, b, a, strong32(model.physics), t, meas.arch, layer, int(draws))
+    phys = strong32(model.physics)
+    out = _one_step(key, W, b, a, phys, t, meas.arch, layer, int(draws))
+    check_finite(out, lambda: f"the one-step shots of layer {layer} ({model.describe()})",
+                 lambda i: _eager_one_step(key, W, b, a, phys, t, meas.arch, layer, int(draws)))
+    return out
+
+
+def _eager_one_step(key, W, b, a, physics, t, arch, layer, q):
+    """:func:`_one_step` again, eagerly (a plugin hook that returned a non-finite value is named
+    where it returns)."""
+    with jax.disable_jit():
+        _one_step(key, W, b, a, physics, t, arch, layer, q)
 
 
 def one_step_pre(model: Model, meas: Measurement, layer: int) -> np.ndarray:
@@ -225,8 +253,14 @@ def noiseless_taps(model: Model, meas: Measurement, physics=None):
 
 def _noiseless_of(model: Model, meas: Measurement, physics):
     """(pre-activations, outputs) of every layer, every draw zero, as float64 numpy lists."""
-    pre, taps = _noiseless(params32(model.weights(meas)), to32(meas.x), strong32(physics),
-                           meas.arch)
+    p32, x32, phys = params32(model.weights(meas)), to32(meas.x), strong32(physics)
+    pre, taps = _noiseless(p32, x32, phys, meas.arch)
+
+    def rerun(k, i):
+        with jax.disable_jit():
+            _noiseless(p32, x32, phys, meas.arch)
+    check_all_finite(taps, [lambda l=l: f"the noiseless output of layer {l} ({physics.describe()})"
+                            for l in range(1, len(taps) + 1)], rerun)
     return [np.asarray(z, np.float64) for z in pre], [np.asarray(a, np.float64) for a in taps]
 
 

@@ -16,7 +16,10 @@
       determined by the data rather than by its prior -- effective degrees of freedom at least
       half its number of values (:func:`~gift_theory.lab._offset_null.effective_dof`; without
       taps a few hundred weight offsets fitted to a few hundred output means are not: they can
-      follow almost any smooth distortion of the network, so their passing says nothing);
+      follow almost any smooth distortion of the network, so their passing says nothing); a
+      model whose only offsets are per-neuron parameters is identified when each value is, neuron
+      by neuron (:mod:`._neurons`: its standard error at most 1/sqrt(2) of the prior scale), and
+      then the outlier test of rule b does not refuse its values (a dead neuron is a finding);
    b. its fitted values look like its own effect: fitted weight offsets are neither
       proportional to the programmed weights nor a fixed linear map of them, nor are their
       rows coupled as the rows of the weights are; fitted bias offsets do not all go one way
@@ -80,6 +83,7 @@ import dataclasses
 import numpy as np
 
 from ._compare import failing_layers
+from ._neurons import identified, outlier_tests
 from ._offset_prior import refusing
 
 ALPHA = 0.01
@@ -104,7 +108,11 @@ def refusals(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[str]:
     them."""
     name = " + ".join(cand.effects)
     why = []
-    if cand.nominal and cand.n_free < 0.5 * cand.nominal and any(cand.model.offsets):
+    # issue 48 hook (lab/_neurons.py): per-neuron values identified neuron by neuron are an
+    # explanation -- rule a's count and rule b's outlier test do not refuse them
+    per_neuron, _ = identified(cand.model)
+    if (cand.nominal and cand.n_free < 0.5 * cand.nominal and any(cand.model.offsets)
+            and not per_neuron):
         why.append(f"{name}'s {cand.nominal} fitted values are not identified by the data (effective degrees of "
                    f"freedom {cand.n_free:.0f}: the prior, not the data, sets most of them)")
     if not any(cand.model.offsets) and cand.score >= baseline_cmp.discrepancy:
@@ -119,7 +127,10 @@ def refusals(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[str]:
                           "coupling between the inputs, not errors drawn per weight)",
             "b_mean": "bias offsets of layer {l} all go one way (a shifted transfer, not per-neuron draws of either "
                       "sign)"}
+    findings = outlier_tests(cand.model) if per_neuron else set()
     for row in refusing(prior):
+        if row["test"] in findings:  # a neuron unlike the rest is the finding, not a refusal
+            continue
         text = what.get(row["test"], row.get("what", f"{row['test']} of layer {{l}}")).format(l=row["layer"])
         why.append(f"the fitted {text}: z = {row['z']:.1f}" + (f" (p = {row['p']:.2g})" if "p" in row else ""))
     unit = baseline_cmp.se if baseline_cmp.se > 0 else 1.0
@@ -165,8 +176,9 @@ def explanation(top, baseline_cmp, top_steps=None, prior=(), twin=None, flagged=
         why = [_rejected(baseline_cmp, flagged, "no candidate with a term for it explains the data")] + why
     if why:
         return False, why
+    per_neuron, said = identified(top.model)
     return True, [f"awgn + {name} passes its held-out test (p = {top.comparison.p_value:.3g}) and every check of "
-                  f"its fitted values"]
+                  f"its fitted values" + (f"; {said}" if per_neuron else "")]
 
 
 def _pm(value: float, sd: float) -> str:

@@ -18,6 +18,7 @@ import jax
 import numpy as np
 
 from .._arch import Architecture
+from .._cachedir import cache_dir, unwritable, warn_once
 from .._errors import GiftInputError, require
 from .._io import atomic_write
 from .._objective import estimate_from_samples, per_input_scores
@@ -27,9 +28,6 @@ from ..effects import Physics, awgn
 from ._sgd import TrainConfig, stderr_progress, train
 
 
-def cache_dir() -> str:
-    """``$GIFT_CACHE_DIR`` or ``~/.cache/gift``."""
-    return os.environ.get("GIFT_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "gift")
 
 
 def default_config(dataset: str, arch: Architecture) -> TrainConfig:
@@ -59,7 +57,7 @@ def load_weights(path: str):
     """``(params, meta)`` from a weight file written by :func:`save_weights` (or any npz with W1, b1, ...)."""
     require(os.path.isfile(path), f"{path}: no such weight file")
     try:
-        with np.load(path, allow_pickle=False) as f:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as f:  # our handle: closed on a bad file
             arrays = {k: f[k] for k in f.files}
     except Exception as exc:  # zip errors, truncated files
         raise GiftInputError(f"{path}: not a readable .npz file ({type(exc).__name__})") from None
@@ -100,7 +98,9 @@ def load_or_train(dataset: str, arch: Architecture, s0: float, seed: int = 0, *,
     Returns
     -------
     params : tuple of Layer
-    info : dict with ``path``, ``cached``, ``seconds`` and the train/test metrics
+    info : dict with ``path`` (None when the cache could not be written: one warning on stderr),
+        ``cached``, ``seconds`` and the train/test metrics (a cached file that cannot be read is
+        trained again and rewritten)
     """
     from ..data import load_dataset
 
@@ -114,8 +114,11 @@ def load_or_train(dataset: str, arch: Architecture, s0: float, seed: int = 0, *,
                     None if physics == awgn(s0) else physics)
     path = os.path.join(cache or cache_dir(), f"{dataset}_{arch}_s{s0:g}_seed{seed}_{key}.npz")
     if os.path.isfile(path) and not force:
-        params, meta = load_weights(path)
-        return params, dict(meta, path=path, cached=True)
+        try:
+            params, meta = load_weights(path)
+            return params, dict(meta, path=path, cached=True)
+        except GiftInputError as exc:  # a truncated or damaged entry: trained again and rewritten
+            warn_once("broken entry", f"the cached weights are unreadable ({exc}); training again")
     t0 = time.perf_counter()
     label = f"train {dataset} {arch} s0={s0:g} seed={seed}"
     if progress:
@@ -133,5 +136,9 @@ def load_or_train(dataset: str, arch: Architecture, s0: float, seed: int = 0, *,
                          else config.epochs * (ds.x_train.shape[0] // config.batch_size)),
             "physics": physics.describe(), "train_seconds": seconds,
             "train_examples": int(ds.x_train.shape[0]), "test_examples": int(ds.x_test.shape[0]), **metrics}
-    save_weights(path, params, meta)
+    try:
+        save_weights(path, params, meta)
+    except OSError as exc:  # a read-only or full cache: the weights are still returned (and --out written)
+        unwritable(os.path.dirname(path), exc, "the trained weights")
+        path = None
     return params, dict(meta, path=path, cached=False)

@@ -87,17 +87,17 @@ def write(tmp_path, text, name="my_effect.py"):
 def test_public_api_and_mechanisms():
     assert fx.MECHANISMS == ("noise_level", "noise_law", "input_dependent_noise", "gain_fluctuation",
                              "time_drift", "correlated_noise", "gain_error", "weight_error", "bias_offset",
-                             "activation_mismatch", "readout_nonlinearity")
+                             "activation_mismatch", "readout_nonlinearity", "memory")
     assert fx.STAGES == ("level", "law", "weights", "bias", "gain", "activation", "readout")
     assert gt.EFFECT_NAMES == fx.EFFECT_NAMES and len(fx.EFFECT_NAMES) == 11
-    assert fx.BUILTIN == fx.EFFECT_NAMES + ("bias_offset", "activation_gain", "layer_gain")
+    assert fx.BUILTIN == fx.EFFECT_NAMES + ("bias_offset", "activation_gain", "layer_gain", "memory")
     assert set(fx.BUILTIN) == set(fx.REGISTRY)
     table6 = {"awgn": "noise_level", "laplace": "noise_law", "uniform": "noise_law",
               "shot": "input_dependent_noise", "multiplicative": "input_dependent_noise",
               "common_mode": "gain_fluctuation", "drift": "time_drift", "crosstalk": "weight_error",
               "weight_error": "weight_error", "saturation": "readout_nonlinearity",
               "quantization": "readout_nonlinearity", "bias_offset": "bias_offset",
-              "activation_gain": "activation_mismatch", "layer_gain": "gain_error"}
+              "activation_gain": "activation_mismatch", "layer_gain": "gain_error", "memory": "memory"}
     assert {n: fx.REGISTRY[n].mechanism for n in fx.BUILTIN} == table6
     for n in fx.BUILTIN:
         cls = fx.REGISTRY[n]

@@ -172,3 +172,25 @@ def test_build_by_cells_runs_those_cells_only_and_assembles_what_landed(tmp_path
     assert float(ds["pathwise_loss"].sel(s0=0.1, st=0.3, seed=0)) == 0.9
     assert np.isnan(float(ds["pathwise_loss"].sel(s0=0.1, st=0.2, seed=0)))
     assert main(["--scale", "tiny", "--cells", "0.1-0.2", "--draw-only"]) == 2
+
+
+def test_a_results_own_seconds_does_not_replace_the_jobs(tmp_path, monkeypatch):
+    """A job whose result has its own "seconds" (a method's time): the sweep keeps the job's wall
+    time as ``seconds`` and the result's as ``result_seconds``."""
+    (tmp_path / "timed_job.py").write_text("import time\n\ndef job(a, **_):\n    time.sleep(0.01)\n"
+                                           "    return {'seconds': -1.0 * a, 'done': 7.0, 'v': a}\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    sw = Sweep("timed", {"a": (1, 2)}, "timed_job:job")
+    ds = run_sweep(sw, str(tmp_path / "out"), scheduler="synchronous", progress=False)
+    np.testing.assert_array_equal(ds["result_seconds"].values, [-1.0, -2.0])
+    np.testing.assert_array_equal(ds["result_done"].values, [7.0, 7.0])
+    assert (ds["seconds"].values >= 0.01).all() and ds["done"].values.all()
+
+
+def test_figures_data_default_outside_an_installed_package(tmp_path, monkeypatch):
+    import paper_figures._build as build
+
+    assert build.default_root() == build.HERE  # this source checkout: the repository's folders
+    monkeypatch.setattr(build, "HERE", str(tmp_path / "site-packages" / "paper_figures"))
+    monkeypatch.chdir(tmp_path)
+    assert build.default_root() == str(tmp_path / "gift_figures")

@@ -353,14 +353,14 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
     """The rate is the real test's on simulated files: at the model itself it is the level; shot
     noise is seen; a law change at equal variance on 40 inputs x 16 shots is not, with or
     without taps; an outputs-only file gets the with-taps figure of the same simulated files."""
-    from gift_theory.lab._compare import _power_on, power_of
+    from gift_theory.lab._compare import _power_p, _rate, power_of
 
     params, x = deep_setup
     model = Model(gt.Physics.create(s=0.1))
     meas = simulate_measurement(jax.random.PRNGKey(9), params, x, gt.Physics.create(s=0.1), shots=16, taps=True)
     B = 10
     null = simulate_measurement(jax.random.PRNGKey(10), params, np.tile(x, (B, 1)), model.physics, shots=16, taps=True)
-    rate, se = _power_on(jax.random.PRNGKey(11), model, null, meas.n, 0.01)
+    rate, se = _rate(_power_p(jax.random.PRNGKey(11), model, null, meas.n), 0.01)
     assert rate <= 0.2  # P(>= 3 of 10 false alarms at level 0.01) = 1e-4
     with_taps = {p["mechanism"]: p for p in power_of(jax.random.PRNGKey(1), model, meas, replicates=B)}
     without = {p["mechanism"]: p for p in power_of(jax.random.PRNGKey(1), model,

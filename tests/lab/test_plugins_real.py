@@ -178,6 +178,17 @@ def test_plugin_is_ranked_first(tmp_path, name):
     if name == "transmission":
         assert set(entry["per_neuron"]["alive"]) == {"1", "2"}
         assert len(entry["per_neuron_se"]["alive"]["2"]) == 6
+        # reference §8, per-neuron explanations: the values are identified neuron by neuron, so the
+        # dead neuron among them is the finding, and the model that fits to the floor explains the
+        # data (it was refused as "not a draw of N(0, e^2)" by the outlier test of the offsets' prior)
+        assert d.explained and d.ranking[0].status == "passes", d.reasons
+        assert "identified neuron by neuron" in d.reasons[0]
+        assert d.as_json()["explained_by"] == ["transmission"]
+        # which families the rule covers is private (lab/_neurons.py): bias_offset keeps its prior
+        from gift_theory.lab import Model
+        from gift_theory.lab._neurons import per_neuron_families
+        assert per_neuron_families(d.ranking[0].model) == [("transmission", "alive")]
+        assert per_neuron_families(Model(d.baseline.physics, None, {"bias_offset": 0.1})) == []
 
 
 @pytest.mark.slow

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 import gift_theory as gt
 import linear_case as lc
 from proofs_checks import _theorem1 as T
-from proofs_checks import theorem1_check
+from proofs_checks import render_theorem1, theorem1_check
 
 vec = st.lists(st.floats(-10, 10), min_size=3, max_size=3)
 
@@ -96,6 +96,8 @@ def test_theorem1_check_on_linear_network(x64):
     g0 = [float(g.subs(at).subs(s, s0)) for g in grad]
     assert (crit["verified"] is False) == (max(abs(q) for q in g0) > 1e-9)
     assert res["confirmed"]
+    # the summary docs/theory.md prints for this call (its docs test skips the block: this test runs it)
+    assert "fresh-draw confirmation on the model" in render_theorem1(res) and "-> confirmed" in render_theorem1(res)
 
 
 def test_trivial_point_is_critical_and_bad(x64):

@@ -81,7 +81,7 @@ TARGETS = {
         code=[("_gift", "global_minimiser_1d"), ("_gift", "algorithm1_exact"), ("_gift", "theorem2_printed"),
               ("_gift", "theorem2_guarantee")],
         tests=["tests/proofs/test_hypotheses.py::test_theorem2_as_printed_is_refuted_inside_its_hypotheses",
-               f"{T}::test_theorem2_guarantee"]),
+               f"{T}::test_theorem2_algorithm1_exact_reports_a_difference", f"{T}::test_theorem2_guarantee"]),
     "linear_example_bound": dict(
         code=[("_linear", "mc_cross_check"), ("_linear", "c1_closed_form"), ("_linear", "_example_hypotheses"),
               ("_linear", "linear_example_bound")],

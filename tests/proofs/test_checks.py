@@ -329,6 +329,22 @@ def test_theorem2_guarantee(onn, x64):
         assert inst[key]["algorithm1_J_st_difference"] == pytest.approx(want, rel=1e-9)
 
 
+def test_theorem2_algorithm1_exact_reports_a_difference(x64):
+    """algorithm1_exact returns J_st(w_ft) - J_st(w0): on counterexample.py moved to w0 = 1 and raised by 3 the
+    difference is the unmoved one (the closed form of test_theorem2_guarantee), so neither w0 = 0 nor
+    J_st(w0) = 0 can hide a slip in it."""
+    from proofs_checks import family, load_family, theorem1
+    from proofs_checks.families import path
+
+    fam = load_family(path("counterexample"))
+    w = fam.w[0]
+    moved = family(fam.J.subs(w, w - 1) + 3, 1, s=fam.s, w=w)
+    res = theorem1(moved, 2, 1)
+    for eta in (0.1, 0.01):
+        d, info = _gift.algorithm1_exact(moved, res, eta)
+        assert d == pytest.approx((eta * 2.0 * 0.5 / 2) ** 2 / 2, rel=1e-9) and info["iterations"] == 1
+
+
 @pytest.mark.slow
 def test_gift_never_worse(onn, x64):
     key = jax.random.PRNGKey(3)
@@ -357,7 +373,12 @@ def test_algorithm1_stopping_rule(onn, x64):
     assert ex["printed"] == {"iterations": 1, "chosen": (1, 1)} and ex["both"]["chosen"] == (13, 1)
     r = _gift.algorithm1_stopping_rule(jax.random.PRNGKey(19))
     assert r["verdict"] == "fails" and r["correction"] and ALL_VERIFIED(r)
-    assert r["counterexample"]["p_stop_at_1_lower_bound"] > 0.5
+    ce = r["counterexample"]
+    assert ce["p_stop_at_1_lower_bound"] > 0.5
+    # eta is set so that the quadratic model's line minimum alpha = C1/(2 C2) lies 4 ray steps out; its lower end
+    # comes from the C1, C2 enclosures (relative widths ~1e-7 on the finite-mean objective)
+    assert ce["onn_c_star"] == pytest.approx(4.0, rel=1e-12)
+    assert ce["onn_c_star_lower"] <= ce["onn_c_star"] and ce["onn_c_star_lower"] == pytest.approx(4.0, rel=1e-4)
 
 
 @pytest.mark.slow

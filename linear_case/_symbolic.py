@@ -3,6 +3,8 @@ y = V x, E[x^2] = m2, noise on the input only (paper Example ex: linear network)
 
 from __future__ import annotations
 
+import functools
+
 import sympy as sp
 
 
@@ -15,6 +17,11 @@ def example(L: int):
     dict with keys s, s0, st, V, m2, w (symbols), J, v, u, C1, printed_rhs, corrected_rhs,
     example_rhs (sympy expressions in s0, st, V, m2 after substituting w0).
     """
+    return dict(_example(int(L)))            # a fresh dict of the cached (immutable) expressions
+
+
+@functools.lru_cache(maxsize=8)
+def _example(L: int):
     s, s0, st, V, m2 = sp.symbols("s s0 st V m2", positive=True)
     w = sp.symbols(f"w1:{L + 1}", positive=True)
     W = sp.Mul(*w)
@@ -32,6 +39,7 @@ def example(L: int):
     printed = sp.simplify(sp.sqrt(vv) / (uv / 2))
     corrected = sp.simplify(vv / (uv / 2))
     example_rhs = (1 + s0 ** 2 / m2) / (2 * V)
+    crit, v, u = (sp.ImmutableMatrix(m) for m in (crit, v, u))    # cached: nobody may change them in place
     return dict(s=s, s0=s0, st=st, V=V, m2=m2, w=w, J=J, critical_residual=crit, v=v, u=u, C1=C1,
                 printed_rhs=printed, corrected_rhs=corrected, example_rhs=example_rhs)
 

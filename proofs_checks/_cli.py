@@ -59,7 +59,8 @@ def add_arguments(parser):
     parser.add_argument("--s0", type=_positive_number, help="theorem1: the training noise level s0")
     parser.add_argument("--st", type=_positive_number, help="theorem1: the true noise level st")
     parser.add_argument("--confidence", type=_confidence, default=0.95,
-                        help="theorem1, numeric families: simultaneous confidence of the intervals (default 0.95)")
+                        help="theorem1, numeric families: accepted for compatibility; their intervals are rigorous "
+                             "float64 enclosures of a finite mean, so they hold at any confidence (default 0.95)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 

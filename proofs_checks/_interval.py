@@ -22,6 +22,7 @@ Two evaluators of an enclosure ``[lo, hi] -> (L, U)`` with L <= h(zeta) <= U for
 from __future__ import annotations
 
 import heapq
+import math
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -365,6 +366,159 @@ def jaxpr_enclosure(fn: Callable, at: float):
         return IV(l, h)
 
     return enclose
+
+
+def box_enclosure(fn: Callable, *example, boxed=(0,)):
+    """An enclosure of the JAX function ``fn(*args)`` whose arguments at the positions ``boxed``
+    range over boxes: ``enclose(*args)`` takes an :class:`IV` (numpy ``lo``, ``hi`` of the
+    argument's shape) at those positions and a concrete value elsewhere, and returns one
+    :class:`IV` per output of ``fn`` (a tuple when ``fn`` returns a tuple, else one IV). Every
+    value ``fn`` takes on the boxes lies in the returned intervals (float64 interval arithmetic,
+    outward rounding; see the module docstring). Traced once at ``example``, compiled once.
+    Raises ValueError when an operation on a boxed quantity has no interval rule."""
+    import jax
+
+    boxed = tuple(boxed)
+    with jax.enable_x64(True):
+        closed = jax.make_jaxpr(fn)(*example)
+        tupled = isinstance(jax.eval_shape(fn, *example), tuple)
+
+        def run(*flat):
+            args, i = [], 0
+            for k in range(len(example)):
+                if k in boxed:
+                    args.append(IV(flat[i], flat[i + 1]))
+                    i += 2
+                else:
+                    args.append(flat[i])
+                    i += 1
+            outs = eval_jaxpr_intervals(closed.jaxpr, closed.consts, *args)
+            return [(o.lo, o.hi) for o in map(_iv, outs)]
+
+        def flat_of(args):
+            out = []
+            for k, a in enumerate(args):
+                if k in boxed:
+                    a = a if isinstance(a, IV) else IV(np.asarray(a, np.float64))
+                    out += [np.asarray(a.lo, np.float64), np.asarray(a.hi, np.float64)]
+                else:
+                    out.append(a)
+            return out
+
+        jax.eval_shape(run, *flat_of(example))           # rule errors surface here, once
+        compiled = jax.jit(run)
+
+    def enclose(*args):
+        with jax.enable_x64(True):
+            res = compiled(*flat_of(args))
+        outs = []
+        for lo, hi in res:
+            lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+            outs.append(IV(np.where(np.isnan(lo), -np.inf, lo), np.where(np.isnan(hi), np.inf, hi)))
+        return tuple(outs) if tupled else outs[0]
+
+    return enclose
+
+
+# --------------------------------------------------------------------------------------
+# interval arithmetic on numpy arrays (outward: every result is inflated by a bound on the
+# float64 rounding of the midpoint-radius formulas)
+# --------------------------------------------------------------------------------------
+def iv_point(x) -> IV:
+    """The degenerate interval [x, x]."""
+    x = np.asarray(x, np.float64)
+    return IV(x, x.copy())
+
+
+def iv_mid_rad(a: IV):
+    """(midpoint, radius) with [lo, hi] inside [mid - rad, mid + rad]."""
+    lo, hi = np.asarray(a.lo, np.float64), np.asarray(a.hi, np.float64)
+    mid = 0.5 * lo + 0.5 * hi
+    rad = np.nextafter(np.maximum(hi - mid, mid - lo), np.inf)
+    return mid, np.nextafter(rad * (1 + 4 * _U), np.inf)
+
+
+def iv_mag(a: IV):
+    """max |x| over the interval."""
+    return np.maximum(np.abs(np.asarray(a.lo)), np.abs(np.asarray(a.hi)))
+
+
+def iv_mig(a: IV):
+    """min |x| over the interval (0 when it contains 0)."""
+    lo, hi = np.asarray(a.lo), np.asarray(a.hi)
+    return np.where((lo <= 0) & (hi >= 0), 0.0, np.minimum(np.abs(lo), np.abs(hi)))
+
+
+def iv_dot(a: IV, b: IV) -> IV:
+    """An enclosure of sum_i a_i b_i over the intervals (vectors of one length)."""
+    am, ar = iv_mid_rad(a)
+    bm, br = iv_mid_rad(b)
+    n = am.size
+    mid = float(am @ bm)
+    rad = float(np.abs(am) @ br + ar @ np.abs(bm) + ar @ br)
+    err = (n + 2) * _U / (1 - (n + 2) * _U) * (float(np.abs(am) @ np.abs(bm)) + rad) + 1e-300
+    rad = float(np.nextafter(rad * (1 + 4 * (n + 2) * _U) + err, np.inf))
+    return IV(np.nextafter(mid - rad, -np.inf), np.nextafter(mid + rad, np.inf))
+
+
+def iv_sub(a: IV, b: IV) -> IV:
+    return IV(np.nextafter(np.asarray(a.lo) - np.asarray(b.hi), -np.inf),
+              np.nextafter(np.asarray(a.hi) - np.asarray(b.lo), np.inf))
+
+
+class Krawczyk(NamedTuple):
+    """The outcome of :func:`krawczyk`: ``unique_zero`` True when the box ``center +- radius``
+    provably holds exactly one zero of the map, None when that was not shown (a degenerate zero,
+    or no contraction)."""
+
+    unique_zero: bool | None
+    radius: np.ndarray
+    contraction: float
+    how: str
+
+
+def krawczyk(center, value_at_center: IV, jacobian_mid, jacobian_on_box: Callable, *, tries: int = 6) -> Krawczyk:
+    """Krawczyk's test for a zero of a map F: R^P -> R^P near ``center``.
+
+    ``value_at_center`` encloses F(center) (rounding included), ``jacobian_mid`` is the float
+    Jacobian at the center and ``jacobian_on_box(lo, hi)`` an :class:`IV` enclosure of the
+    Jacobian over the box [lo, hi]. With C = jacobian_mid^-1 and X = center + [-r, r],
+    K(X) = center - C F(center) + (I - C F'(X)) (X - center); if K(X) lies strictly inside X,
+    F has exactly one zero in X (Krawczyk 1969; Moore, Kearfott, Cloud, *Introduction to
+    Interval Analysis*, 2009, Thm 8.2). The magnitudes are bounded from above in float64 with a
+    relative allowance for the rounding of the P-term products. r starts at twice |C F(center)|
+    (plus a few ulp of the center) and is inflated up to ``tries`` times."""
+    center = np.asarray(center, np.float64)
+    P = center.size
+    fm, fr = iv_mid_rad(value_at_center)
+    A = np.asarray(jacobian_mid, np.float64)
+    try:
+        cond = float(np.linalg.cond(A))
+        C = np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        cond, C = math.inf, None
+    if C is None or not np.all(np.isfinite(C)) or cond > 1e13:
+        return Krawczyk(None, np.zeros(P), math.inf, f"Jacobian at the center singular or nearly so "
+                        f"(condition number {cond:.3g}): a degenerate zero, not certified")
+    slack = 1 + 8 * (P + 2) * _U
+    absC = np.abs(C)
+    cf = (np.abs(C @ fm) + absC @ fr) * slack                       # >= |C F(center)|
+    r = 2 * cf + 4 * np.spacing(np.abs(center) + 1e-300) + 1e-300
+    best = math.inf
+    for _ in range(tries):
+        Jb = jacobian_on_box(center - r, center + r)
+        Jm, Jr = iv_mid_rad(Jb)
+        M = np.abs(np.eye(P) - C @ Jm) * slack + absC @ Jr * slack + 4 * P * _U * (absC @ np.abs(Jm))
+        k = (cf + M @ r) * slack
+        ratio = float(np.max(k / r))
+        best = min(best, ratio)
+        if ratio < 1 and np.all(np.isfinite(k)):
+            return Krawczyk(True, r, ratio, f"Krawczyk: K(X) inside X = center +- r (max r = {float(np.max(r)):.3g}, "
+                            f"contraction {ratio:.3g} < 1; condition number of the Jacobian {cond:.3g}): exactly one "
+                            f"zero in X")
+        r = 2 * np.maximum(r, k)
+    return Krawczyk(None, r, best, f"Krawczyk: no contraction (best ratio {best:.3g} after {tries} inflations; "
+                    f"condition number {cond:.3g}): not certified")
 
 
 # --------------------------------------------------------------------------------------

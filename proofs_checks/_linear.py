@@ -10,7 +10,7 @@ import sympy as sp
 import gift_theory as gt
 import linear_case as lc
 
-from ._record import fmt, hypothesis, level, record, symbolic_verdict
+from ._record import decide, fmt, hypothesis, level, record, symbolic_verdict
 
 
 def mc_cross_check(key, L: int = 2, s0: float = 0.3, K1: int = 4096, K2: int = 4):
@@ -47,26 +47,30 @@ def c1_closed_form(e):
     return diff, [r for r in roots if r.is_positive is not False], sp.simplify(gB2)
 
 
-def _example_hypotheses(L_list, theorem1: bool = True):
+def _example_hypotheses(L_list, instance: dict | None = None):
     """The example's setting and Theorem 1's hypotheses on the symbolic chains, computed: J_s has the
-    form m2 (V - W)^2 + s^2 W^2 of input noise on an uncorrelated input, s0 > 0, and the balanced
-    point is critical (sympy)."""
-    setting, crit, s0_pos = [], [], []
+    form m2 (V - W)^2 + s^2 W^2 of input noise on an uncorrelated input, and the balanced point is
+    critical (sympy); with ``instance`` (the numbers of the refuting instance, e.g. {"s0": 1/2,
+    "st": 1.6}) also Theorem 1's s0, st > 0, computed on those numbers (the symbols are only declared
+    positive, which decides nothing)."""
+    setting, crit = [], []
     for L in L_list:
         e = lc.symbolic_example(L)
         W = sp.Mul(*e["w"])
         setting.append(sp.simplify(e["J"] - (e["m2"] * (e["V"] - W) ** 2 + e["s"] ** 2 * W ** 2)) == 0
                        and bool(e["m2"].is_positive))
         crit.append(all(sp.simplify(r) == 0 for r in e["critical_residual"]))
-        s0_pos.append(bool(e["s0"].is_positive))
-    return [hypothesis("example", "deep linear network, AWGN on the input only, uncorrelated inputs of equal second "
-                       "moment, y = V x", all(setting), f"scalar chains of depth {list(L_list)}: J_s = m2 (V - W)^2 + "
-                       f"s^2 W^2 with W = w1...wL, E[x^2] = m2 > 0, symbolic V (sympy)"),
-            *([hypothesis("s_positive", "s0, st in (0, inf) (Theorem 1)", all(s0_pos), "s0, st positive symbols")]
-              if theorem1 else []),
-            hypothesis("w0_critical", "w0 a critical point of J_s0 (Theorem 1)", all(crit),
-                       f"the balanced factorisation of m2 V/(m2 + s0^2): grad J_s0(w0) = 0 (sympy) at depths "
-                       f"{list(L_list)}: {crit}")]
+    out = [hypothesis("example", "deep linear network, AWGN on the input only, uncorrelated inputs of equal second "
+                      "moment, y = V x", all(setting), f"scalar chains of depth {list(L_list)}: J_s = m2 (V - W)^2 + "
+                      f"s^2 W^2 with W = w1...wL, E[x^2] = m2 > 0, symbolic V (sympy)")]
+    if instance is not None:
+        out.append(hypothesis("s_positive", "s0, st in (0, inf) (Theorem 1)",
+                              all(sp.sympify(v) > 0 for v in instance.values()),
+                              "on the refuting instance: " + ", ".join(f"{k} = {v}" for k, v in instance.items())))
+    out.append(hypothesis("w0_critical", "w0 a critical point of J_s0 (Theorem 1)", all(crit),
+                          f"the balanced factorisation of m2 V/(m2 + s0^2): grad J_s0(w0) = 0 (sympy) at depths "
+                          f"{list(L_list)}: {crit}"))
+    return out
 
 
 def linear_example_bound(key=None, precise: bool = False) -> dict:
@@ -90,10 +94,13 @@ def linear_example_bound(key=None, precise: bool = False) -> dict:
     mc_ok = zmax < zc
     e2 = rows[1]["e"]
     sub = {e2["s0"]: sp.Rational(1, 2), e2["V"]: sp.Rational(1, 2), e2["m2"]: 1}
-    pr, ex = float(e2["printed_rhs"].subs(sub)), float(e2["example_rhs"].subs(sub))
+    pr_e, ex_e = e2["printed_rhs"].subs(sub), e2["example_rhs"].subs(sub)
+    pr, ex = float(pr_e), float(ex_e)
+    # an st between the two bounds: the printed condition and the example's equation disagree there
+    st_between = sub[e2["s0"]] + (pr_e + ex_e) / 2
     counter = None if verdict == "holds" else {
-        "L": 2, "widths": "d-1 (hidden width 1), balanced factorisation", "s0": 0.5, "||V||": 0.5, "E[x_i^2]": 1.0,
-        "printed_theorem_rhs": pr, "example_rhs": ex, "st_between": 0.5 + (pr + ex) / 2,
+        "L": 2, "widths": "d-1 (hidden width 1), balanced factorisation", "s0": float(sub[e2["s0"]]), "||V||": 0.5,
+        "E[x_i^2]": 1.0, "printed_theorem_rhs": pr, "example_rhs": ex, "st_between": float(st_between),
         "symbolic_difference_L2": str(rows[1]["diff"])}
     correction = None
     if corrected_sym and c1_ok and mc_ok:
@@ -118,7 +125,8 @@ def linear_example_bound(key=None, precise: bool = False) -> dict:
         f"depths 1-3: {c1_ok}; "
         f"corrected rhs = 2 s0 for L=1..3: {corrected_sym}; Monte-Carlo pathwise d/ds grad J vs closed form (L=2): "
         f"max |z| = {zmax:.1f} over {P} coordinates (Bonferroni z_crit {zc:.1f}); {lev.text()}",
-        correction=correction, counterexample=counter, hypotheses=_example_hypotheses([1, 2, 3]))
+        correction=correction, counterexample=counter,
+        hypotheses=_example_hypotheses([1, 2, 3], instance={"s0": sub[e2["s0"]], "st": sp.nsimplify(st_between)}))
 
 
 def linear_example_text_claim(key=None, precise: bool = False) -> dict:
@@ -133,14 +141,15 @@ def linear_example_text_claim(key=None, precise: bool = False) -> dict:
     gap_above = sp.expand(rhs - (1 - s0))                                      # st < 1: st - s0 < 1 - s0 <= rhs
     above_ok = gap_above == s0 ** 2 + s0 and bool((s0 ** 2 + s0).is_nonnegative)
     rows = []
+    s0_text = sp.Integer(0)                    # the text's "no noise in training"
     for L in (1, 2, 3):
         e = lc.symbolic_example(L)
         sub = {e["V"]: sp.Rational(1, 2), e["m2"]: 1}
-        v0 = [sp.simplify(x.subs(sub).subs(e["s0"], 0)) for x in e["v"]]
-        c10 = sp.simplify(e["C1"].subs(sub).subs(e["s0"], 0))
+        v0 = [sp.simplify(x.subs(sub).subs(e["s0"], s0_text)) for x in e["v"]]
+        c10 = sp.simplify(e["C1"].subs(sub).subs(e["s0"], s0_text))
         rows.append((L, v0, c10))
     v_zero = all(all(x == 0 for x in v0) and c10 == 0 for _, v0, c10 in rows)
-    verdict = symbolic_verdict(not v_zero)
+    verdict = decide(fails=v_zero)              # no refutation at s0 = 0 would decide nothing
     # the text's numbers, read back from each instance's J_0(W) = m2 (V - W)^2 (coefficients of W^2 and W)
     Wsym = sp.Symbol("W_")
     got = []
@@ -154,13 +163,14 @@ def linear_example_text_claim(key=None, precise: bool = False) -> dict:
         m2_, lin = sp.Poly(J0, Wsym).coeff_monomial(Wsym ** 2), sp.Poly(J0, Wsym).coeff_monomial(Wsym)
         got.append((sp.Abs(-lin / (2 * m2_)), m2_))
     numbers_ok = all(vn == sp.Rational(1, 2) and m2_ == 1 for vn, m2_ in got)
-    hyps = _example_hypotheses([1, 2, 3], theorem1=False) + [
+    hyps = _example_hypotheses([1, 2, 3]) + [
         hypothesis("numbers", "||V||_2 = 1/2 and E[x_i^2] = 1", numbers_ok,
                    f"read back from the instances' J_0 = m2 (V - W)^2 (sympy coefficients), depths 1-3: (||V||, "
                    f"E x^2) = {[(str(a), str(b)) for a, b in got]}"),
-        hypothesis("theorem1_s0_positive", "Theorem 1 requires s0 in (0, inf)", bool(sp.Integer(0) > 0),
-                   "the text extends the guarantee to s0 = 0 ('no noise in training'), beyond the theorem; the "
-                   "refutation is of the text's own claim at s0 = 0", needed_for_refutation=False)]
+        hypothesis("theorem1_s0_positive", "Theorem 1 requires s0 in (0, inf)", bool(s0_text > 0),
+                   f"the refuting instance has s0 = {s0_text} (the text extends the guarantee to 'no noise in "
+                   f"training', beyond the theorem); the refutation is of the text's own claim there",
+                   needed_for_refutation=False)]
     return record(
         "linear_example_text_claim",
         "ex: linear network, the text after eq. condition finetuning works linear net: with ||V||_2 = 1/2 and "
@@ -227,18 +237,21 @@ def linear_example_v_scaling(key=None, precise: bool = False) -> dict:
     printed_form = [sp.simplify(r["printed_rhs"] - (r["m2"] + r["s0"] ** 2) / (2 * r["m2"] * r["Vnorm"])) == 0
                     for r in rows]
     # a concrete pair: d = 1 with V = 1/2, and d = max with every V_i = 1/2 (||V|| grows with d)
-    num = lambda r, expr: expr.subs({Vi: sp.Rational(1, 2) for Vi in r["V"]}).subs({r["m2"]: 1, r["s0"]: sp.Rational(1, 2)})
+    inst = {"V_i": sp.Rational(1, 2), "m2": sp.Integer(1), "s0": sp.Rational(1, 2)}
+    num = lambda r, expr: expr.subs({Vi: inst["V_i"] for Vi in r["V"]}).subs({r["m2"]: inst["m2"], r["s0"]: inst["s0"]})
+    inst_s0 = [inst["s0"]]
     pr = [num(r, r["printed_rhs"]) for r in rows]
     cr = [num(r, r["corrected_rhs"]) for r in rows]
     tightens_printed = all(sp.simplify(a - b) > 0 for a, b in zip(pr, pr[1:]))
-    verdict = symbolic_verdict(not corr_free)
+    verdict = decide(fails=corr_free)           # a V-dependent corrected bound would not show the tightening
     setting_ok = all(r["setting"] == 0 for r in rows)
     crit_ok = all(all(c == 0 for c in r["critical"]) for r in rows)
     hyps = [hypothesis("example", "depth-1 linear network, AWGN on the input only, uncorrelated inputs of equal "
                        "second moment, y = V x", setting_ok, f"J_s from E||V x - W(x + xi)||^2 with exact moments "
                        f"equals m2 ||V - W||^2 + s^2 ||W||^2 for d = {list(dims)} (sympy)"),
-            hypothesis("s_positive", "s0, st in (0, inf) (Theorem 1)", bool(rows[0]["s0"].is_positive),
-                       "s0 a positive symbol"),
+            hypothesis("s_positive", "s0 in (0, inf) (Theorem 1; st does not enter either bound)",
+                       all(v > 0 for v in inst_s0),
+                       f"on the refuting instance: s0 = {inst_s0[0]} (the symbols are only declared positive)"),
             hypothesis("w0_critical", "w0 a critical point of J_s0 (Theorem 1)", crit_ok,
                        f"w0 = m2 V/(m2 + s0^2) solves grad J_s0 = 0 exactly for d = {list(dims)}")]
     return record(

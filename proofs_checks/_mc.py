@@ -178,3 +178,132 @@ def trivial_critical_point(arch: gt.Architecture, y, dtype=jnp.float64):
         b = jnp.asarray(np.mean(y, axis=0), dtype) if l == arch.depth else jnp.zeros((arch.widths[l],), dtype)
         layers.append(gt.Layer(W, b))
     return tuple(layers)
+
+
+def symmetric_draws(key, arch: gt.Architecture, physics, K1: int, K2: int, dtype=jnp.float64) -> dict:
+    """Standard draws with leaves (K1, K2, d) in sign-symmetric groups of four: K2 / 4 base draws,
+    each repeated with the sites of the last hidden layer (w{L-1} and a{L-1}) negated together and
+    with the output site wL negated (the other sites unchanged). The finite-mean objective over
+    these draws keeps the symmetry the Gaussian law gives the trivial point (W = 0, hidden b = 0,
+    b_L = mean y): there its gradient vanishes exactly (:func:`trivial_point_certificate`)."""
+    if K2 % 4:
+        raise ValueError("K2 must be a multiple of 4 (sign-symmetric groups of four)")
+    base = gt.sample_noise(key, arch, physics, (K1, K2 // 4), dtype)
+    L = arch.depth
+    group_a, group_b = {f"w{L - 1}", f"a{L - 1}"}, {f"w{L}"}
+    signs = ((1, 1), (-1, 1), (1, -1), (-1, -1))
+    out = {}
+    for name, d in base.items():
+        parts = [d * (sa if name in group_a else 1) * (sb if name in group_b else 1) for sa, sb in signs]
+        out[name] = jnp.stack(parts, axis=2).reshape(K1, K2, *d.shape[2:])
+    return out
+
+
+def trivial_point_certificate(arch: gt.Architecture, draws: dict, y, unravel):
+    """A ``certify(w_flat, s)`` hook for :func:`proofs_checks.family` (the Theorem-1 checker calls it
+    where Krawczyk's test cannot succeed): proves that the finite-mean objective
+    J_s(w) = mean_{k, m} ||y_k - M_s(x_k, w, N_{k,m})||^2 over the sign-symmetric ``draws``
+    (:func:`symmetric_draws`) has an exact critical point within rounding of the trivial point
+    w = (W_l = 0, b_l = 0 for l < L, b_L = mean y), for every s. Computed, not assumed:
+
+    * the point's W_l and hidden b_l are exactly 0.0 and the draws come in exact sign groups
+      (array equality, bit for bit);
+    * sympy: at such a point the per-draw gradient of the loss (tanh activation) summed over one
+      sign group is exactly (0, ..., 0, -8 (y - b_L)) -- W_L's gradient -2 R a_{L-1}^T is odd in
+      the last hidden layer's sites (tanh is odd), R = y - b_L - s n_wL is odd in n_wL, and every
+      earlier gradient carries the factor W_L = 0;
+    * so grad J_s vanishes at b_L* = mean y exactly (a rational number, by exact summation), and
+      the float64 b_L differs from it by the computed amount, which the returned radius covers.
+
+    Returns None for any other point (the hook certifies this one point only)."""
+    import fractions
+
+    y = np.asarray(y, np.float64)
+    L = arch.depth
+    ok_draws = bool(arch.activation == "tanh")
+    for name, d in draws.items():
+        d = np.asarray(d)
+        g = d.reshape(d.shape[0], -1, 4, *d.shape[2:])
+        flip_a, flip_b = name in (f"w{L - 1}", f"a{L - 1}"), name == f"w{L}"
+        want = [g[:, :, 0] * (sa if flip_a else 1) * (sb if flip_b else 1)
+                for sa, sb in ((1, 1), (-1, 1), (1, -1), (-1, -1))]
+        ok_draws &= all(np.array_equal(g[:, :, i], want[i]) for i in range(4))
+    identity = _trivial_group_identity()
+    exact_mean = [sum((fractions.Fraction(float(v)) for v in y[:, j]), fractions.Fraction(0)) / y.shape[0]
+                  for j in range(y.shape[1])]
+
+    def certify(w_flat, s):
+        layers = unravel(np.asarray(w_flat, np.float64))
+        zero = all(np.all(np.asarray(l.W) == 0.0) for l in layers) and all(
+            np.all(np.asarray(l.b) == 0.0) for l in layers[:-1])
+        if not zero:
+            return None
+        bL = np.asarray(layers[-1].b, np.float64)
+        off = [abs(fractions.Fraction(float(b)) - m) for b, m in zip(bL, exact_mean)]
+        radius = np.zeros(np.asarray(w_flat).size)
+        radius[-bL.size:] = [float(np.nextafter(float(o), np.inf)) if o else 0.0 for o in off]
+        verified = bool(ok_draws and identity[0])
+        return dict(verified=True if verified else None, radius=radius,
+                    how=(f"exact by symmetry: W and hidden b exactly 0, draws in exact sign groups of four: {ok_draws}, "
+                         f"activation tanh: {arch.activation == 'tanh'}; sympy: {identity[1]}; so grad J_s = 0 at "
+                         f"b_L* = mean y (exact rational mean), within {fmt_float(float(np.max(radius)))} of the float64 "
+                         f"b_L: an exact critical point in that box"))
+
+    return certify
+
+
+def fmt_float(x: float) -> str:
+    return f"{x:.3g}"
+
+
+def _trivial_group_identity():
+    """sympy: the per-draw loss gradient of a 1-2-2 tanh network with biases and noise at every site,
+    at W = 0, b1 = 0, summed over the four sign patterns of ((w1, a1), w2), is (0, ..., 0, -8 (y - b2))."""
+    import sympy as sp
+
+    from ._symbolic import _network
+
+    net = _network((1, 2, 2), sp.tanh)
+    W, b = net["W"], net["b"]
+    params = [e for l in (1, 2) for e in list(W[l]) + list(b[l])]
+    grads = [sp.diff(net["loss"], p) for p in params]
+    at = {e: 0 for l in (1, 2) for e in list(W[l])}
+    at.update({e: 0 for e in list(b[1])})
+    nw1 = sp.symbols("nw1_1:3")
+    na1 = sp.symbols("na1_1:3")
+    nw2 = sp.symbols("nw2_1:3")
+    total = [0] * len(params)
+    for sa, sb in ((1, 1), (-1, 1), (1, -1), (-1, -1)):
+        flip = {x: sa * x for x in nw1 + na1}
+        flip.update({x: sb * x for x in nw2})
+        for i, g in enumerate(grads):
+            total[i] += g.subs(at).subs(flip, simultaneous=True)
+    total = [sp.simplify(t) for t in total]
+    y = net["y"]
+    want = [0] * (len(params) - 2) + [-8 * (y[0] - b[2][0]), -8 * (y[1] - b[2][1])]
+    ok = all(sp.simplify(t - w_) == 0 for t, w_ in zip(total, want))
+    return ok, f"group sum of the per-draw gradient at W = 0, b1 = 0 is (0, ..., 0, -8 (y - b2)): {ok}"
+
+
+def solve_critical(J_mean, w, s, *, maxiter: int = 200):
+    """A critical point of the deterministic objective ``J_mean(w, s)`` near ``w`` to float64 precision:
+    trust-region Newton (scipy ``trust-exact``, exact Hessian) from ``w``, then Newton polishing steps
+    while the gradient shrinks. Returns the flat point (numpy)."""
+    from scipy.optimize import minimize
+
+    s = jnp.float64(s)
+    f = jax.jit(J_mean)
+    g = jax.jit(jax.grad(J_mean))
+    H = jax.jit(jax.hessian(J_mean))
+    res = minimize(lambda x: float(f(x, s)), np.asarray(w, np.float64), jac=lambda x: np.asarray(g(x, s)),
+                   hess=lambda x: np.asarray(H(x, s)), method="trust-exact", options=dict(gtol=1e-14, maxiter=maxiter))
+    x = np.asarray(res.x, np.float64)
+    best = float(np.max(np.abs(np.asarray(g(x, s)))))
+    for _ in range(4):
+        step = np.linalg.solve(np.asarray(H(x, s)), np.asarray(g(x, s)))
+        x_new = x - step
+        gn = float(np.max(np.abs(np.asarray(g(x_new, s)))))
+        if not gn < best:
+            break
+        x, best = x_new, gn
+    return x

@@ -122,13 +122,15 @@ def run_replicates(key, arch, s, box, n_steps_list, *, R, eps0, k0, power, init_
     return out
 
 
-def sgd_limit_points(key=None, precise: bool = False) -> dict:
+def sgd_limit_points(key=None, precise: bool = False, *, runs: int | None = None, steps=None) -> dict:
     """Proposition 2 inside its hypotheses (a box that does not bind), and the finding on a
-    box that binds, where (B2) fails."""
+    box that binds, where (B2) fails. ``runs``, ``steps`` (the three checkpoints) override the
+    sizes (tests use smaller ones)."""
     key = jax.random.PRNGKey(7) if key is None else key
     lev = level(3)
-    eps0, k0, power, s, R = 0.05, 100.0, 1.0, 0.5, 32
-    N = [2500, 10000, 40000] if not precise else [5000, 20000, 80000]
+    eps0, k0, power, s = 0.05, 100.0, 1.0, 0.5
+    R = runs or 32
+    N = list(steps) if steps else ([2500, 10000, 40000] if not precise else [5000, 20000, 80000])
     arch = gt.Architecture((2, 1), activation="identity", noise_sites="all")
     inner_box, tight_box = gt.Box(-1.0, 1.0, -1.0, 1.0), gt.Box(-0.5, 0.5, -0.5, 0.5)
     with jax.enable_x64(True):

@@ -51,7 +51,7 @@ def lemma_gaussian_product_derivative(max_L: int = 3) -> dict:
     point = {s: 2, d[0]: 1, r2[0]: 0}
     rel = float(diff1.subs(point))
     counter = None if verdict == "holds" else {
-        "L": 1, "d": 1, "n": [0.0], "s": 2.0,
+        "L": 1, "d": int(point[d[0]]), "n": [float(point[r2[0]])], "s": float(point[s]),
         "relative_difference_(lhs-rhs)/prod": rel,
         "symbolic_(lhs-rhs)/prod_L1": str(diff1)}
     return record(
@@ -67,15 +67,18 @@ def lemma_gaussian_product_derivative(max_L: int = 3) -> dict:
         correction=("d/ds prod_i phi_s(n_i) = s^-1 sum_i (s^-2 |n_i|^2 - d_i) prod_j phi_s(n_j) "
                     "(verified symbolically for L=1..%d)" % max_L) if corrected_ok else None,
         counterexample=counter,
-        hypotheses=[_gaussian_density_hypothesis(s, d[0])])
+        hypotheses=[_gaussian_density_hypothesis(s, point[s], point[d[0]])])
 
 
-def _gaussian_density_hypothesis(s, d):
+def _gaussian_density_hypothesis(s, s_value, d_value):
     """The product's factors are N(0, s^2 I_d) densities: for d = 1, 2 (sympy), the factor of
-    :func:`gaussian_product` integrates to 1 and has second moment d s^2 over R^d; s > 0 and d >= 1 are
-    properties of the symbols."""
+    :func:`gaussian_product` integrates to 1 and has second moment d s^2 over R^d (for every s > 0);
+    s > 0 and d a positive integer computed on the refuting point's numbers (the symbols are only
+    declared so, which decides nothing)."""
     xs = sp.symbols("x1:3", real=True)
-    ok, rows = bool(s.is_positive) and bool(d.is_positive) and bool(d.is_integer), []
+    s_value, d_value = sp.sympify(s_value), sp.sympify(d_value)
+    point_ok = bool(s_value > 0) and bool(d_value >= 1) and bool(d_value.is_integer)
+    ok, rows = point_ok, []
     for dim in (1, 2):
         r2 = sum(x ** 2 for x in xs[:dim])
         dens = gaussian_product([dim], s, [r2])
@@ -84,8 +87,8 @@ def _gaussian_density_hypothesis(s, d):
         ok = ok and mass == 1 and sp.simplify(m2 - dim * s ** 2) == 0
         rows.append(f"d = {dim}: mass {mass}, E|n|^2 = {m2}")
     return hypothesis("gaussian", "phi_s^(d) the N(0, s^2 I_d) density, s > 0, d_i >= 1", ok,
-                      f"symbols s > 0: {s.is_positive}, d_i positive integers: {bool(d.is_positive and d.is_integer)}; "
-                      f"the factor integrates (sympy) to " + "; ".join(rows))
+                      f"the refuting point s = {s_value}, d = {d_value}: s > 0 and d a positive integer: {point_ok}; "
+                      f"the factor (symbol s > 0) integrates (sympy) to " + "; ".join(rows))
 
 
 # --------------------------------------------------------------------------------------
@@ -218,21 +221,25 @@ def score_identity_difference(widths=(1, 1, 1), activation="quadratic"):
 
 
 _z = sp.Symbol("z", real=True)
+#: the noise level of score_function_identity's concrete counterexample
+S_COUNTER = sp.Rational(1, 2)
 
 
-def _noise_hypothesis():
-    """The moment rule of :func:`_gauss_expect` is the N(0, s^2) law (sympy.stats, moments 1-6) and s > 0."""
+def _noise_hypothesis(s_value):
+    """The moment rule of :func:`_gauss_expect` is the N(0, s^2) law (sympy.stats, moments 1-6), and s > 0
+    on the refuting instance's number ``s_value``."""
     from sympy.stats import E, Normal
 
     s = sp.symbols("s", positive=True)
     n = sp.Symbol("n")
     X = Normal("X", 0, s)
     rows = [(k, _gauss_expect(n ** k, [n], s), sp.simplify(E(X ** k))) for k in range(1, 7)]
-    ok = bool(s.is_positive) and all(sp.simplify(a - b) == 0 for _, a, b in rows)
+    s_value = sp.sympify(s_value)
+    ok = bool(s_value > 0) and all(sp.simplify(a - b) == 0 for _, a, b in rows)
     return hypothesis("noise", "independent N(0, s^2) noise at the sites of S, s > 0", ok,
                       "the moment rule used for every noise symbol against sympy.stats N(0, s^2): "
-                      + ", ".join(f"E n^{k} = {a}" for k, a, _ in rows) + f"; s > 0: {s.is_positive}; independence: "
-                      "the rule factorises over distinct symbols")
+                      + ", ".join(f"E n^{k} = {a}" for k, a, _ in rows) + f"; s = {s_value} > 0 on the refuting "
+                      f"instance: {bool(s_value > 0)}; independence: the rule factorises over distinct symbols")
 
 
 def score_function_identity(nets=((1, 1, 1), "quadratic"), activation: str | None = None) -> dict:
@@ -258,14 +265,14 @@ def score_function_identity(nets=((1, 1, 1), "quadratic"), activation: str | Non
                     f"rhs / true d/ds grad J = {', '.join(sorted({str(r) for r in ratios}))} for every parameter; "
                     f"corrected rhs {'exact' if all(d == 0 for d in fixed) else 'NOT exact'}")
         if not zero and counter is None:
-            # a concrete counterexample: all weights 1/2, biases 0, x = 1, y = 0, s = 1/2
+            # a concrete counterexample: all weights 1/2, biases 0, x = 1, y = 0, s = S_COUNTER
             subs = {p: sp.Rational(1, 2) if str(p).startswith("W") else 0 for p in res["params"]}
             subs.update({x: 1 for x in sp.symbols(f"x1:{widths[0] + 1}")})
             subs.update({y: 0 for y in sp.symbols(f"y1:{widths[-1] + 1}")})
-            subs[s] = sp.Rational(1, 2)
+            subs[s] = S_COUNTER
             k = next(i for i, d in enumerate(diffs) if d != 0)
             counter = {"network": "-".join(map(str, widths)) + " with " + names[act], "weights": 0.5, "biases": 0.0,
-                       "x": 1.0, "y": 0.0, "s": 0.5, "parameter": str(res["params"][k]),
+                       "x": 1.0, "y": 0.0, "s": float(S_COUNTER), "parameter": str(res["params"][k]),
                        "d/ds grad J": float(res["true"][k].subs(subs)),
                        "printed rhs": float(res["printed"][k].subs(subs))}
     verdict = symbolic_verdict(all_diff_zero)
@@ -282,4 +289,4 @@ def score_function_identity(nets=((1, 1, 1), "quadratic"), activation: str | Non
                     "(verified symbolically here)") if corrected_ok else None,
         counterexample=counter if verdict == "fails" else None,
         hypotheses=[activation_pb(_z + _z ** 2 / 2 if act == "quadratic" else _z, name=f"A1 ({names[act]})")
-                    for act in sorted({a for _, a in nets})] + [_noise_hypothesis()])
+                    for act in sorted({a for _, a in nets})] + [_noise_hypothesis(S_COUNTER)])

@@ -11,7 +11,7 @@ import gift_theory as gt
 import linear_case as lc
 
 from . import _mc, _onn
-from ._record import fmt, hypothesis, level, record, sign_verdict, symbolic_verdict
+from ._record import decide, fmt, hypothesis, level, record, sign_verdict
 from ._theorem1 import descent_confirmation
 
 
@@ -63,7 +63,7 @@ def gift_taylor_rule(key=None, precise: bool = False) -> dict:
         dt = _mc.paired_difference_on_mu(jax.random.fold_in(key, 1), toward, st_.w0, p.x, p.y, phys, p.arch, K2=128)
     vt, zt = sign_verdict(float(dt.mean), float(dt.se), "positive", confidence=lev.confidence)
     va, da_mean, da_se, za = descent_confirmation(jax.random.fold_in(key, 2), st_, lev)
-    verdict = symbolic_verdict(not never)
+    verdict = decide(fails=never)               # one family can refute the rule, not prove it
     corrected_ok = side_ok and vt == "holds" and va == "holds"
     st_sym = next(iter(w_st.free_symbols))
     # for every st != s0 = 1 the refutation holds (phi = 0 identically), and w_st -> w0 as st -> s0

@@ -7,7 +7,7 @@ $(python -c "import proofs_checks.families as f; print(f.path('quartic'))") --s0
 
 import os
 
-NAMES = ("quartic", "counterexample", "linear_chain", "onn_tanh")
+NAMES = ("quartic", "counterexample", "linear_chain", "onn_tanh", "per_sample")
 
 
 def path(name: str) -> str:

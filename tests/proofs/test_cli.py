@@ -79,3 +79,4 @@ def test_theorem1_bad_family_files_exit_2_one_line(tmp_path, capsys):
         out = capsys.readouterr()
         assert out.out == "" and out.err.count("\n") == 1 and "Traceback" not in out.err, (name, out.err)
         assert name in out.err, out.err
+

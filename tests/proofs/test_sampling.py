@@ -1,14 +1,11 @@
 """Sampling lemmas: the hierarchical variance formula, the fourth-moment stabiliser on
-square-integrable and on heavy-tailed samples, and the D^[0] constant."""
+square-integrable and on heavy-tailed samples (the D^[0] constant: test_checks.test_d0_limit)."""
 
 import math
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
-import gift_theory as gt
-from proofs_checks import _mc
 from proofs_checks import _sampling as S
 
 
@@ -33,16 +30,3 @@ def test_fourth_moment_stabiliser_known_cases():
     qb = q.reshape(8, -1)
     v, *_ = S.stabilises(qb.mean(1), qb.std(1, ddof=1) / math.sqrt(qb.shape[1]))
     assert v != "holds"
-
-
-def test_d0_printed_constant(x64):
-    arch = gt.Architecture((2, 2, 1))
-    prob = _mc.teacher_problem(jax.random.PRNGKey(2), arch, n=512, s=0.3)
-    w = gt.init_params(jax.random.PRNGKey(3), arch, dtype=jnp.float64, gain=1.5)
-    res = S.d0_comparison(jax.random.PRNGKey(4), w, prob.x, prob.y, prob.physics, arch, K2=8)
-    r, se = res["ratio"]
-    assert abs(r + 0.15) < 4.5 * se          # E D^[0] = -(s/2) d/ds grad J
-    d, dse = res["corrected"]
-    assert abs(d) < 4.5 * dse
-    cm, cse, norm = res["coordinates"]                  # the correction along every coordinate direction
-    assert cm.shape == (arch.n_params,) and np.all(np.abs(cm) < 5.0 * cse) and norm > 0

@@ -80,7 +80,9 @@ class ChipModel:
         responses = []
         for l, ((W, b), (pW, pb)) in enumerate(zip(model.weights(meas), meas.params), start=1):
             W, b, pW, pb = (np.asarray(a, np.float64) for a in (W, b, pW, pb))
-            if np.array_equal(W, pW) and np.array_equal(b, pb):
+            # compared at the precision the model runs in: a layer merely cast to float32 is not an offset
+            if np.array_equal(W.astype(np.float32), pW.astype(np.float32)) and \
+                    np.array_equal(b.astype(np.float32), pb.astype(np.float32)):
                 continue
             responses.append(LayerResponse(l, W, b, pW, pb, np.ones(W.shape[0]), np.ones(b.shape[0]),
                                            np.zeros_like(W), np.zeros_like(b), np.zeros(W.shape, bool),

@@ -61,13 +61,14 @@ def _runs(key, R, N, eps0, k0, power):
     return out
 
 
-def proposition2_unique_point(key=None, precise: bool = False) -> dict:
-    """Proposition 2: 'converges to a unique point in {grad J|_H = 0}', on a critical continuum."""
+def proposition2_unique_point(key=None, precise: bool = False, *, runs: int | None = None, steps=None) -> dict:
+    """Proposition 2: 'converges to a unique point in {grad J|_H = 0}', on a critical continuum. ``runs``,
+    ``steps`` (the four checkpoints) override the sizes (tests use smaller ones)."""
     key = jax.random.PRNGKey(29) if key is None else key
     lev = level(3)
     eps0, k0, power = 0.05, 100.0, 1.0
-    R = 32 if precise else 16
-    N = [500, 2000, 8000, 32000] if not precise else [1000, 4000, 16000, 64000]
+    R = runs or (32 if precise else 16)
+    N = list(steps) if steps else ([500, 2000, 8000, 32000] if not precise else [1000, 4000, 16000, 64000])
     with jax.enable_x64(True):
         its = _runs(key, R, N, eps0, k0, power)
         flat = [np.asarray(jax.vmap(lambda p: gt.flatten(p)[0])(w)) for w in its]

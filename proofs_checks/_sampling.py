@@ -250,9 +250,10 @@ def stabilises(block_means, block_ses, confidence: float = 1 - 1e-5, rel: float 
     return decide(fails=p < 1 - confidence, holds=pooled_se < rel * pooled), p, pooled, pooled_se
 
 
-def square_integrability(key=None, precise: bool = False) -> dict:
+def square_integrability(key=None, precise: bool = False, *, samples: int | None = None) -> dict:
+    """lem:Square-Integrability on a tanh ONN. ``samples`` overrides the number of samples (tests use fewer)."""
     key = jax.random.PRNGKey(6) if key is None else key
-    n = 2 ** 17 if precise else 2 ** 15
+    n = samples or (2 ** 17 if precise else 2 ** 15)
     with jax.enable_x64(True):
         arch = gt.Architecture((3, 4, 2))
         prob = _mc.teacher_problem(jax.random.PRNGKey(31), arch, n=512, s=0.1)

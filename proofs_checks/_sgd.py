@@ -281,11 +281,13 @@ def ode_shadowing(key, arch, s, box, windows, T, *, R, eps0, k0, power, substeps
     return np.array(out), np.array(out0)
 
 
-def proposition1_ode_limit(key=None, precise: bool = False) -> dict:
+def proposition1_ode_limit(key=None, precise: bool = False, *, runs: int | None = None, windows=None) -> dict:
+    """Proposition 1 on a linear 2-2-1 net. ``runs``, ``windows`` (the three start iterations) override the
+    sizes (tests use smaller ones)."""
     key = jax.random.PRNGKey(17) if key is None else key
     lev = level(2)
-    eps0, k0, power, s, R, T = 0.1, 100.0, 1.0, 0.5, 32 if precise else 16, 0.5
-    windows = [1000, 8000, 64000]
+    eps0, k0, power, s, R, T = 0.1, 100.0, 1.0, 0.5, runs or (32 if precise else 16), 0.5
+    windows = list(windows) if windows else [1000, 8000, 64000]
     arch = gt.Architecture((2, 2, 1), activation="identity", noise_sites="all")
     box = gt.Box(-0.5, 0.5, -0.5, 0.5)
     with jax.enable_x64(True):

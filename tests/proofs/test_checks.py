@@ -72,6 +72,8 @@ def test_score_function_identity():
     # independent closed form: the printed right-hand side is -s/2 times d/ds grad J (s = ce["s"])
     assert ce["printed rhs"] == pytest.approx(-ce["s"] / 2 * ce["d/ds grad J"], rel=1e-12)
     assert ce["d/ds grad J"] != 0
+    # the instance reported is the one substituted (weights 1/2, biases 0, x = 1, y = 0)
+    assert (ce["weights"], ce["biases"], ce["x"], ce["y"]) == (0.5, 0.0, 1.0, 0.0)
 
 
 # ---------------------------------------------------------------------------------- sampling lemmas
@@ -118,6 +120,14 @@ def test_d0_covariance_identity():
     assert bad == 0 and slack >= 0 and low >= 0 and finite
     r = _sampling_proofs.d0_covariance_identity()
     assert r["verdict"] == "holds" and ALL_VERIFIED(r)
+
+
+def test_d0_covariance_identity_moments_hypothesis_can_fail(monkeypatch):
+    """The hypothesis (nonnegative laws, finite values) is computed from the random laws: a law with a negative
+    value (or a non-finite one) makes it "not verified" -- each part alone."""
+    for low, finite in ((-0.5, True), (0.0, False)):
+        monkeypatch.setattr(_sampling_proofs, "bound_violations", lambda rng, n, low=low, finite=finite: (0, 0.0, low, finite))
+        assert _hyp(_sampling_proofs.d0_covariance_identity(), "moments")["verified"] is False
 
 
 def test_square_integrability(x64):
@@ -185,21 +195,28 @@ def test_linear_example_text_claim_needs_v_zero_at_every_depth(monkeypatch):
     verdict is "inconclusive" (one example cannot prove the text's claim)."""
     orig = _linear.lc.symbolic_example
 
-    def shifted(L):
+    def shifted(L):                      # one coordinate of v made nonzero at depth 2 (the other stays 0)
         e = orig(L)
-        return dict(e, v=e["v"] + sp.ones(L, 1)) if L == 2 else e
+        return dict(e, v=e["v"] + sp.Matrix([1] + [0] * (L - 1))) if L == 2 else e
     monkeypatch.setattr(_linear.lc, "symbolic_example", shifted)
     r = _linear.linear_example_text_claim()
     assert r["verdict"] == "inconclusive" and r["counterexample"] is None
 
 
-def test_linear_example_v_scaling():
+def test_linear_example_v_scaling(monkeypatch):
+    orig = {d: _linear.vector_example(d) for d in (1, 2, 3)}      # computed once, shared by both runs below
+    monkeypatch.setattr(_linear, "vector_example", lambda d: orig[d])
     r = _linear.linear_example_v_scaling()
     assert r["verdict"] == "fails" and r["correction"] and ALL_VERIFIED(r)
     ce = r["counterexample"]
     # independent closed forms at m2 = 1, s0 = 1/2, V_i = 1/2: printed rhs (m2 + s0^2)/(2 m2 ||V||), corrected 2 s0
     assert ce["printed_rhs"] == pytest.approx([1.25 / (2 * 0.5 * math.sqrt(d)) for d in ce["d"]], rel=1e-12)
     assert ce["corrected_rhs"] == pytest.approx([1.0] * len(ce["d"]), rel=1e-12)
+    assert _hyp(r, "w0_critical")["verified"] is True
+    # w0_critical is computed at every depth and every coordinate: one nonzero gradient coordinate at d = 2 refutes it
+    bad = dict(orig[2], critical=[orig[2]["critical"][0], sp.Integer(1)])
+    monkeypatch.setattr(_linear, "vector_example", lambda d: bad if d == 2 else orig[d])
+    assert _hyp(_linear.linear_example_v_scaling(), "w0_critical")["verified"] is False
 
 
 # ---------------------------------------------------------------------------------- Theorem 1
@@ -209,6 +226,10 @@ def test_theorem1_condition(monkeypatch):
     # independent: counterexample.py, J = w^2/2 + (d/2 + d^2/2) w with d = s - 2: v = 1/2, u = 1, so the printed
     # rhs ||v|| / (|u v|/2) = 2 and C1 = g(1) v = 0 at st = 1
     assert r["counterexample"]["printed_rhs"] == pytest.approx(2.0) and r["counterexample"]["C1"] == "0"
+    # independent closed form of the zero search: C1(d)/d = ||v||^2 + (u.v) d/2 + (c.v) d^2/6 with v = 1, u = 0,
+    # c = -6 is 1 - d^2, zero at d = 1 (st* = s0 + 1 = 2), where |d| sup|u.v + c.v d|/2 = 3 > ||v||: printed fails
+    assert T1.nearest_zero_of_C1([1.0], [0.0], [-6.0], 1.0, 3.0) == (pytest.approx(2.0, rel=1e-12), False)
+    assert T1.nearest_zero_of_C1([1.0], [0.0], [-6.0], 1.0, 1.5) is None        # the zero lies beyond st
     # without a refuting instance the verdict is "inconclusive", never "holds" (examples cannot prove it)
     orig = T1.theorem1
 

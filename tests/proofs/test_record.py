@@ -18,6 +18,14 @@ def test_sign_verdict_three_outcomes():
     assert sign_verdict(1.0, 0.01, "positive")[0] == "holds"
 
 
+def test_combine_all_parts():
+    from proofs_checks import _record            # through the module: the mutation pass replaces its attributes
+
+    assert _record.combine("holds", "holds") == "holds"
+    assert _record.combine("holds", "inconclusive") == "inconclusive"          # every part must hold
+    assert _record.combine("inconclusive", "fails", "holds") == "fails"       # one failing part refutes
+
+
 def test_record_requires_evidence_for_fails():
     with pytest.raises(ValueError):
         record("x", "c", "fails", "e")

@@ -354,6 +354,9 @@ def test_theorem2_guarantee(onn, x64):
     for key, s0, v in (("counterexample1", 2.0, 0.5), ("quartic1.1", 1.0, -0.42)):
         want = [(eta * s0 * v / 2) ** 2 / 2 for eta in (0.1, 0.01, 0.001)]
         assert inst[key]["algorithm1_J_st_difference"] == pytest.approx(want, rel=1e-9)
+    # the ONN part verifies the correction only: its hypotheses are reported, never carry the refutation
+    onn_h = [h for h in r["hypotheses"] if h["name"].startswith("tanh ONN (correction)")]
+    assert onn_h and not any(h["needed_for_refutation"] for h in onn_h)
 
 
 def test_theorem2_algorithm1_exact_reports_a_difference(x64):
@@ -402,6 +405,14 @@ def test_algorithm1_stopping_rule(onn, x64):
     assert r["verdict"] == "fails" and r["correction"] and ALL_VERIFIED(r)
     ce = r["counterexample"]
     assert ce["p_stop_at_1_lower_bound"] > 0.5
+    # the bound recomputed from the printed rise, its standard error, Eval's standard error and z1 (3 digits each):
+    # Phi((rise - z1 se_rise) / se_Eval)
+    from scipy.stats import norm
+    ev = r["evidence"]
+    rise, rise_se = (float(t) for t in ev.split("true rise at i = 1 is ")[1].split(",")[0].split(" +- "))
+    se_eval = float(ev.split("against Eval's standard error ")[1].split(" ")[0])
+    z1 = float(ev.split("resolved at z1 = ")[1].split(":")[0])
+    assert ce["p_stop_at_1_lower_bound"] == pytest.approx(norm.cdf((rise - z1 * rise_se) / se_eval), abs=5e-3)
     # eta is set so that the quadratic model's line minimum alpha = C1/(2 C2) lies 4 ray steps out; its lower end
     # comes from the C1, C2 enclosures (relative widths ~1e-7 on the finite-mean objective)
     assert ce["onn_c_star"] == pytest.approx(4.0, rel=1e-12)
@@ -415,5 +426,7 @@ def test_gift_taylor_rule(onn, x64):
     assert (g0, v, phi) == (0, 0, 0)
     r = _taylor.gift_taylor_rule(jax.random.PRNGKey(23))
     assert r["verdict"] == "fails" and r["correction"] and ALL_VERIFIED(r)
+    ce = r["counterexample"]           # the instance reported is the one computed above: s0 = 1, w0 = 0, phi = 0
+    assert (ce["s0"], ce["w0"], ce["v"], ce["phi(s)"]) == (1, 0, str(v), str(phi))
     # the ONN part uses the Theorem-1 result: C1 > 0, so the good side is s < s0
     assert onn.theorem1["C1"]["lo"] > 0

@@ -41,6 +41,8 @@ def test_wrong_sign_gives_a_zero_of_C1_inside_the_printed_condition():
 def test_search_counts():
     r = T.search_families(jax.random.PRNGKey(0), n=1500)
     assert r["wrong_sign_printed"] > 0 and r["zero_inside"] == r["wrong_sign_printed"]
+    # C1(d)/d is ||v||^2 > 0 at d = 0: a wrong sign at st always has a zero between (intermediate value theorem)
+    assert r["zero_found"] == r["wrong_sign_printed"]
     assert r["bad_corrected"] == 0 and r["n_corrected"] > 100
 
 

@@ -46,32 +46,34 @@ def activation_expression(activation):
     return expr if np.allclose(jx, sx, rtol=1e-6, atol=1e-6) else None
 
 
-@functools.lru_cache(maxsize=64)
 def _pb_orders(expr, r: int):
-    """For k = 0..r: (continuous on R, growth exponent lim log(1 + d_k^2) / log(1 + z^2) at +-inf)."""
-    out = []
-    for k in range(r + 1):
-        d = sp.diff(expr, _z, k)
-        if d.has(sp.Heaviside, sp.DiracDelta, sp.sign, sp.Piecewise):
-            cont = False                     # a jump (e.g. the derivative of Max(z, 0))
-        else:
+    """For k = 0..r: (k, the k-th derivative, continuous on R, growth exponents
+    lim log(1 + d_k^2) / log(1 + z^2) at +-inf); each order computed once per expression."""
+    return tuple(_pb_order(expr, k) for k in range(r + 1))
+
+
+@functools.lru_cache(maxsize=64)
+def _pb_order(expr, k: int):
+    d = sp.diff(expr, _z, k)
+    if d.has(sp.Heaviside, sp.DiracDelta, sp.sign, sp.Piecewise):
+        cont = False                     # a jump (e.g. the derivative of Max(z, 0))
+    else:
+        try:
+            cont = sp.calculus.util.continuous_domain(d, _z, sp.S.Reals) == sp.S.Reals
+        except (NotImplementedError, ValueError, TypeError):
+            cont = None
+    grow = []
+    for end in (sp.oo, -sp.oo):
+        g = None
+        for form in (d.rewrite(sp.exp), d) if d.has(sp.tanh, sp.sinh, sp.cosh) else (d, d.rewrite(sp.exp)):
             try:
-                cont = sp.calculus.util.continuous_domain(d, _z, sp.S.Reals) == sp.S.Reals
+                g = sp.limit(sp.log(1 + form ** 2) / sp.log(1 + _z ** 2), _z, end)
             except (NotImplementedError, ValueError, TypeError):
-                cont = None
-        grow = []
-        for end in (sp.oo, -sp.oo):
-            g = None
-            for form in (d.rewrite(sp.exp), d) if d.has(sp.tanh, sp.sinh, sp.cosh) else (d, d.rewrite(sp.exp)):
-                try:
-                    g = sp.limit(sp.log(1 + form ** 2) / sp.log(1 + _z ** 2), _z, end)
-                except (NotImplementedError, ValueError, TypeError):
-                    g = None
-                if g is not None and (g.is_finite or g.is_infinite):
-                    break
-            grow.append(g)
-        out.append((k, d, cont, grow))
-    return tuple(out)
+                g = None
+            if g is not None and (g.is_finite or g.is_infinite):
+                break
+        grow.append(g)
+    return k, d, cont, tuple(grow)
 
 
 def activation_pb(activation, r: int = 2, name: str = "A1", statement: str = "sigma in C^2_PB") -> dict:

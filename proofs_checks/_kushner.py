@@ -34,6 +34,7 @@ def _key_data(keys) -> np.ndarray:
     return np.asarray(jax.random.key_data(keys) if jnp.issubdtype(keys.dtype, jax.dtypes.prng_key) else keys)
 
 
+@jax.jit  # one program per shape (the callers vmap and differentiate it)
 def exact_grad_input(params, s):
     """grad J_s of the linear network with biases and input noise (closed form, flat vector)."""
     g = jax.grad(lambda p: lc.J_with_biases(p, s, _TASK, "input"))(params)

@@ -93,6 +93,7 @@ def make_sgd(arch, s, box, *, eps0, k0, power, batch=1):
     return step
 
 
+@jax.jit  # one program per shape (the callers vmap and differentiate it)
 def exact_grad(params, s):
     """grad J_s from the closed form (flat vector)."""
     g = jax.grad(lambda p: lc.J_with_biases(p, s, _TASK, "all"))(params)

@@ -89,11 +89,16 @@ def hierarchical_borel_cantelli(key=None, precise: bool = False) -> dict:
 # --------------------------------------------------------------------------------------
 # the covariance identity in the proof of lem:unbiased-sampling-D0
 # --------------------------------------------------------------------------------------
+def moment_symbols():
+    """The moments m_x, m_y, m_z, m_xy, m_xz, m_yz, m_xyz of the identity: real (hence finite) symbols."""
+    return sp.symbols("m_x m_y m_z m_xy m_xz m_yz m_xyz", real=True)
+
+
 def covariance_identity():
     """Symbolic moments m_x, m_xy, m_xyz, ... of any random variables with finite moments:
     E[XYZ] - (E X E Y E Z + Cov(X,Y) E Z + Cov(XY, Z)) (the only two-argument reading of the
     printed 'Cov(X Y Z)'), and the same with the joint central moment E[(X-EX)(Y-EY)(Z-EZ)]."""
-    mx, my, mz, mxy, mxz, myz, mxyz = sp.symbols("m_x m_y m_z m_xy m_xz m_yz m_xyz", real=True)
+    mx, my, mz, mxy, mxz, myz, mxyz = moment_symbols()
     cov_xy = mxy - mx * my
     cov_xy_z = mxyz - mxy * mz
     central3 = mxyz - mxy * mz - mxz * my - myz * mx + 2 * mx * my * mz
@@ -160,7 +165,7 @@ def d0_covariance_identity(key=None, precise: bool = False) -> dict:
         counterexample=None if verdict != "fails" else {"difference_two_argument_reading": str(d_two),
                                                          "violations": bad},
         hypotheses=[hypothesis("moments", "X, Y, Z nonnegative with finite second moments (and XY)",
-                               finite and low >= 0 and bool(all(m.is_finite is not False for m in d_two.free_symbols)),
+                               finite and low >= 0 and all(m.is_finite is True for m in moment_symbols()),
                                f"the identity: symbolic real moments (finite by being symbols of R); the {n_laws} random "
                                f"laws have finite support, every value finite: {finite}, smallest value of X, Y, Z = "
                                f"{low:.3g} >= 0")])

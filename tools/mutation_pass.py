@@ -101,7 +101,7 @@ TARGETS = {
         code=[("_sampling_proofs", "schedule_table"), ("_sampling_proofs", "hierarchical_borel_cantelli")],
         tests=[f"{T}::test_hierarchical_borel_cantelli"]),
     "d0_covariance_identity": dict(
-        code=[("_sampling_proofs", "covariance_identity"), ("_sampling_proofs", "bound_violations"),
+        code=[("_sampling_proofs", "moment_symbols"), ("_sampling_proofs", "covariance_identity"), ("_sampling_proofs", "bound_violations"),
               ("_sampling_proofs", "d0_covariance_identity")],
         tests=[f"{T}::test_d0_covariance_identity", f"{T}::test_d0_covariance_identity_moments_hypothesis_can_fail"]),
     "gift_taylor_rule": dict(

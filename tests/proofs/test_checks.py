@@ -116,8 +116,26 @@ def test_d0_covariance_identity():
     p = sp.Rational(1, 2)
     central3 = p - 3 * p * p + 2 * p ** 3                       # E[(X - p)^3] for X ~ Bernoulli(p), p = 1/2
     assert d_bern == p - (p ** 3 + (p - p * p) * p + central3)
+    # the central reading in general (Bernoulli(1/2) has no third central moment, so it alone cannot tell
+    # + from - in front of it): E[XYZ] - E X E Y E Z - Cov(X,Y) E Z - E[(X-EX)(Y-EY)(Z-EZ)]
+    mx, my, mz, mxy, mxz, myz, mxyz = _sampling_proofs.moment_symbols()
+    assert sp.expand(d_central - (mxz * my + myz * mx - 2 * mx * my * mz)) == 0
     bad, slack, low, finite = _sampling_proofs.bound_violations(np.random.default_rng(0), 50)
     assert bad == 0 and slack >= 0 and low >= 0 and finite
+    # its slack and smallest value against the bound computed here in float64 on the same three laws
+    rng, slacks, lows = np.random.default_rng(5), [], []
+    for _ in range(3):
+        p = rng.dirichlet(np.ones(4))
+        base = rng.exponential(size=4)
+        X, Y = base * rng.uniform(0.5, 2, 4), base ** 2 * rng.uniform(0.5, 2, 4)
+        Z = rng.exponential(size=4) + base
+        E = lambda v: float(p @ v)
+        Var = lambda v: E((v - E(v)) ** 2)
+        rhs = E(X) * E(Y) * E(Z) + np.sqrt(Var(X) * Var(Y)) * E(Z) + np.sqrt(Var(X * Y) * Var(Z))
+        slacks.append(rhs - E(X * Y * Z))
+        lows.append(min(X.min(), Y.min(), Z.min()))
+    bad, slack, low, finite = _sampling_proofs.bound_violations(np.random.default_rng(5), 3)
+    assert bad == 0 and slack == pytest.approx(min(slacks), rel=1e-9) and low == pytest.approx(min(lows), rel=1e-12)
     r = _sampling_proofs.d0_covariance_identity()
     assert r["verdict"] == "holds" and ALL_VERIFIED(r)
 
@@ -128,6 +146,20 @@ def test_d0_covariance_identity_moments_hypothesis_can_fail(monkeypatch):
     for low, finite in ((-0.5, True), (0.0, False)):
         monkeypatch.setattr(_sampling_proofs, "bound_violations", lambda rng, n, low=low, finite=finite: (0, 0.0, low, finite))
         assert _hyp(_sampling_proofs.d0_covariance_identity(), "moments")["verified"] is False
+    # a smallest value of exactly 0 is nonnegative
+    monkeypatch.setattr(_sampling_proofs, "bound_violations", lambda rng, n: (0, 0.0, 0.0, True))
+    assert _hyp(_sampling_proofs.d0_covariance_identity(), "moments")["verified"] is True
+    # ... moments not all known finite (one symbol without the real assumption): not verified
+    real = sp.symbols("m_x m_y m_z m_xy m_xz m_yz", real=True)
+    monkeypatch.setattr(_sampling_proofs, "moment_symbols", lambda: real + (sp.Symbol("m_xyz"),))
+    r = _sampling_proofs.d0_covariance_identity()
+    assert _hyp(r, "moments")["verified"] is not True and r["verdict"] == "holds"   # the identity itself still holds
+    # one violated bound: a refutation only where the hypothesis holds, then with its counterexample
+    monkeypatch.setattr(_sampling_proofs, "bound_violations", lambda rng, n: (1, -1e-3, 0.0, True))
+    assert _sampling_proofs.d0_covariance_identity()["verdict"] == "inconclusive"
+    monkeypatch.setattr(_sampling_proofs, "moment_symbols", lambda: real + (sp.Symbol("m_xyz", real=True),))
+    r = _sampling_proofs.d0_covariance_identity()
+    assert r["verdict"] == "fails" and r["counterexample"]["violations"] == 1
 
 
 def test_square_integrability(x64):

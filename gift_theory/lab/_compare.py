@@ -484,7 +484,7 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
     common = {"replicates": replicates, "n": meas.n, "r": meas.r, "taps": meas.has_taps,
               "layers": list(meas.layer_ids())}
     # the replicate files in batches of at most POWER_BYTES (one batch for a small file; a 50 MB
-    # file's 20 replicates at once were 1 GB of shots)
+    # file's 20 replicates at once were 1 GB of shots, its batches of 4 some 0.8 GB)
     per_file = 8 * meas.n * meas.r * (sum(meas.arch.widths[1:]) + meas.arch.widths[0])
     batch = int(max(1, min(replicates, POWER_BYTES // max(per_file, 1))))
     out = []
@@ -510,8 +510,9 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
     return out
 
 
-#: bytes of simulated replicate files :func:`power_of` holds at once
-POWER_BYTES = 128 << 20
+#: bytes of simulated replicate files :func:`power_of` holds at once (their scoring holds some six
+#: times that: the model's 4 r shots per input in float32, their draws, the channels' chunks)
+POWER_BYTES = 32 << 20
 
 
 def power_notes(power: list[dict], verdict_passes: bool, threshold: float = 0.8) -> list[str]:

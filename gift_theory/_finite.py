@@ -27,6 +27,10 @@ def first_bad(a) -> tuple | None:
     a = np.asarray(a)
     if a.dtype.kind not in "fc":
         return None
+    if a.dtype.kind == "f" and a.dtype.itemsize <= 4:
+        with np.errstate(invalid="ignore"):  # inf - inf: NaN, found below
+            if np.isfinite(np.sum(a, dtype=np.float64)):
+                return None  # float32 values summed in float64 cannot overflow: finite without a mask as large as a
     bad = ~np.isfinite(a)
     if not bad.any():
         return None

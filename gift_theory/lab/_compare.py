@@ -155,8 +155,15 @@ def discrepancy_difference(a: Comparison, b: Comparison, replicates: int = DIFFE
         return delta, 0.0
     n = Ta.shape[0]
     idx = np.random.default_rng(seed).integers(0, n, size=(replicates, n))
-    d = _q_of(Ta[idx]) - _q_of(Tb[idx])
+    # the resampled channel matrices a few replicates at a time: all 1000 at once were 0.4 GB on a
+    # 50 MB file's held-out half (each Q depends on its own replicate only: the same numbers)
+    step = max(1, int(BOOTSTRAP_BYTES // max(8 * n * Ta.shape[1], 1)))
+    d = np.concatenate([_q_of(Ta[idx[b:b + step]]) - _q_of(Tb[idx[b:b + step]]) for b in range(0, replicates, step)])
     return delta, float(np.std(d, ddof=1))
+
+
+#: bytes of one model's resampled channel matrices :func:`discrepancy_difference` holds at once
+BOOTSTRAP_BYTES = 16 << 20
 
 
 def layer_level(key, model: Model, meas: Measurement, layer: int, xtol: float = 1e-4) -> float:
@@ -484,7 +491,7 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
     common = {"replicates": replicates, "n": meas.n, "r": meas.r, "taps": meas.has_taps,
               "layers": list(meas.layer_ids())}
     # the replicate files in batches of at most POWER_BYTES (one batch for a small file; a 50 MB
-    # file's 20 replicates at once were 1 GB of shots)
+    # file's 20 replicates at once were 1 GB of shots, its batches of 4 some 0.8 GB)
     per_file = 8 * meas.n * meas.r * (sum(meas.arch.widths[1:]) + meas.arch.widths[0])
     batch = int(max(1, min(replicates, POWER_BYTES // max(per_file, 1))))
     out = []
@@ -510,8 +517,9 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
     return out
 
 
-#: bytes of simulated replicate files :func:`power_of` holds at once
-POWER_BYTES = 128 << 20
+#: bytes of simulated replicate files :func:`power_of` holds at once (their scoring holds some six
+#: times that: the model's 4 r shots per input in float32, their draws, the channels' chunks)
+POWER_BYTES = 32 << 20
 
 
 def power_notes(power: list[dict], verdict_passes: bool, threshold: float = 0.8) -> list[str]:

@@ -21,7 +21,7 @@ from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
 from ..effects import REGISTRY
-from ._budget import candidate_threads
+from ._budget import candidate_threads, replicate_threads
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, one_step_check
 from ._fit import fit_model
@@ -193,7 +193,7 @@ class Session:
         name = "+".join(model.effects)
         return self.cache.get(("refit_null",) + model_key(model), lambda: offset_replicates(
             name_key(self.k_cmp, name), model, self.fit_meas, self.test_meas, self.ref, channel_values=channel_values,
-            shots=self.shots, workers=self.workers))
+            shots=self.shots, workers=replicate_threads(self.meas, self.workers)))
 
     def score(self, model: Model, plain: Comparison | None = None, held_out: Measurement | None = None) -> Comparison:
         """The held-out comparison; a model with fitted offsets against its own refit null. With

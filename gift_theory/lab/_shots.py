@@ -155,16 +155,22 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     x = to32(meas.x)
     t = tiled_times(meas, chunk)
     physics = strong32(model.physics)  # the fit's leaf types: its compiled forward serves here
-    parts = []
+    ids = meas.layer_ids()
+    outs = None
     for c in range(K // chunk):
         noise = draws(jax.random.fold_in(key, c), model.physics, meas, chunk)
         part = layer_outputs(params, x, noise, physics, meas.arch, t)
         check_all_finite(part, [lambda l=l: f"the model's shots of layer {l} ({model.describe()})"
                                 for l in range(1, len(part) + 1)],
                          lambda k, i: eager_forward_at(params, x, noise, physics, meas.arch, t, i))
-        parts.append(part)
-    outs = parts[0] if len(parts) == 1 else tuple(jnp.concatenate(p, axis=1) for p in zip(*parts))
-    return tuple(outs[l - 1] for l in meas.layer_ids())
+        if K == chunk:
+            return tuple(part[l - 1] for l in ids)
+        if outs is None:  # filled part by part: a concatenation held every part and the whole at once
+            outs = [np.empty((meas.n, K, part[l - 1].shape[-1]), np.float32) for l in ids]
+        for o, l in zip(outs, ids):
+            o[:, c * chunk:(c + 1) * chunk] = np.asarray(part[l - 1])
+        del part, noise
+    return tuple(outs)
 
 
 def eager_forward_at(params, x, noise, physics, arch, t, at=None):

@@ -500,3 +500,34 @@ def test_the_log_variance_ratio_of_the_figures_has_mean_zero_under_the_true_mode
 
     raw_bias = log_variance_bias(mom.r - 1) - log_variance_bias(mom.K - 1)  # what the uncorrected ratio carries
     assert abs(raw_bias) / sd > 2 * 4.5 * se
+
+
+def test_the_chunks_of_inputs_do_not_change_the_numbers(setup, monkeypatch):
+    """Memory is bounded by working through the inputs in chunks (the channels' pair distances
+    and moments; the model's shots filled part by part): the chunk size is a memory budget, not
+    a parameter of the test. Chunks of 5 inputs (the last one padded; the private
+    ``CHUNK_BYTES`` set so: the budget itself is the contract here) against one chunk for all:
+    the same channel values to float32 rounding, the same discrepancy and p-value. The file and
+    its :class:`Reference` are made by hand (private names): simulating and a noise floor would
+    compile programs that are not under test (this test runs in CI's budget)."""
+    from gift_theory._measurement import Measurement
+    from gift_theory.lab import _channels
+    from gift_theory.lab._channels import Reference, channel_values, layer_scales
+
+    params, x = setup
+    n, r = 12, 8
+    rng = np.random.default_rng(0)
+    a1 = np.tanh(x[:n] @ np.asarray(params[0][0]).T + np.asarray(params[0][1]))[:, None] + 0.1 * rng.normal(size=(n, r, 8))
+    y = np.tanh(a1 @ np.asarray(params[1][0]).T + np.asarray(params[1][1])) + 0.1 * rng.normal(size=(n, r, 3))
+    meas = Measurement(x=x[:n], y=y, params=tuple(gt.Layer(np.asarray(W), np.asarray(b)) for W, b in params), taps=(a1,))
+    ref = Reference(tuple(layer_scales(Y) for Y in meas.layers()), np.argsort(rng.random((n, r)), axis=1), CHANNELS,
+                    np.ones((2, len(CHANNELS))), 0.0, 0.0, np.zeros(n))
+    model = Model(gt.Physics.create(s=0.1))
+    whole = channel_values(jax.random.PRNGKey(6), model, meas, ref)
+    assert _channels._input_chunk(n, 4 * r, r, 8) == n  # the default: one chunk
+    monkeypatch.setattr(_channels, "CHUNK_BYTES", 5 * (12 * 40 ** 2 + 24 * 40 * 8))
+    assert [_channels._input_chunk(n, 4 * r, r, d) for d in (8, 3)] == [5, 6]
+    chunked = channel_values(jax.random.PRNGKey(6), model, meas, ref)
+    np.testing.assert_allclose(chunked, whole, rtol=1e-5, atol=1e-6)
+    (Qw, pw, *_), (Qc, pc, *_) = (q_test(C.reshape(n, -1)) for C in (whole, chunked))
+    assert Qw > 0 and Qc == pytest.approx(Qw, rel=1e-5) and pc == pytest.approx(pw, rel=1e-3, abs=1e-4)

@@ -231,6 +231,26 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
     assert ("does not rule weight_error out" in render(out)) is (not taps)
 
 
+def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them():
+    """The memory budget of a diagnosis (private ``_budget``: its threads are its contract): a
+    small file runs 4 candidate threads and 4 replicate threads inside each (the numbers do not
+    depend on them); a 50 MB file (16-32-16-8 with taps, 1740 inputs x 64 shots) fewer, and the
+    refit null's replicates inside each candidate come out of the same budget -- every thread
+    at once within it."""
+    from gift_theory.lab import _budget
+
+    def file(n, r, widths):
+        return types.SimpleNamespace(n=n, r=r, layers=lambda: [np.empty((0, 0, d)) for d in widths])
+
+    small, big = file(120, 32, (16, 8, 4)), file(1740, 64, (32, 16, 8))
+    assert _budget.candidate_threads(small) >= 4 and _budget.replicate_threads(small, 4) == 4
+    c = _budget.candidate_threads(big)
+    assert c == 2 and _budget.replicate_threads(big, c) == 1 and _budget.replicate_threads(big, 1) == 1
+    for cand in (1, 2, 4):  # within the budget whatever the candidate threads (one thread at least)
+        per = _budget.PER_THREAD * _budget.shot_bytes(big)
+        assert cand * _budget.replicate_threads(big, cand) * per <= max(_budget.LAB_MEMORY, cand * per)
+
+
 @pytest.mark.slow
 def test_order_of_candidates_and_threads_change_no_number():
     """The session is pure: refit nulls keyed by the model's name and content, no memo keyed by

@@ -94,6 +94,23 @@ def test_a_statistic_never_drops_a_non_finite_term():
     assert np.isfinite(over_inputs(np.r_[1.0, 2.0, 0.5, 0.3]))
 
 
+def test_the_finite_check_of_float32_shots_finds_every_bad_value_and_passes_the_largest_good_ones():
+    """float32 values are checked by their float64 sum first (no mask as large as the shots):
+    NaN, +inf, -inf and a +inf beside a -inf are found at their index; float32's largest values,
+    whose float32 sum overflows, are finite."""
+    from gift_theory._finite import first_bad
+
+    big = np.full((4, 8, 3), np.finfo(np.float32).max, np.float32)
+    with np.errstate(over="ignore"):
+        assert not np.isfinite(big.sum())
+    assert first_bad(big) is None and first_bad(-big) is None
+    for bad in ([np.nan], [np.inf], [-np.inf], [np.inf, -np.inf]):
+        a = np.ones((4, 8, 3), np.float32)
+        a.flat[[37, 90][:len(bad)]] = bad
+        assert first_bad(a) == (1, 4, 1)
+    assert first_bad(np.ones(5, np.float64)) is None and first_bad(np.r_[1.0, np.nan]) == (1,)
+
+
 # ---- the long CSV ------------------------------------------------------------------------------
 
 def _long(tmp_path, meas, edit=None):

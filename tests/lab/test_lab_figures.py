@@ -198,6 +198,12 @@ def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error()
     idx = np.random.default_rng(1).integers(0, n, size=(1000, n))
     alone = np.hypot(np.std(_q_of(Ta[idx])), np.std(_q_of(Tb[idx])))
     assert 0 < se < 0.5 * alone
+    # the replicates in steps of 7 (the private memory budget set so): the same standard error
+    from gift_theory.lab import _compare
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(_compare, "BOOTSTRAP_BYTES", 7 * 8 * n * C)
+        assert discrepancy_difference(a, b) == (delta, pytest.approx(se, rel=1e-12))
     assert discrepancy_difference(a, a) == (0.0, 0.0)
     assert np.isnan(discrepancy_difference(a, dataclasses.replace(b, channel_values=None))[1])
 

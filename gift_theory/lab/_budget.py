@@ -13,7 +13,7 @@ two candidates with two replicate threads each raised the peak by 1.1 GB within 
 from __future__ import annotations
 
 #: bytes the threads of a diagnosis (candidates, and the replicates inside them) may hold together
-LAB_MEMORY = 1 << 30
+LAB_MEMORY = 2 << 30
 #: a candidate thread's working memory over the file's float32 shots (measured, see above)
 PER_THREAD = 20
 

@@ -234,8 +234,8 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
 def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them():
     """The memory budget of a diagnosis (private ``_budget``: its threads are its contract): a
     small file runs 4 candidate threads and 4 replicate threads inside each (the numbers do not
-    depend on them); a 50 MB file (16-32-16-8 with taps, 1740 inputs x 64 shots) fewer, and the
-    refit null's replicates inside each candidate come out of the same budget -- every thread
+    depend on them); on a 50 MB file (16-32-16-8 with taps, 1740 inputs x 64 shots) the candidate
+    threads fill the budget and the refit null's replicates inside each come out of the same budget -- every thread
     at once within it."""
     from gift_theory.lab import _budget
 
@@ -244,10 +244,11 @@ def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them():
 
     small, big = file(120, 32, (16, 8, 4)), file(1740, 64, (32, 16, 8))
     assert _budget.candidate_threads(small) >= 4 and _budget.replicate_threads(small, 4) == 4
-    c = _budget.candidate_threads(big)
-    assert c == 2 and _budget.replicate_threads(big, c) == 1 and _budget.replicate_threads(big, 1) == 1
+    c, per = _budget.candidate_threads(big), _budget.PER_THREAD * _budget.shot_bytes(big)
+    assert per == 20 * 1740 * 64 * (32 + 16 + 8) * 4                    # float32 shots of every layer
+    assert c == max(1, _budget.LAB_MEMORY // per) < _budget.candidate_threads(small)
+    assert _budget.replicate_threads(big, c) == 1 and _budget.replicate_threads(big, 1) == 1  # the budget is spent
     for cand in (1, 2, 4):  # within the budget whatever the candidate threads (one thread at least)
-        per = _budget.PER_THREAD * _budget.shot_bytes(big)
         assert cand * _budget.replicate_threads(big, cand) * per <= max(_budget.LAB_MEMORY, cand * per)
 
 

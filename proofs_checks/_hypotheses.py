@@ -95,7 +95,7 @@ def activation_pb(activation, r: int = 2, name: str = "A1", statement: str = "si
             bad.append(k)
         elif cont is None or not all(fin):
             undecided.append(k)
-        parts.append(f"sigma^({k}) = {d}: continuous on R {cont}, growth exponents at +-inf {grow}")
+        parts.append(f"sigma^({k}) = {d}: continuous on R {cont}, growth exponents at +-inf {list(grow)}")
     verified = False if bad else (None if undecided else True)
     return hypothesis(name, statement, verified, f"{label} (sympy): " + "; ".join(parts)
                       + ("" if verified else f" -- orders {bad or undecided} "

@@ -179,14 +179,14 @@ def theorem2_printed(rtol: float = 0.02):
     return rows
 
 
-def theorem2_guarantee(key=None, precise: bool = False) -> dict:
+def theorem2_guarantee(key=None, precise: bool = False, *, quick: bool = False) -> dict:
     """thm:ft-guarantee as printed, on exact families where w0 is also J_st's global minimiser
     (the strict improvement is impossible), each checked to be inside the printed hypotheses; the
     correction (the corrected Theorem-1 condition) verified on the tanh ONN at (s0, st) = (0.1, 0.13),
     where it holds: GIFT (printed D^[0], printed Algorithm 1) with eta set without knowledge of st."""
     key = jax.random.PRNGKey(2) if key is None else key
     exact = theorem2_printed()
-    st_ = _onn.setup(precise)
+    st_ = _onn.setup(precise, quick=quick)
     p, th1 = st_.problem, st_.theorem1
     kappas = (0.004, 0.002)
     # two slots per eta: the paired descent test, and the comparisons of "K large" (Bonferroni inside the slot);
@@ -315,6 +315,28 @@ def _clopper_pearson(k, n, conf):
     return float(lo), float(hi)
 
 
+def corrected_selection_verdict(worse0: int, R: int, worsem: int, Rm: int, accm: int, delta: float,
+                                alpha: float) -> dict:
+    """The decision on the corrected selection of :func:`gift_never_worse` from its run counts (pure).
+
+    ``worse0`` of ``R`` runs at st = s0 and ``worsem`` of ``Rm`` runs at the misspecified st returned a
+    point worse than w0; ``accm`` of the ``Rm`` replaced w0. One-sided Clopper-Pearson bounds at level
+    ``alpha`` each: "fails" when a worse-rate's lower bound exceeds ``delta``; "holds" when both
+    worse-rates' upper bounds are at most ``delta`` and the acceptance rate's lower bound exceeds 0.1
+    (the test is not vacuous: candidates do get accepted); else "inconclusive".
+
+    Returns
+    -------
+    dict: verdict, worse_lo_s0, worse_hi_s0, worse_lo_mis, worse_hi_mis, accepted_lo_mis
+    """
+    lo0, hi0 = _clopper_pearson(worse0, R, 1 - 2 * alpha)           # each end one-sided at alpha
+    lom, him = _clopper_pearson(worsem, Rm, 1 - 2 * alpha)
+    acc_lo, _ = _clopper_pearson(accm, Rm, 1 - 2 * alpha)
+    verdict = decide(fails=lo0 > delta or lom > delta, holds=hi0 <= delta and him <= delta and acc_lo > 0.1)
+    return dict(verdict=verdict, worse_lo_s0=lo0, worse_hi_s0=hi0, worse_lo_mis=lom, worse_hi_mis=him,
+                accepted_lo_mis=acc_lo)
+
+
 def _corrected_runs(key, st_, D, eta, s, R, K2e, delta):
     """R runs of the corrected selection (w0 kept, paired one-sided tests at delta / 2^(c+1)) against a
     simulated chip at noise level s; returns (accepted, worse, true differences of the accepted choices)."""
@@ -334,14 +356,14 @@ def _corrected_runs(key, st_, D, eta, s, R, K2e, delta):
     return accepted, worse, truth
 
 
-def gift_never_worse(key=None, precise: bool = False, *, runs: int | None = None) -> dict:
+def gift_never_worse(key=None, precise: bool = False, *, runs: int | None = None, quick: bool = False) -> dict:
     """The text: the selection step includes w0, so GIFT never makes the loss worse.
     Tested on the printed Algorithm 1 with st = s0 (no misspecification: every step away
     from the critical point w0 is worse; w0's criticality computed on this instance), then the
     corrected selection at st = s0 and at a misspecified st where candidates are accepted."""
     key = jax.random.PRNGKey(3) if key is None else key
     lev = level(5)          # printed test, criticality, first-order term, worse-rate bound at s0, at st_mis
-    st_ = _onn.setup(precise)
+    st_ = _onn.setup(precise, quick=quick)
     p, s0 = st_.problem, st_.s0
     st_run = s0                      # the instance of the printed test
     phys0 = p.physics.replace(s=st_run)
@@ -376,12 +398,8 @@ def gift_never_worse(key=None, precise: bool = False, *, runs: int | None = None
     acc0, worse0, _ = _corrected_runs(jax.random.fold_in(key, 4), st_, D.mean, eta, s0, R, K2e, delta)
     Rm = R
     accm, worsem, truthm = _corrected_runs(jax.random.fold_in(key, 5), st_, D.mean, eta, st_mis, Rm, K2m, delta)
-    _, hi0 = _clopper_pearson(worse0, R, 1 - 2 * lev.alpha)        # one-sided upper bounds at lev.alpha
-    lo0, _ = _clopper_pearson(worse0, R, 1 - 2 * lev.alpha)
-    _, him = _clopper_pearson(worsem, Rm, 1 - 2 * lev.alpha)
-    lom, _ = _clopper_pearson(worsem, Rm, 1 - 2 * lev.alpha)
-    acc_lo, _ = _clopper_pearson(accm, Rm, 1 - 2 * lev.alpha)
-    corrected_v = decide(fails=lo0 > delta or lom > delta, holds=hi0 <= delta and him <= delta and acc_lo > 0.1)
+    cv = corrected_selection_verdict(worse0, R, worsem, Rm, accm, delta, lev.alpha)
+    corrected_v, hi0, him, acc_lo = cv["verdict"], cv["worse_hi_s0"], cv["worse_hi_mis"], cv["accepted_lo_mis"]
     # "never worse" is universal: one significantly worse run refutes it
     verdict = decide(fails=worse_v == "holds")
     correction = None
@@ -453,7 +471,49 @@ def stopping_rule_exact():
             "printed": keep(info_p), "both": keep(info_b)}
 
 
-def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | None = None) -> dict:
+def stopping_rule_verdict(stops, diffs, rise: float, rise_se: float, sig_eval: float, *, lev, convex: bool,
+                          c_star_hi: float, line_ok: bool) -> dict:
+    """The decision of :func:`algorithm1_stopping_rule` from its runs' results (pure: no ONN, no draws).
+
+    Parameters
+    ----------
+    stops : (R, 3) per run: the printed rule's stopping step i, the 'both sides' rule's stopping step i,
+        the 'both sides' rule's chosen ray step c.
+    diffs : (R,) per run: J_st(result of 'both sides') - J_st(result of printed), fresh draws.
+    rise, rise_se : the ascent side's true rise J_st(w0 +- eta D) - J_st(w0) at i = 1 and its standard error.
+    sig_eval : the largest standard error of Eval's difference at the first stopping comparison.
+    lev : the check's :class:`~proofs_checks._record.Level`.
+    convex, c_star_hi : C2 > 0 along the ray, and the upper confidence end of the line minimum c* (ray steps).
+    line_ok : the exact line argument's algorithm1 runs came out as the sympy analysis says.
+
+    Returns
+    -------
+    dict: verdict, better (the paired test 'both sides' < printed), z, p_stop1 (lower bound of
+    P(printed rule stops at i = 1) in each run), stops_early, first_resolved, one_step (runs stopped at
+    i = 1), corrected_ok (the 'both sides' rule searched to median i >= 2 and the line argument holds).
+    """
+    stops = np.asarray(stops)
+    d = np.asarray(diffs, np.float64)
+    better, z = sign_verdict(float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size)), "negative",
+                             confidence=lev.confidence)
+    # the printed rule stops at i = 1 as soon as the ascent side's Eval is >= L^[0]; with a true rise resolved by
+    # Eval (lower confidence bound of the rise above z1 standard errors of Eval's difference) that happens with
+    # probability >= Phi(z1) > 1/2 in every run, whatever the noise
+    rise_lo = rise - lev.z1 * rise_se
+    first_resolved = bool(rise_lo > lev.z1 * sig_eval)
+    p_stop1 = float(stats.norm.cdf(rise_lo / sig_eval)) if sig_eval > 0 else math.nan
+    stops_early = math.isfinite(p_stop1) and p_stop1 > 0.5
+    # fails: the printed rule stops at i = 1 with probability above 1/2 in every run (computed bound), while points
+    # further along the ray are significantly better (the 'both sides' rule's result beats it, paired test);
+    # holds: the printed rule's result is significantly better, or the line minimum lies within one step (c* < 2)
+    verdict = decide(fails=stops_early and better == "holds",
+                     holds=better == "fails" or (convex and c_star_hi < 2))
+    corrected_ok = bool(line_ok) and bool(np.median(stops[:, 1]) >= 2)
+    return dict(verdict=verdict, better=better, z=z, p_stop1=p_stop1, stops_early=stops_early,
+                first_resolved=first_resolved, one_step=int(np.sum(stops[:, 0] == 1)), corrected_ok=corrected_ok)
+
+
+def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | None = None, quick: bool = False) -> dict:
     """The stopping rule 'until L+ v L- >= L0'. Refuted on the tanh ONN when, computed on the instance,
     the printed rule stops at i = 1 with probability above 1/2 in every run (a bound from the ascent
     side's true rise and Eval's standard error) while points further along the ray are significantly
@@ -464,7 +524,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | Non
     key = jax.random.PRNGKey(19) if key is None else key
     lev = level(3)          # Theorem-1 intervals, the true rise of the first step, the paired comparison
     ex = stopping_rule_exact()
-    st_ = _onn.setup(precise)
+    st_ = _onn.setup(precise, quick=quick)
     p, th1 = st_.problem, st_.theorem1
     D = _printed_D(jax.random.fold_in(key, 0), st_, K2=32)
     Dm = np.asarray(D.mean)
@@ -502,25 +562,14 @@ def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | Non
     rise, rise_se = _true_difference(jax.random.fold_in(key, 1), w_up, st_.w0, p, st_.st, K2=256)
     stops = np.array(stops)
     d = np.array(diffs)
-    better, z = sign_verdict(float(d.mean()), float(d.std(ddof=1) / math.sqrt(R)), "negative",
-                             confidence=lev.confidence)
-    one_step = int(np.sum(stops[:, 0] == 1))
-    # the printed rule stops at i = 1 as soon as the ascent side's Eval is >= L^[0]; with a true rise resolved by
-    # Eval (lower confidence bound of the rise above z1 standard errors of Eval's difference) that happens with
-    # probability >= Phi(z1) > 1/2 in every run, whatever the noise
     sig_eval = float(np.max(resolved))
-    rise_lo = rise - lev.z1 * rise_se
-    first_resolved = rise_lo > lev.z1 * sig_eval
-    p_stop1 = float(stats.norm.cdf(rise_lo / sig_eval)) if sig_eval > 0 else math.nan
     line_ok = (ex["printed"]["iterations"], ex["printed"]["chosen"]) == (1, (1, 1)) and ex["both"]["chosen"] == (13, 1)
-    # fails: the printed rule stops at i = 1 with probability above 1/2 in every run (computed bound), while points
-    # further along the ray are significantly better (the 'both sides' rule's result beats it, paired test);
-    # holds: the printed rule's result is significantly better, or the line minimum lies within one step (c* < 2)
     c_star_hi = (C1["hi"] / (2 * C2["lo"])) / (eta * dv) if C2["lo"] > 0 else math.inf
-    stops_early = math.isfinite(p_stop1) and p_stop1 > 0.5
-    verdict = decide(fails=stops_early and better == "holds",
-                     holds=better == "fails" or (convex and c_star_hi < 2))
-    corrected_ok = line_ok and bool(np.median(stops[:, 1]) >= 2)
+    dec = stopping_rule_verdict(stops, d, rise, rise_se, sig_eval, lev=lev, convex=convex, c_star_hi=c_star_hi,
+                                line_ok=line_ok)
+    verdict, better, z, p_stop1 = dec["verdict"], dec["better"], dec["z"], dec["p_stop1"]
+    stops_early, first_resolved, one_step, corrected_ok = (dec["stops_early"], dec["first_resolved"], dec["one_step"],
+                                                           dec["corrected_ok"])
     b_sym = next(x for x in ex["avg_minus_f0"].free_symbols if x.name == "b")
     hyps = [hypothesis("require", "Require of alg:GIFT: s0 > 0, eta > 0, K1, K2 >= 1",
                        st_.s0 > 0 and eta > 0 and p.x.shape[0] >= 1 and K2e >= 1,

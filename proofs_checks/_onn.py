@@ -69,14 +69,22 @@ def onn_family(n: int = 1024, K2: int = 16, s0: float = S0, steps: int = 1500):
     return J, w0_flat, wt_flat, prob, w0, wt, certify
 
 
-def setup(precise: bool = False, s0: float = S0, st: float = ST) -> Setup:
+#: the instance's sizes (teacher points, fixed draws per input, Adam steps before Newton): "full" for
+#: ``gift check``, "precise" for ``--precise``, "quick" for the tests (the same architecture, teacher,
+#: noise levels and seeds on fewer points and draws; its verdicts are the full instance's, its numbers not)
+SIZES = {"full": (1024, 16, 1500), "precise": (1024, 32, 3000), "quick": (256, 8, 500)}
+
+
+def setup(precise: bool = False, s0: float = S0, st: float = ST, *, quick: bool = False) -> Setup:
     """Arch 3-4-2 tanh, 1024 teacher points (the data measure mu), w0 a critical point of the
     finite-mean objective at s0 (16 fixed sign-symmetric draws per input; ``precise``: 32),
-    Theorem 1 at (s0, st) on that objective (every decision from rigorous enclosures)."""
-    k = (precise, s0, st)
+    Theorem 1 at (s0, st) on that objective (every decision from rigorous enclosures).
+    ``quick``: the test instance of :data:`SIZES` (256 points, 8 draws per input)."""
+    size = "quick" if quick else ("precise" if precise else "full")
+    k = (size, s0, st)
     if k not in _CACHE:
-        K2 = 32 if precise else 16
-        J, w0f, wtf, prob, w0, wt, certify = onn_family(K2=K2, s0=s0, steps=3000 if precise else 1500)
+        n, K2, steps = SIZES[size]
+        J, w0f, wtf, prob, w0, wt, certify = onn_family(n=n, K2=K2, s0=s0, steps=steps)
         th1 = theorem1(family(J, w0f, wt=wtf, name="tanh ONN 3-4-2", certify=certify), s0, st)
         _CACHE[k] = Setup(prob, w0, s0, st, th1, wt, K2, J)
     return _CACHE[k]

@@ -37,7 +37,7 @@ def linear_side(L: int):
     return ratio, e
 
 
-def gift_taylor_rule(key=None, precise: bool = False) -> dict:
+def gift_taylor_rule(key=None, precise: bool = False, *, quick: bool = False) -> dict:
     key = jax.random.PRNGKey(23) if key is None else key
     lev = level(3)           # the shared Theorem-1 intervals, the two paired tests on the ONN
     phi, g0, v, w_st, x = flat_direction_family()
@@ -53,7 +53,7 @@ def gift_taylor_rule(key=None, precise: bool = False) -> dict:
     phi1 = sp.expand(Jst(w0_1 + e1["v"][0].subs(num) * (s_ - num[e1["s0"]])) - Jst(w0_1))
     good = sp.solve_univariate_inequality(phi1 < 0, s_, relational=False)
     # the ONN: the reading "nudge towards st" (s = st) against the step to the other side
-    st_ = _onn.setup(precise)
+    st_ = _onn.setup(precise, quick=quick)
     p, th1 = st_.problem, st_.theorem1
     with jax.enable_x64(True):
         flat0, unravel = gt.flatten(st_.w0)

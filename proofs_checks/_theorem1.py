@@ -261,12 +261,12 @@ def _points_text(r) -> str:
             f"J_st(w_t) - J_st(w0): " + "; ".join(pts))
 
 
-def theorem1_conclusion(key=None, precise: bool = False) -> dict:
+def theorem1_conclusion(key=None, precise: bool = False, *, quick: bool = False) -> dict:
     key = jax.random.PRNGKey(8) if key is None else key
     lev = level(1)       # the fresh-draw descent step; the ONN's Theorem-1 quantities are rigorous enclosures
     quartic = theorem1(load_family(_families_path("quartic")), 1, "1.1")
     chain = theorem1(load_family(_families_path("linear_chain")), "0.5", "0.8")
-    st_ = _onn.setup(precise)
+    st_ = _onn.setup(precise, quick=quick)
     onn = st_.theorem1
     ins = {"quartic": _inside(quartic), "chain": _inside(chain), "onn": _inside(onn)}
     refuting = [name for name, r in (("quartic", quartic), ("chain", chain), ("onn", onn))

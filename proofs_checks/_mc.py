@@ -152,7 +152,7 @@ def train_critical(key, problem: Problem, s: float, *, K2: int = 32, steps: int 
     return run(params)
 
 
-def paired_difference_on_mu(key, params_a, params_b, x, y, physics, arch, K2: int) -> gt.Estimate:
+def paired_difference_on_mu(key, params_a, params_b, x, y, physics, arch, K2: int, chunk: int = 4096) -> gt.Estimate:
     """J_s(w_a) - J_s(w_b) when mu is the empirical measure of the given points (all used):
     only the noise is random, so the standard error comes from the noise alone. The K2 draws per
     input are split into two independent halves (common random numbers between w_a and w_b within
@@ -160,8 +160,15 @@ def paired_difference_on_mu(key, params_a, params_b, x, y, physics, arch, K2: in
     """
     kA, kB = jax.random.split(key)
     h = max(K2 // 2, 1)
-    dA = gt.paired_difference(kA, params_a, params_b, x, y, physics, arch, K2=h).samples
-    dB = gt.paired_difference(kB, params_a, params_b, x, y, physics, arch, K2=h).samples
+
+    def diff(k):
+        if chunk == 4096:                 # gt.paired_difference's own chunk: its numbers (one vmapped pass)
+            return gt.paired_difference(k, params_a, params_b, x, y, physics, arch, K2=h).samples
+        # the same draws for both (same key), another chunk (per_input_loss gives paired_difference's halves)
+        la = gt.per_input_loss(k, params_a, x, y, physics, arch, h, chunk)
+        return la - gt.per_input_loss(k, params_b, x, y, physics, arch, h, chunk)
+
+    dA, dB = diff(kA), diff(kB)
     n = dA.shape[0]
     mean = float(0.5 * (dA.mean() + dB.mean()))
     se = float(np.sqrt(np.sum((dA - dB) ** 2)) / (2 * n))

@@ -90,6 +90,21 @@ def setup(precise: bool = False, s0: float = S0, st: float = ST, *, quick: bool 
     return _CACHE[k]
 
 
+def mc_size(st_: Setup, K2: int, *, per_input_spread: bool = False) -> dict:
+    """The Monte-Carlo size of a check's evaluation on the instance ``st_``: ``K2`` draws per input
+    on the full instances. On a smaller one (quick) a paired difference on mu (only the noise is
+    random) gets as many more draws per input as keep n K2, its precision, the same;
+    ``per_input_spread``: an estimate whose standard error is the spread of per-input values over
+    sqrt(n) (Eval's comparisons) -- more draws per input would not buy its precision back, so ``K2``
+    stays. Off the full instances one chunk per evaluation (fewer dispatches; other draws than at
+    full size). Returns keywords {"K2", "chunk"} for :func:`proofs_checks._gift.make_eval` and
+    :func:`proofs_checks._mc.paired_difference_on_mu`."""
+    n = st_.problem.x.shape[0]
+    scale = 1 if per_input_spread else max(1, SIZES["full"][0] // n)
+    full = n >= SIZES["full"][0]
+    return dict(K2=K2 * scale, chunk=4096 if full else n * K2 * scale)
+
+
 def hypotheses_of_theorem1(th1: dict) -> list:
     """Theorem 1's hypotheses on the ONN instance, as verified by :func:`proofs_checks.theorem1`."""
     out = [hypothesis(h["name"], h["statement"], h["verified"], str(h["detail"])) for h in th1["hypotheses"]]

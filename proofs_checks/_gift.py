@@ -193,8 +193,8 @@ def theorem2_guarantee(key=None, precise: bool = False, *, quick: bool = False) 
     # two slots per eta: the paired descent test, and the comparisons of "K large" (Bonferroni inside the slot);
     # the Theorem-1 quantities of the ONN are rigorous enclosures (no error probability)
     lev = level(2 * len(kappas))
-    mc = lambda K2: _onn.mc_size(st_, K2)           # draws per input (scaled up on the quick instance)
-    D = _printed_D(jax.random.fold_in(key, 0), st_, K2=mc(64 if precise else 32)["K2"])
+    mc = lambda K2: _onn.mc_size(st_, K2=K2)        # draws per input (scaled up on the quick instance)
+    D = _printed_D(jax.random.fold_in(key, 0), st_, K2=mc(K2=64 if precise else 32)["K2"])
     Dm = np.asarray(D.mean)
     Dn = float(np.linalg.norm(Dm))
     w0n = float(np.linalg.norm(np.asarray(gt.flatten(st_.w0)[0])))
@@ -204,7 +204,8 @@ def theorem2_guarantee(key=None, precise: bool = False, *, quick: bool = False) 
     C1, C2 = th1["C1"], th1["C2_at_alpha0"]
     alpha_max_lo = C1["lo"] / C2["hi"] if C1["lo"] > 0 and C2["hi"] > 0 else 0.0
     rows, tests = [], []
-    ke = _onn.mc_size(st_, 4096 if precise else 2048, per_input_spread=True)   # "K1, K2 sufficiently large": Eval must resolve the change (K_large)
+    # "K1, K2 sufficiently large": Eval must resolve the change (K_large)
+    ke = _onn.mc_size(st_, K2=4096 if precise else 2048, per_input_spread=True)
     K2e = ke["K2"]
     for j, kappa in enumerate(kappas):
         eta = kappa * w0n / Dn                      # a step of kappa ||w0||: no oracle quantity at st
@@ -214,7 +215,8 @@ def theorem2_guarantee(key=None, precise: bool = False, *, quick: bool = False) 
         c, sign = info["chosen"]
         alpha = abs(c * eta * float(Dm @ v) / float(v @ v))
         small = 0 < alpha < alpha_max_lo
-        diff, se = _true_difference(jax.random.fold_in(key, 20 + j), w_ft, st_.w0, p, st_.st, **mc(256 if precise else 128))
+        diff, se = _true_difference(jax.random.fold_in(key, 20 + j), w_ft, st_.w0, p, st_.st,
+                                    **mc(K2=256 if precise else 128))
         vd, z = sign_verdict(diff, se, "negative", confidence=lev.confidence)
         # "K1, K2 sufficiently large": every comparison Algorithm 1 made with Eval (fresh draws each call, as
         # on a chip) agrees with J_st and resolves its true difference: |J_st(a) - J_st(b)| > z1 * se of
@@ -223,7 +225,7 @@ def theorem2_guarantee(key=None, precise: bool = False, *, quick: bool = False) 
         z_dec = float(stats.norm.isf(lev.alpha / max(len(dec), 1)))
         res_d = []
         for n_d, (label, wa, wb, la, lb) in enumerate(dec):
-            t_d, _ = _true_difference(jax.random.fold_in(key, 100 * (j + 1) + n_d), wa, wb, p, st_.st, **mc(64))
+            t_d, _ = _true_difference(jax.random.fold_in(key, 100 * (j + 1) + n_d), wa, wb, p, st_.st, **mc(K2=64))
             e_d = np.asarray(la) - np.asarray(lb)
             se_e = float(e_d.std(ddof=1) / math.sqrt(e_d.size))
             res_d.append((label, t_d, float(e_d.mean()), se_e,
@@ -274,7 +276,7 @@ def theorem2_guarantee(key=None, precise: bool = False, *, quick: bool = False) 
                    f"(C1, C2 enclosed on the finite-mean objective)", needed_for_refutation=False),
         hypothesis("tanh ONN (correction): K_large", "K1, K2 sufficiently large", K_ok,
                    f"K1 = all {p.x.shape[0]} points of mu, K2 = {K2e} draws per input in Eval, D^[0] from "
-                   f"{mc(64 if precise else 32)['K2']} draws per input: at every eta inside the range, every comparison "
+                   f"{mc(K2=64 if precise else 32)['K2']} draws per input: at every eta inside the range, every comparison "
                    f"Algorithm 1 made with Eval has the sign of the true difference, which exceeds z1 standard errors "
                    f"of Eval's difference (one-sided, Bonferroni over the comparisons of each eta)",
                    needed_for_refutation=False)]
@@ -348,14 +350,15 @@ def _corrected_runs(key, st_, D, eta, s, R, K2e, delta):
     phys = p.physics.replace(s=s)
     worse, accepted, truth = 0, 0, {}
     for r in range(R):
-        ev = make_eval(jax.random.fold_in(key, 100 + r), p.x, p.y, phys, p.arch, **_onn.mc_size(st_, K2e, per_input_spread=True))
+        ev = make_eval(jax.random.fold_in(key, 100 + r), p.x, p.y, phys, p.arch,
+                       **_onn.mc_size(st_, K2=K2e, per_input_spread=True))
         with jax.enable_x64(True):
             w_c, inf = algorithm1(ev, st_.w0, D, eta, keep_w0=True, delta=delta)
         if inf["chosen"] != (0, 0):
             accepted += 1
             if inf["chosen"] not in truth:
                 truth[inf["chosen"]] = _true_difference(jax.random.fold_in(key, 7 + len(truth)), w_c, st_.w0, p, s,
-                                                        **_onn.mc_size(st_, 64))
+                                                        **_onn.mc_size(st_, K2=64))
             worse += truth[inf["chosen"]][0] > 0
     return accepted, worse, truth
 
@@ -371,14 +374,15 @@ def gift_never_worse(key=None, precise: bool = False, *, runs: int | None = None
     p, s0 = st_.problem, st_.s0
     st_run = s0                      # the instance of the printed test
     phys0 = p.physics.replace(s=st_run)
-    D = _printed_D(jax.random.fold_in(key, 0), st_, K2=_onn.mc_size(st_, 32)["K2"])
+    D = _printed_D(jax.random.fold_in(key, 0), st_, K2=_onn.mc_size(st_, K2=32)["K2"])
     flat0, _ = gt.flatten(st_.w0)
     eta = 0.05 * float(jnp.linalg.norm(flat0)) / float(np.linalg.norm(D.mean))
     K2e = 16
-    ev = make_eval(jax.random.fold_in(key, 1), p.x, p.y, phys0, p.arch, **_onn.mc_size(st_, K2e, per_input_spread=True))
+    ev = make_eval(jax.random.fold_in(key, 1), p.x, p.y, phys0, p.arch,
+                   **_onn.mc_size(st_, K2=K2e, per_input_spread=True))
     with jax.enable_x64(True):
         w_ft, info = algorithm1(ev, st_.w0, D.mean, eta)
-    diff, se = _true_difference(jax.random.fold_in(key, 2), w_ft, st_.w0, p, st_run, **_onn.mc_size(st_, 64))
+    diff, se = _true_difference(jax.random.fold_in(key, 2), w_ft, st_.w0, p, st_run, **_onn.mc_size(st_, K2=64))
     worse_v, z = sign_verdict(diff, se, "positive", confidence=lev.confidence)
     # w0 an approximate minimiser of J_s0 (Algorithm 1's Initialization), shown, not merely not rejected: an exact
     # critical point of the finite-mean in-silico objective (Krawczyk, from the Theorem-1 check of the same w0), and
@@ -530,7 +534,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | Non
     ex = stopping_rule_exact()
     st_ = _onn.setup(precise, quick=quick)
     p, th1 = st_.problem, st_.theorem1
-    D = _printed_D(jax.random.fold_in(key, 0), st_, K2=_onn.mc_size(st_, 32)["K2"])
+    D = _printed_D(jax.random.fold_in(key, 0), st_, K2=_onn.mc_size(st_, K2=32)["K2"])
     Dm = np.asarray(D.mean)
     v = np.asarray(th1["v_bar"])
     # eta so that the quadratic model's line minimum is about 4 ray steps out (a search has room)
@@ -541,7 +545,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | Non
     c_star = th1["alpha"] / (eta * dv)
     c_star_lo = (C1["lo"] / (2 * C2["hi"])) / (eta * dv) if (C1["lo"] > 0 and C2["hi"] > 0) else 0.0
     R = runs or (16 if precise else 8)
-    ke = _onn.mc_size(st_, 256, per_input_spread=True)        # Eval's draws per input
+    ke = _onn.mc_size(st_, K2=256, per_input_spread=True)        # Eval's draws per input
     K2e = ke["K2"]
     phys = p.physics.replace(s=st_.st)
     stops, diffs, resolved = [], [], []
@@ -552,7 +556,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | Non
             w_b, ib = algorithm1(make_eval(jax.random.fold_in(kr, 1), p.x, p.y, phys, p.arch, **ke), st_.w0, Dm, eta,
                                  stop="both")
         stops.append((ip["iterations"], ib["iterations"], ib["chosen"][0]))
-        diffs.append(_true_difference(jax.random.fold_in(kr, 2), w_b, w_p, p, st_.st, **_onn.mc_size(st_, 256))[0])
+        diffs.append(_true_difference(jax.random.fold_in(kr, 2), w_b, w_p, p, st_.st, **_onn.mc_size(st_, K2=256))[0])
         # the standard error of Eval's difference at the first stopping comparison (each side against w0)
         for cand in ip["candidates"][:2]:
             e_d = np.asarray(cand[3]) - np.asarray(ip["L0"])
@@ -564,7 +568,7 @@ def algorithm1_stopping_rule(key=None, precise: bool = False, *, runs: int | Non
         # the ray whose first-order change C1 (v . D) sign is positive: J_st rises along sign(C1) v
         sgn = float(np.sign(C1["value"]) * np.sign(float(Dm @ v)))
         w_up = unravel(flat0 + sgn * eta * jnp.asarray(Dm))
-    rise, rise_se = _true_difference(jax.random.fold_in(key, 1), w_up, st_.w0, p, st_.st, **_onn.mc_size(st_, 256))
+    rise, rise_se = _true_difference(jax.random.fold_in(key, 1), w_up, st_.w0, p, st_.st, **_onn.mc_size(st_, K2=256))
     stops = np.array(stops)
     d = np.array(diffs)
     sig_eval = float(np.max(resolved))

@@ -61,7 +61,7 @@ def gift_taylor_rule(key=None, precise: bool = False, *, quick: bool = False) ->
         toward = unravel(flat0 + vb * (st_.st - st_.s0))
         phys = p.physics.replace(s=st_.st)
         dt = _mc.paired_difference_on_mu(jax.random.fold_in(key, 1), toward, st_.w0, p.x, p.y, phys, p.arch,
-                                            **_onn.mc_size(st_, 128))
+                                            **_onn.mc_size(st_, K2=128))
     vt, zt = sign_verdict(float(dt.mean), float(dt.se), "positive", confidence=lev.confidence)
     va, da_mean, da_se, za = descent_confirmation(jax.random.fold_in(key, 2), st_, lev)
     verdict = decide(fails=never)               # one family can refute the rule, not prove it

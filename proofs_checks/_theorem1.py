@@ -233,7 +233,7 @@ def descent_confirmation(key, st_, lev, K2: int = 128):
         flat0, unravel = gt.flatten(st_.w0)
         w_new = unravel(flat0 - th1["alpha"] * jnp.asarray(th1["v_bar"], flat0.dtype))
         d = _mc.paired_difference_on_mu(key, w_new, st_.w0, p.x, p.y, p.physics.replace(s=st_.st), p.arch,
-                                        **_onn.mc_size(st_, K2))
+                                        **_onn.mc_size(st_, K2=K2))
     v, z = sign_verdict(float(d.mean), float(d.se), "negative", confidence=lev.confidence)
     return v, float(d.mean), float(d.se), z
 

@@ -89,11 +89,11 @@ TARGETS = {
         tests=[f"{T}::test_linear_example_bound", f"{T}::test_linear_example_bound_can_hold"]),
     "gift_never_worse": dict(
         code=[("_gift", "algorithm1"), ("_gift", "_clopper_pearson"), ("_gift", "_corrected_runs"),
-              ("_gift", "gift_never_worse")],
-        tests=["tests/proofs/test_gift_alg.py", f"{T}::test_gift_never_worse"]),
+              ("_gift", "corrected_selection_verdict"), ("_gift", "gift_never_worse")],
+        tests=["tests/proofs/test_gift_alg.py", f"{T}::test_corrected_selection_verdict", f"{T}::test_gift_never_worse"]),
     "algorithm1_stopping_rule": dict(
-        code=[("_gift", "stopping_rule_exact"), ("_gift", "algorithm1_stopping_rule")],
-        tests=[f"{T}::test_algorithm1_stopping_rule"]),
+        code=[("_gift", "stopping_rule_exact"), ("_gift", "stopping_rule_verdict"), ("_gift", "algorithm1_stopping_rule")],
+        tests=[f"{T}::test_stopping_rule_verdict", f"{T}::test_algorithm1_stopping_rule"]),
     "proposition1_ode_limit": dict(
         code=[("_sgd", "ode_shadowing"), ("_sgd", "proposition1_ode_limit")],
         tests=[f"{T}::test_proposition1_ode_limit"]),

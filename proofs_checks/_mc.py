@@ -152,7 +152,8 @@ def train_critical(key, problem: Problem, s: float, *, K2: int = 32, steps: int 
     return run(params)
 
 
-def paired_difference_on_mu(key, params_a, params_b, x, y, physics, arch, K2: int, chunk: int = 4096) -> gt.Estimate:
+def paired_difference_on_mu(key, params_a, params_b, x, y, physics, arch, K2: int,
+                            chunk: int = 4096) -> gt.Estimate:
     """J_s(w_a) - J_s(w_b) when mu is the empirical measure of the given points (all used):
     only the noise is random, so the standard error comes from the noise alone. The K2 draws per
     input are split into two independent halves (common random numbers between w_a and w_b within

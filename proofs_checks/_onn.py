@@ -71,7 +71,9 @@ def onn_family(n: int = 1024, K2: int = 16, s0: float = S0, steps: int = 1500):
 
 #: the instance's sizes (teacher points, fixed draws per input, Adam steps before Newton): "full" for
 #: ``gift check``, "precise" for ``--precise``, "quick" for the tests (the same architecture, teacher,
-#: noise levels and seeds on fewer points and draws; its verdicts are the full instance's, its numbers not)
+#: noise levels and seeds on fewer points and draws; other numbers, and Eval's comparisons, whose standard
+#: error is the spread over the points, resolve less: algorithm1_stopping_rule's paired test and
+#: theorem2_guarantee's K_large are undecided there)
 SIZES = {"full": (1024, 16, 1500), "precise": (1024, 32, 3000), "quick": (256, 8, 500)}
 
 

@@ -3,7 +3,8 @@
 * ``x64``: a fixture that runs a test in float64 (tests about mathematics use it).
 * The weight cache goes to a temporary folder so tests never touch the user's cache.
 * hypothesis: a profile with a deadline that tolerates JAX compilation.
-* XLA compiles at backend optimisation level 0 (:func:`_xla_flags`: the suite is compile-bound).
+* XLA compiles at backend optimisation level 0 with its classic emitters (:func:`_xla_flags`:
+  the suite is compile-bound).
 * numpy's global generator (tests that draw a fresh seed with ``np.random.randint`` each run)
   is seeded per test from one run seed, ``GIFT_TEST_SEED`` (random unless set), printed in the
   header and under a failing test: ``GIFT_TEST_SEED=N python -m pytest ...`` replays a run.
@@ -12,6 +13,8 @@
 import os
 import random
 import shutil
+import subprocess
+import sys
 import tempfile
 import zlib
 
@@ -42,26 +45,47 @@ def pytest_configure(config):
 #: XLA's backend (LLVM) optimisation level for the test run; XLA's default is 2
 TEST_XLA_OPT_LEVEL = 0
 
+#: XLA:CPU options the test run adds where the installed XLA knows them (name -> value)
+TEST_XLA_OPTIONS = {"xla_cpu_use_fusion_emitters": "false"}
+
 
 def _xla_flags():
-    """Compile the test run's programs at LLVM optimisation level 0 instead of XLA's default 2
-    (``--xla_backend_optimization_level``), in this process and every command a test starts.
+    """Compile the test run's programs cheaply, in this process and every command a test starts:
+    LLVM optimisation level 0 instead of XLA's default 2 (``--xla_backend_optimization_level``)
+    and XLA:CPU's classic elemental emitters instead of its MLIR fusion emitters
+    (:data:`TEST_XLA_OPTIONS`).
 
     The suite is compile-bound: it builds thousands of small programs, one per physics structure
     and chip shape, and runs each a few times, so the compiler's time outweighs what its
     optimisations save. Measured on 2 cores, one process each, CPU seconds: the nine hidden-effect
     diagnoses of tests/lab/test_diagnose.py 98 at level 1, 85 at level 0; tests/finetune/test_memo.py,
     test_referee.py and tests/estimators together (trainings and Monte Carlo: run-time heavy) 99 at
-    level 1, 85 at level 0 (level 2 was slower than level 1 over the whole suite). The programs are
-    the same; their float rounding may differ in the last bits (no fast-math at any level), which no
-    test may depend on. ``GIFT_TEST_XLA_DEFAULTS=1`` runs it at XLA's defaults; a level the user
-    put in ``XLA_FLAGS`` is kept. Must run before the first computation (the flags are
-    read when the backend starts)."""
+    level 1, 85 at level 0 (level 2 was slower than level 1 over the whole suite). One diagnosis
+    of a 6-12-6-4 chip in a fresh process with no compilation cache: 18.4 CPU s with the fusion
+    emitters, 12.0 without (XLA's compile time of its 93 programs halves). The programs compute
+    the same functions; their float rounding may differ in the last bits (no fast-math anywhere),
+    which no test may depend on. ``GIFT_TEST_XLA_DEFAULTS=1`` runs the suite at XLA's defaults; a
+    flag the user put in ``XLA_FLAGS`` is kept. An option this XLA does not know is left out
+    (XLA aborts on an unknown flag: :func:`_known_xla_flags` asks a child process once). Must run
+    before the first computation (the flags are read when the backend starts)."""
     if os.environ.get("GIFT_TEST_XLA_DEFAULTS", "") not in ("", "0"):
         return
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_backend_optimization_level" not in flags:
-        os.environ["XLA_FLAGS"] = f"{flags} --xla_backend_optimization_level={TEST_XLA_OPT_LEVEL}".strip()
+        flags = f"{flags} --xla_backend_optimization_level={TEST_XLA_OPT_LEVEL}"
+    wanted = [f"--{k}={v}" for k, v in TEST_XLA_OPTIONS.items() if k not in flags]
+    os.environ["XLA_FLAGS"] = " ".join([flags.strip()] + _known_xla_flags(flags.strip(), wanted)).strip()
+
+
+def _known_xla_flags(base: str, wanted: list) -> list:
+    """The flags of ``wanted`` a JAX backend starts with (beside ``base``): one child process
+    per run (xdist workers inherit the result through ``XLA_FLAGS``)."""
+    if not wanted:
+        return []
+    probe = [sys.executable, "-c", "import jax.numpy as jnp; jnp.zeros(1).block_until_ready()"]
+    env = dict(os.environ, XLA_FLAGS=" ".join([base] + wanted).strip(), JAX_PLATFORMS="cpu")
+    ok = subprocess.run(probe, env=env, capture_output=True, timeout=300).returncode == 0
+    return wanted if ok else []
 
 
 def _compilation_cache():

@@ -119,9 +119,11 @@ NOTEBOOK_XLA_OPT_LEVEL = 1
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[os.path.basename(p) for p in NOTEBOOKS])
 def test_notebook_runs_and_its_stored_outputs_are_current(path, tmp_path, monkeypatch):
     monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's own inline backend: figures as outputs
-    # the kernel compiles at the level the stored outputs were written at (the rest of the suite
-    # runs at 0: a GIFT run in 03 and a rounding-level print in 02 differ there)
-    flags = re.sub(r"--xla_backend_optimization_level=\d+", "", os.environ.get("XLA_FLAGS", "")).strip()
+    # the kernel compiles as the stored outputs were written: level 1, XLA's own emitters (the rest
+    # of the suite runs at 0 with the classic emitters: a GIFT run in 03 and a rounding-level
+    # print in 02 differ there)
+    flags = re.sub(r"--xla_(backend_optimization_level|cpu_use_fusion_emitters)=\w+", "",
+                   os.environ.get("XLA_FLAGS", "")).strip()
     monkeypatch.setenv("XLA_FLAGS", f"{flags} --xla_backend_optimization_level={NOTEBOOK_XLA_OPT_LEVEL}".strip())
     stored = nbformat.read(path, as_version=4)
     fresh = nbformat.read(path, as_version=4)

@@ -112,7 +112,7 @@ def energy_cells(M, Y, paired: bool = False):
         if k < c and n > c:  # pad the last chunk to the common shape
             m_ = np.concatenate([m_, np.repeat(m_[-1:], c - k, axis=0)])
             y_ = np.concatenate([y_, np.repeat(y_[-1:], c - k, axis=0)])
-        e, w = _vector_energy(jnp.asarray(m_), jnp.asarray(y_), paired)
+        e, w = _vector_energy(m_, y_, paired)  # numpy in: jnp.asarray would compile a copy program per shape
         E[sl], wy[sl] = np.asarray(e, np.float64)[:k], np.asarray(w, np.float64)[:k]
         E1[sl], wy1[sl] = _marginal_energy(m_[:k], y_[:k], paired)
     return E, wy, E1, wy1

@@ -134,14 +134,34 @@ def summarise(data_dir: str, loaded: dict | None = None) -> dict:
 
 
 def _claims(data_dir: str, loaded: dict | None = None) -> dict:
-    out = {}
+    """Every claim's record (rule, numbers, verdict, summary) from the saved sweeps in ``data_dir``;
+    a claim whose sweep is missing is left out (the deeper net's GIFT sweep is required)."""
     deep, shallow, viol = (_load(data_dir, n, loaded) for n in ("gift_awgn_deep", "gift_awgn_shallow", "gift_violated"))
     if deep is None:
         raise FileNotFoundError(f"no gift_awgn_deep.nc in {data_dir}: run the GIFT sweeps first")
     imp_d = improvements(deep, "train")
+    out = {"accuracy_gain_up_to_28pct": _claim_28pct(data_dir, loaded, imp_d)}
+    if shallow is not None:
+        out["deeper_benefits_more"] = _claim_deeper(imp_d, shallow)
+    if viol is not None:
+        out["robust_to_non_awgn"] = _claim_non_awgn(viol)
+    out["test_resembles_train"] = _claim_test_train(deep, imp_d)
+    diag = _claim_diagonal(deep, imp_d)
+    if diag is not None:
+        out["gains_at_s0_eq_st"] = diag
+    under, under_c = _load(data_dir, "undertrained", loaded), _load(data_dir, "undertrained_ceiling", loaded)
+    if under is not None and under_c is not None:  # 7. (ours) the under-trained w0
+        from .undertrained import summarise as undertrained
 
-    # 1. up to 28 % relative accuracy gain: judged over every cell of GIFT on the deeper net and
-    # under every reading (mean over seeds or single run; relative or absolute), see _readings
+        out["undertrained_w0"] = undertrained(under, under_c)
+    if "predicted_change" in deep:
+        out["theorem1_first_order"] = _claim_first_order(deep, shallow, viol)
+    return out
+
+
+def _claim_28pct(data_dir, loaded, imp_d) -> dict:
+    """1. Up to 28 % relative accuracy gain: judged over every cell of GIFT on the deeper net and
+    under every reading (mean over seeds or single run; relative or absolute), see :func:`_readings`."""
     mean, half = mean_ci(imp_d["acc_pct"])
     flat = mean.stack(cell=("s0", "st"))
     i = int(np.nanargmax(flat.values))
@@ -155,7 +175,7 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
     top = gift["mean_relative"]
     verdict = ("reproduced" if not missed else "reproduced under some readings" if held else
                "gains, smaller" if np.isfinite(top["ci95"]) and top["value"] - top["ci95"] > 0 else "not reproduced")
-    out["accuracy_gain_up_to_28pct"] = {
+    acc_claim = {
         "best_cell_mean_pct": float(best), "best_cell_ci95": float(hbest), "best_cell": {
             "s0": float(best["s0"]), "st": float(best["st"])}, "best_single_run_pct": pmax,
         "readings": rd, "holds_under": held, "fails_under": missed,
@@ -167,7 +187,6 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
         "verdict": verdict,
         "summary": _readings_text(rd) + f"; on our grid (s0, st <= 0.2) GIFT's best cell {_fmt(float(best), float(hbest))} "
                    f"% at s0={float(best['s0']):g}, st={float(best['st']):g}"}
-    acc_claim = out["accuracy_gain_up_to_28pct"]
     acc_claim.update(_beside(data_dir, loaded, float(best["s0"]), float(best["st"])))
     acc_claim["rivals"] = _rivals_at(data_dir, loaded, float(best["s0"]), float(best["st"]))
     acc_claim["summary"] += _beside_text(acc_claim) + _rivals_text(acc_claim["rivals"])
@@ -194,63 +213,68 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
     if highest is not None:
         acc_claim["ceiling_highest"] = highest
         acc_claim["summary"] += _ceiling_highest_text(highest)
+    return acc_claim
 
-    # 2. deeper benefits more (same grid, paired by s0, st, seed)
-    if shallow is not None:
-        imp_s = improvements(shallow, "train")
-        rows = {}
-        for var in ("acc_pct", "acc_abs", "loss_pct"):
-            d = (imp_d[var] - imp_s[var]).values
-            m, h, n = _ci(d)
-            rows[var] = {"deep_mean": float(imp_d[var].mean()), "shallow_mean": float(imp_s[var].mean()),
-                         "deep_best_run": float(imp_d[var].max()), "shallow_best_run": float(imp_s[var].max()),
-                         "paired_diff_mean": m, "paired_diff_ci95": h, "n": n}
-        m, h = rows["acc_pct"]["paired_diff_mean"], rows["acc_pct"]["paired_diff_ci95"]
-        ml, hl = rows["loss_pct"]["paired_diff_mean"], rows["loss_pct"]["paired_diff_ci95"]
-        verdict = ("supported" if m - h > 0 and ml - hl > 0 else
-                   "contradicted" if m + h < 0 and ml + hl < 0 else "inconclusive")
-        out["deeper_benefits_more"] = {
-            **rows, "rule": "supported if deep - shallow (paired over s0, st, seed) has a 95 % CI above 0 for "
-                            "both relative accuracy and loss gains; contradicted if below 0 for both",
-            "verdict": verdict,
-            "summary": f"deep - shallow: accuracy gain {_fmt(m, h)} pp of %, loss gain {_fmt(ml, hl)} pp of % "
-                       f"(deep {rows['acc_pct']['deep_mean']:.2f} % vs shallow {rows['acc_pct']['shallow_mean']:.2f} "
-                       f"% accuracy; absolute deep - shallow "
-                       f"{_fmt(rows['acc_abs']['paired_diff_mean'], rows['acc_abs']['paired_diff_ci95'])} points; "
-                       f"best run deep {rows['acc_pct']['deep_best_run']:.2f} % / "
-                       f"{rows['acc_abs']['deep_best_run']:+.2f} points, shallow {rows['acc_pct']['shallow_best_run']:.2f}"
-                       f" % / {rows['acc_abs']['shallow_best_run']:+.2f} points)"}
 
-    # 3. robustness to non-AWGN true noise
-    if viol is not None:
-        imp_v = improvements(viol, "train")
-        per = {}
-        parts = []
-        for kind in viol["noise_kind"].values:
-            sub = imp_v.sel(noise_kind=kind)
-            acc_m = sub["acc_pct"].mean("seed")
-            loss_m = sub["loss_pct"].mean("seed")
-            a, ha, _ = _ci(sub["acc_pct"].values)
-            lo, hl, _ = _ci(sub["loss_pct"].values)
-            extra, extra_text = _acc_extra(sub)
-            per[str(kind)] = {"acc_pct_mean": a, "acc_pct_ci95": ha, "loss_pct_mean": lo, "loss_pct_ci95": hl,
-                              "acc_cells_improved": int((acc_m > 0).sum()), "cells": int(acc_m.size),
-                              "acc_pct_worst_cell": float(acc_m.min()), "acc_pct_best_cell": float(acc_m.max()),
-                              "loss_pct_worst_cell": float(loss_m.min()), **extra}
-            parts.append(f"{kind}: accuracy {_fmt(a, ha)} %{extra_text}, loss {_fmt(lo, hl)} %, "
-                         f"{per[str(kind)]['acc_cells_improved']}/{per[str(kind)]['cells']} cells improve accuracy")
-        ok = all(v["loss_pct_worst_cell"] >= 0 and v["acc_pct_mean"] - (v["acc_pct_ci95"] if np.isfinite(
-            v["acc_pct_ci95"]) else 0) > 0 for v in per.values())
-        bad = any(v["acc_pct_mean"] + (v["acc_pct_ci95"] if np.isfinite(v["acc_pct_ci95"]) else 0) < 0
-                  for v in per.values())
-        out["robust_to_non_awgn"] = {
-            "per_noise_kind": per,
-            "rule": "supported if for every law no cell's mean loss gets worse and the mean accuracy gain over "
-                    "all points has a 95 % CI above 0; contradicted if some law's CI is below 0",
-            "verdict": "supported" if ok else ("contradicted" if bad else "inconclusive"),
-            "summary": "; ".join(parts)}
+def _claim_deeper(imp_d, shallow) -> dict:
+    """2. The deeper net benefits more (same grid, paired by s0, st, seed)."""
+    imp_s = improvements(shallow, "train")
+    rows = {}
+    for var in ("acc_pct", "acc_abs", "loss_pct"):
+        d = (imp_d[var] - imp_s[var]).values
+        m, h, n = _ci(d)
+        rows[var] = {"deep_mean": float(imp_d[var].mean()), "shallow_mean": float(imp_s[var].mean()),
+                     "deep_best_run": float(imp_d[var].max()), "shallow_best_run": float(imp_s[var].max()),
+                     "paired_diff_mean": m, "paired_diff_ci95": h, "n": n}
+    m, h = rows["acc_pct"]["paired_diff_mean"], rows["acc_pct"]["paired_diff_ci95"]
+    ml, hl = rows["loss_pct"]["paired_diff_mean"], rows["loss_pct"]["paired_diff_ci95"]
+    verdict = ("supported" if m - h > 0 and ml - hl > 0 else
+               "contradicted" if m + h < 0 and ml + hl < 0 else "inconclusive")
+    return {
+        **rows, "rule": "supported if deep - shallow (paired over s0, st, seed) has a 95 % CI above 0 for "
+                        "both relative accuracy and loss gains; contradicted if below 0 for both",
+        "verdict": verdict,
+        "summary": f"deep - shallow: accuracy gain {_fmt(m, h)} pp of %, loss gain {_fmt(ml, hl)} pp of % "
+                   f"(deep {rows['acc_pct']['deep_mean']:.2f} % vs shallow {rows['acc_pct']['shallow_mean']:.2f} "
+                   f"% accuracy; absolute deep - shallow "
+                   f"{_fmt(rows['acc_abs']['paired_diff_mean'], rows['acc_abs']['paired_diff_ci95'])} points; "
+                   f"best run deep {rows['acc_pct']['deep_best_run']:.2f} % / "
+                   f"{rows['acc_abs']['deep_best_run']:+.2f} points, shallow {rows['acc_pct']['shallow_best_run']:.2f}"
+                   f" % / {rows['acc_abs']['shallow_best_run']:+.2f} points)"}
 
-    # 4. test-data gains resemble training-data gains
+
+def _claim_non_awgn(viol) -> dict:
+    """3. Robustness to a true noise that is not AWGN."""
+    imp_v = improvements(viol, "train")
+    per = {}
+    parts = []
+    for kind in viol["noise_kind"].values:
+        sub = imp_v.sel(noise_kind=kind)
+        acc_m = sub["acc_pct"].mean("seed")
+        loss_m = sub["loss_pct"].mean("seed")
+        a, ha, _ = _ci(sub["acc_pct"].values)
+        lo, hl, _ = _ci(sub["loss_pct"].values)
+        extra, extra_text = _acc_extra(sub)
+        per[str(kind)] = {"acc_pct_mean": a, "acc_pct_ci95": ha, "loss_pct_mean": lo, "loss_pct_ci95": hl,
+                          "acc_cells_improved": int((acc_m > 0).sum()), "cells": int(acc_m.size),
+                          "acc_pct_worst_cell": float(acc_m.min()), "acc_pct_best_cell": float(acc_m.max()),
+                          "loss_pct_worst_cell": float(loss_m.min()), **extra}
+        parts.append(f"{kind}: accuracy {_fmt(a, ha)} %{extra_text}, loss {_fmt(lo, hl)} %, "
+                     f"{per[str(kind)]['acc_cells_improved']}/{per[str(kind)]['cells']} cells improve accuracy")
+    ok = all(v["loss_pct_worst_cell"] >= 0 and v["acc_pct_mean"] - (v["acc_pct_ci95"] if np.isfinite(
+        v["acc_pct_ci95"]) else 0) > 0 for v in per.values())
+    bad = any(v["acc_pct_mean"] + (v["acc_pct_ci95"] if np.isfinite(v["acc_pct_ci95"]) else 0) < 0
+              for v in per.values())
+    return {
+        "per_noise_kind": per,
+        "rule": "supported if for every law no cell's mean loss gets worse and the mean accuracy gain over "
+                "all points has a 95 % CI above 0; contradicted if some law's CI is below 0",
+        "verdict": "supported" if ok else ("contradicted" if bad else "inconclusive"),
+        "summary": "; ".join(parts)}
+
+
+def _claim_test_train(deep, imp_d) -> dict:
+    """4. The test-data gains resemble the training-data gains."""
     imp_t = improvements(deep, "test")
     rows = {}
     for var in ("acc_pct", "acc_abs", "loss_pct"):
@@ -264,7 +288,7 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
     close = {var: abs(v["test_mean"] - v["train_mean"]) <= 0.25 * max(abs(v["train_mean"]), abs(v["test_mean"]))
              + (v["test_minus_train_ci95"] if np.isfinite(v["test_minus_train_ci95"]) else 0.0)
              for var, v in rows.items() if var != "acc_abs"}  # absolute: reported, the rule is unchanged
-    out["test_resembles_train"] = {
+    return {
         **rows, "close": close,
         "rule": "supported if, for accuracy and loss, |test - train| mean gain <= 25 % of the larger of the two plus "
                 "the 95 % CI of the paired difference, and the cell-wise correlation of loss gains is > 0.5",
@@ -277,50 +301,46 @@ def _claims(data_dir: str, loaded: dict | None = None) -> dict:
                    f"loss gain train {rows['loss_pct']['train_mean']:.2f} % vs test "
                    f"{rows['loss_pct']['test_mean']:.2f} % (corr {rows['loss_pct']['cell_correlation']:.2f})"}
 
-    # 5. gains at s0 = st
+
+def _claim_diagonal(deep, imp_d) -> dict | None:
+    """5. Gains at s0 = st (None when the grid has no such cell)."""
     diag = [(s, s) for s in deep["s0"].values if s in deep["st"].values]
-    if diag:
-        vals = {var: np.concatenate([imp_d[var].sel(s0=a, st=b).values.ravel() for a, b in diag])
-                for var in ("loss_pct", "acc_pct")}
-        lm, lh, n = _ci(vals["loss_pct"])
-        am, ah, _ = _ci(vals["acc_pct"])
-        extra, extra_text = _acc_extra(xr.concat([imp_d.sel(s0=a, st=b, drop=True) for a, b in diag], "cell"))
-        out["gains_at_s0_eq_st"] = {
-            "loss_pct_mean": lm, "loss_pct_ci95": lh, "acc_pct_mean": am, "acc_pct_ci95": ah, "n": n, **extra,
-            "cells": [float(a) for a, _ in diag],
-            "rule": "supported if the mean relative loss gain over the s0 = st points has a 95 % CI above 0",
-            "verdict": "supported" if np.isfinite(lh) and lm - lh > 0 else (
-                "inconclusive" if not np.isfinite(lh) or lm + lh > 0 else "contradicted"),
-            "summary": f"on s0 = st ({n} runs): loss gain {_fmt(lm, lh)} %, accuracy gain {_fmt(am, ah)} %"
-                       + extra_text}
+    if not diag:
+        return None
+    vals = {var: np.concatenate([imp_d[var].sel(s0=a, st=b).values.ravel() for a, b in diag])
+            for var in ("loss_pct", "acc_pct")}
+    lm, lh, n = _ci(vals["loss_pct"])
+    am, ah, _ = _ci(vals["acc_pct"])
+    extra, extra_text = _acc_extra(xr.concat([imp_d.sel(s0=a, st=b, drop=True) for a, b in diag], "cell"))
+    return {
+        "loss_pct_mean": lm, "loss_pct_ci95": lh, "acc_pct_mean": am, "acc_pct_ci95": ah, "n": n, **extra,
+        "cells": [float(a) for a, _ in diag],
+        "rule": "supported if the mean relative loss gain over the s0 = st points has a 95 % CI above 0",
+        "verdict": "supported" if np.isfinite(lh) and lm - lh > 0 else (
+            "inconclusive" if not np.isfinite(lh) or lm + lh > 0 else "contradicted"),
+        "summary": f"on s0 = st ({n} runs): loss gain {_fmt(lm, lh)} %, accuracy gain {_fmt(am, ah)} %"
+                   + extra_text}
 
-    # 7. (ours) the under-trained w0
-    under, under_c = _load(data_dir, "undertrained", loaded), _load(data_dir, "undertrained_ceiling", loaded)
-    if under is not None and under_c is not None:
-        from .undertrained import summarise as undertrained
 
-        out["undertrained_w0"] = undertrained(under, under_c)
+def _claim_first_order(deep, shallow, viol) -> dict:
+    """6. (ours) Theorem 1's first-order prediction against the realised change."""
+    from .predicted_vs_realised import summarise as first_order
 
-    # 6. (ours) Theorem 1's first-order prediction against the realised change
-    if "predicted_change" in deep:
-        from .predicted_vs_realised import summarise as first_order
-
-        fo = first_order({k: v for k, v in (("gift_awgn_deep", deep), ("gift_awgn_shallow", shallow),
-                                            ("gift_violated", viol)) if v is not None})
-        lo = fo["correlation_ci95"][0]
-        frac = fo["wrong"] / fo["points"]
-        out["theorem1_first_order"] = {
-            **{k: v for k, v in fo.items() if k != "wrong_points"},
-            "wrong_points": [{k: p[k] for k in p if k not in ("predicted_change_2nd",)} for p in fo["wrong_points"]],
-            "rule": fo["rule"] + "; verdict 'holds' if at most 5 % of the points are wrong and the correlation's "
-                                 "95 % interval lies above 0.5, 'fails' if more than 5 % are wrong, else "
-                                 "'inconclusive'",
-            "verdict": "holds" if frac <= 0.05 and lo > 0.5 else ("fails" if frac > 0.05 else "inconclusive"),
-            "summary": f"{fo['points']} points: r = {fo['correlation']:.2f} [{fo['correlation_ci95'][0]:.2f}, "
-                       f"{fo['correlation_ci95'][1]:.2f}], realised/predicted median "
-                       f"{fo['median_realised_over_predicted']:.2f}, {fo['wrong']} wrong ({fo['sign_wrong']} of the "
-                       f"wrong sign); with the curvature term r = {fo['correlation_2nd_order']:.2f}"}
-    return out
+    fo = first_order({k: v for k, v in (("gift_awgn_deep", deep), ("gift_awgn_shallow", shallow),
+                                        ("gift_violated", viol)) if v is not None})
+    lo = fo["correlation_ci95"][0]
+    frac = fo["wrong"] / fo["points"]
+    return {
+        **{k: v for k, v in fo.items() if k != "wrong_points"},
+        "wrong_points": [{k: p[k] for k in p if k not in ("predicted_change_2nd",)} for p in fo["wrong_points"]],
+        "rule": fo["rule"] + "; verdict 'holds' if at most 5 % of the points are wrong and the correlation's "
+                             "95 % interval lies above 0.5, 'fails' if more than 5 % are wrong, else "
+                             "'inconclusive'",
+        "verdict": "holds" if frac <= 0.05 and lo > 0.5 else ("fails" if frac > 0.05 else "inconclusive"),
+        "summary": f"{fo['points']} points: r = {fo['correlation']:.2f} [{fo['correlation_ci95'][0]:.2f}, "
+                   f"{fo['correlation_ci95'][1]:.2f}], realised/predicted median "
+                   f"{fo['median_realised_over_predicted']:.2f}, {fo['wrong']} wrong ({fo['sign_wrong']} of the "
+                   f"wrong sign); with the curvature term r = {fo['correlation_2nd_order']:.2f}"}
 
 
 #: the readings of "up to 28 %" the claim is judged under: (what is maximised, which gain)

@@ -80,7 +80,7 @@ TARGETS = {
         tests=[f"{T}::test_theorem1_conclusion"]),
     "theorem2_guarantee": dict(
         code=[("_gift", "global_minimiser_1d"), ("_gift", "algorithm1_exact"), ("_gift", "theorem2_printed"),
-              ("_gift", "theorem2_guarantee")],
+              ("_gift", "theorem2_guarantee"), ("_gift", "_theorem2_correction"), ("_gift", "_theorem2_exact_rows")],
         tests=["tests/proofs/test_hypotheses.py::test_theorem2_as_printed_is_refuted_inside_its_hypotheses",
                f"{T}::test_theorem2_algorithm1_exact_reports_a_difference", f"{T}::test_theorem2_guarantee"]),
     "linear_example_bound": dict(

@@ -760,6 +760,70 @@ def _down(x):
     return float(np.nextafter(float(x), -np.inf))
 
 
+def _numeric_conditions(progs, X0, v_iv, vn, vv_b, vv, s0, st, *, rtol, max_pieces):
+    """Theorem 1's printed and corrected conditions on a numeric family, rigorously: the sup over zeta
+    in [s0 ^ st, s0 v st] of |(d2/ds2 grad J_zeta(w))^T v(w)| over the box X0 of w0 bracketed by interval
+    arithmetic (bisected where the bound is largest), each right-hand side enclosed from it, and each
+    condition "holds", "not met" or "undecided" against |st - s0|. Returns (bound, how, printed rhs,
+    corrected rhs, printed, corrected)."""
+    from ._interval import iv_dot, iv_mag, iv_mig
+
+    (vn_lo, vn_hi), (vv_lo, vv_hi) = vn, vv_b
+    gap = abs(st - s0)
+    gap_hi, gap_lo = (_up(gap), _down(gap)) if gap > 0 else (0.0, 0.0)
+    # the sup over zeta of |(d2/ds2 grad J_zeta(w))^T v(w)| for every w in the box: interval arithmetic with zeta
+    # ranging over each piece (the natural extension), bisected where the bound is largest
+    def upper_on(lo, hi):
+        return _up(float(iv_mag(iv_dot(progs.F2_enc(X0, lo, hi), v_iv))))
+
+    def lower_at(zeta):
+        return float(iv_mig(iv_dot(progs.F2_enc(X0, zeta), v_iv)))
+
+    thresholds = []
+    if gap > 0:
+        thresholds = [2 * vn_lo / gap, 2 * vn_hi / gap, 2 * vv_lo / gap, 2 * vv_hi / gap]
+    try:
+        bound = sup_bound(upper_on, lower_at, min(s0, st), max(s0, st), rtol=rtol, max_pieces=max_pieces,
+                          thresholds=[t for t in thresholds if math.isfinite(t)])
+    except ValueError as exc:          # an operation without an interval rule
+        raise FamilyError(f"cannot bound the sup over zeta rigorously: {exc}") from None
+    how = (f"rigorous: interval arithmetic on the traced d2/ds2 grad J over zeta intervals and the box of w0, "
+           f"{bound.pieces} piece(s)")
+
+    def rhs(numer_lo, numer_hi, numer, value):     # numer / (sup / 2) with [lo, hi] from the sup's bracket
+        lo = math.inf if bound.upper <= 0 else _down(2 * numer_lo / _up(bound.upper))
+        hi = math.inf if bound.lower <= 0 else _up(2 * numer_hi / _down(bound.lower))
+        return {"value": math.inf if value <= 0 else 2 * numer / value, "lo": lo, "hi": hi}
+
+    prhs = rhs(vn_lo, vn_hi, math.sqrt(vv), bound.lower)
+    crhs = rhs(vv_lo, vv_hi, vv, bound.lower)
+
+    def status(r):
+        if gap == 0 or r["hi"] == 0:
+            return "not met"
+        if gap_hi < r["lo"]:
+            return "holds"
+        if gap_lo > r["hi"]:
+            return "not met"
+        return "undecided"
+
+    printed, corrected = status(prhs), status(crhs)
+    return bound, how, prhs, crhs, printed, corrected
+
+
+def _wt_row(progs, fam: Family, wtf, st, J_at, J0_box) -> dict:
+    """A candidate critical point of J_st given by the family: its certificate and J_st(wt) - J_st(w0)
+    enclosed (both boxes the certificates' radii)."""
+    from ._interval import iv_mid_rad, iv_sub
+
+    ct = critical_certificate(progs, wtf, st, fam.certify)
+    dj = iv_sub(J_at(wtf, ct["radius"]), J0_box)
+    dm = float(iv_mid_rad(dj)[0])
+    return {"max_abs_grad": ct["max_abs_grad"], "gradient_test": ct["text"],
+            "critical": ct["verified"], "consistent_with_critical": ct["verified"] is True,
+            "J_st_wt_minus_J_st_w0": _iv(dm, float(dj.lo), float(dj.hi))}
+
+
 def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> dict:
     import jax
     import jax.numpy as jnp
@@ -769,7 +833,6 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
     num = _numeric(fam)
     s0, st = float(s0), float(st)
     gap = abs(st - s0)
-    gap_hi, gap_lo = (_up(gap), _down(gap)) if gap > 0 else (0.0, 0.0)
     with jax.enable_x64(True):
         w0 = np.asarray(fam.w0.ravel(), np.float64)
         progs = _Programs(num, w0, s0)
@@ -799,59 +862,16 @@ def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> d
         mid = lambda a: float(iv_mid_rad(a)[0])
         vv, C1, C2 = float(v_bar @ v_bar), mid(C1_iv), mid(C2_iv)
 
-        # the sup over zeta of |(d2/ds2 grad J_zeta(w))^T v(w)| for every w in the box: interval arithmetic with zeta
-        # ranging over each piece (the natural extension), bisected where the bound is largest
-        def upper_on(lo, hi):
-            return _up(float(iv_mag(iv_dot(progs.F2_enc(X0, lo, hi), v_iv))))
-
-        def lower_at(zeta):
-            return float(iv_mig(iv_dot(progs.F2_enc(X0, zeta), v_iv)))
-
-        thresholds = []
-        if gap > 0:
-            thresholds = [2 * vn_lo / gap, 2 * vn_hi / gap, 2 * vv_lo / gap, 2 * vv_hi / gap]
-        try:
-            bound = sup_bound(upper_on, lower_at, min(s0, st), max(s0, st), rtol=rtol, max_pieces=max_pieces,
-                              thresholds=[t for t in thresholds if math.isfinite(t)])
-        except ValueError as exc:          # an operation without an interval rule
-            raise FamilyError(f"cannot bound the sup over zeta rigorously: {exc}") from None
-        how = (f"rigorous: interval arithmetic on the traced d2/ds2 grad J over zeta intervals and the box of w0, "
-               f"{bound.pieces} piece(s)")
-
-        def rhs(numer_lo, numer_hi, numer, value):     # numer / (sup / 2) with [lo, hi] from the sup's bracket
-            lo = math.inf if bound.upper <= 0 else _down(2 * numer_lo / _up(bound.upper))
-            hi = math.inf if bound.lower <= 0 else _up(2 * numer_hi / _down(bound.lower))
-            return {"value": math.inf if value <= 0 else 2 * numer / value, "lo": lo, "hi": hi}
-
-        prhs = rhs(vn_lo, vn_hi, math.sqrt(vv), bound.lower)
-        crhs = rhs(vv_lo, vv_hi, vv, bound.lower)
-
-        def status(r):
-            if gap == 0 or r["hi"] == 0:
-                return "not met"
-            if gap_hi < r["lo"]:
-                return "holds"
-            if gap_lo > r["hi"]:
-                return "not met"
-            return "undecided"
-
-        printed, corrected = status(prhs), status(crhs)
+        bound, how, prhs, crhs, printed, corrected = _numeric_conditions(
+            progs, X0, v_iv, (vn_lo, vn_hi), (vv_lo, vv_hi), vv, s0, st, rtol=rtol, max_pieces=max_pieces)
         # descent along v: alpha = C1 / (2 C2) of the quadratic model, J_st enclosed at both points
         alpha_step = C1 / (2 * C2) if C2 > 0 else math.copysign(1e-2, C1) / max(math.sqrt(vv), 1e-30)
         J_at = lambda w, r=None: progs.J_enc(_box(w, r), st)
         d_iv = iv_sub(J_at(w0 - alpha_step * v_bar), J_at(w0))
         descent = True if float(d_iv.hi) < 0 else None            # a difference within rounding decides nothing
         # the conclusion on the known critical points of J_st
-        wt_rows = []
         J0_box = J_at(w0, cert0["radius"])
-        for wt in fam.wt or []:
-            wtf = np.asarray(wt.ravel(), np.float64)
-            ct = critical_certificate(progs, wtf, st, fam.certify)
-            dj = iv_sub(J_at(wtf, ct["radius"]), J0_box)
-            dm = mid(dj)
-            wt_rows.append({"max_abs_grad": ct["max_abs_grad"], "gradient_test": ct["text"],
-                            "critical": ct["verified"], "consistent_with_critical": ct["verified"] is True,
-                            "J_st_wt_minus_J_st_w0": _iv(dm, float(dj.lo), float(dj.hi))})
+        wt_rows = [_wt_row(progs, fam, np.asarray(wt.ravel(), np.float64), st, J_at, J0_box) for wt in fam.wt or []]
     refuting = [r for r in wt_rows if r["critical"] is True and r["J_st_wt_minus_J_st_w0"]["lo"] >= 0]
     conclusion = decide(fails=bool(refuting))
     res0_mag = float(iv_mag(res0_iv))

@@ -121,7 +121,8 @@ TARGETS = {
         tests=["tests/proofs/test_hypotheses.py::test_vector_linear_example_corrected_bound_is_free_of_V",
                f"{T}::test_linear_example_v_scaling"]),
     "(shared) Theorem-1 checker": dict(
-        code=[("_family", "critical_certificate"), ("_family", "_theorem1_numeric"), ("_family", "_theorem1_sympy"),
+        code=[("_family", "critical_certificate"), ("_family", "_theorem1_numeric"), ("_family", "_numeric_conditions"),
+              ("_family", "_wt_row"), ("_family", "_theorem1_sympy"),
               ("_family", "_critical_points"), ("_family", "_conditions_exact"), ("_family", "exact_sup_abs"),
               ("_family", "_zero_proven"), ("_interval", "krawczyk"), ("_mc", "trivial_point_certificate"),
               ("_mc", "symmetric_draws")],

@@ -169,9 +169,11 @@ def objective(key, params, x, y, physics: Physics, arch: Architecture, K2: int =
     return estimate_from_samples(per_input_loss(key, params, x, y, physics, arch, K2))
 
 
-def paired_difference(key, params_a, params_b, x, y, physics: Physics, arch: Architecture, K2: int = 1) -> Estimate:
-    """J(w_a) - J(w_b) with common random numbers (same inputs, same draws)."""
-    losses = per_input_scores(key, [params_a, params_b], x, y, None, physics, arch, K2)[0]
+def paired_difference(key, params_a, params_b, x, y, physics: Physics, arch: Architecture, K2: int = 1,
+                      chunk: int = 4096) -> Estimate:
+    """J(w_a) - J(w_b) with common random numbers (same inputs, same draws; ``chunk``: samples per
+    block of draws, as in :func:`per_input_scores`)."""
+    losses = per_input_scores(key, [params_a, params_b], x, y, None, physics, arch, K2, chunk)[0]
     return estimate_from_samples(losses[0] - losses[1])
 
 

@@ -282,7 +282,7 @@ def _claim_test_train(deep, imp_d) -> dict:
         ok = np.isfinite(tr) & np.isfinite(te)
         r = float(np.corrcoef(tr[ok], te[ok])[0, 1]) if ok.sum() > 2 and np.std(tr[ok]) > 0 and np.std(
             te[ok]) > 0 else float("nan")
-        m, h, n = _ci((imp_t[var] - imp_d[var]).values)
+        m, h, _ = _ci((imp_t[var] - imp_d[var]).values)
         rows[var] = {"train_mean": float(np.nanmean(tr)), "test_mean": float(np.nanmean(te)),
                      "cell_correlation": r, "test_minus_train_mean": m, "test_minus_train_ci95": h}
     close = {var: abs(v["test_mean"] - v["train_mean"]) <= 0.25 * max(abs(v["train_mean"]), abs(v["test_mean"]))

@@ -826,7 +826,6 @@ def _wt_row(progs, fam: Family, wtf, st, J_at, J0_box) -> dict:
 
 def _theorem1_numeric(fam: Family, s0, st, *, confidence, rtol, max_pieces) -> dict:
     import jax
-    import jax.numpy as jnp
 
     from ._interval import IV, iv_dot, iv_mag, iv_mid_rad, iv_mig, iv_sub
 

@@ -188,22 +188,10 @@ def theorem2_guarantee(key=None, precise: bool = False, *, quick: bool = False) 
     key = jax.random.PRNGKey(2) if key is None else key
     exact = theorem2_printed()
     onn = _theorem2_correction(key, precise, quick)
-    st_, p, th1, rows, inside, K_ok, hyp_th1, corr_v = (onn[k] for k in ("setup", "problem", "theorem1", "rows", "inside",
-                                                                       "K_ok", "hyp_th1", "verdict"))
-    kappas, lev, mc, K2e = onn["kappas"], onn["level"], onn["mc"], onn["K2e"]
+    st_, corr_v = onn["setup"], onn["verdict"]
     hyps, ex_rows, refuting = _theorem2_exact_rows(exact)
     verdict = decide(fails=bool(refuting), holds=False)
     excluded = all(r["res"]["corrected_condition"] != "holds" for r in exact)
-    hyps += [dict(h, name=f"tanh ONN (correction): {h['name']}", needed_for_refutation=False) for h in hyp_th1] + [
-        hypothesis("tanh ONN (correction): eta_small", "eta sufficiently small (the proof: the step lies in Table "
-                   "alpha-values' range)", bool(inside), f"{len(inside)} of {len(kappas)} eta inside (0, C1/C2) "
-                   f"(C1, C2 enclosed on the finite-mean objective)", needed_for_refutation=False),
-        hypothesis("tanh ONN (correction): K_large", "K1, K2 sufficiently large", K_ok,
-                   f"K1 = all {p.x.shape[0]} points of mu, K2 = {K2e} draws per input in Eval, D^[0] from "
-                   f"{mc(K2=64 if precise else 32)['K2']} draws per input: at every eta inside the range, every comparison "
-                   f"Algorithm 1 made with Eval has the sign of the true difference, which exceeds z1 standard errors "
-                   f"of Eval's difference (one-sided, Bonferroni over the comparisons of each eta)",
-                   needed_for_refutation=False)]
     correction = None
     if corr_v == "holds" and excluded:
         correction = ("add the corrected Theorem-1 condition 0 < |st - s0| < ||v||_2^2 / (1/2 sup_zeta |(d2/ds2 grad "
@@ -219,27 +207,20 @@ def theorem2_guarantee(key=None, precise: bool = False, *, quick: bool = False) 
         "the printed D^[0])",
         verdict,
         "as printed, exact families (sympy): " + "; ".join(ex_rows)
-        + f". Refuting instances inside the printed hypotheses: {refuting or 'none'}. The correction, on the tanh ONN "
-          f"{p.arch}, n = {p.x.shape[0]} teacher points, s0 = {st_.s0:g}, st = {st_.st:g} (Theorem 1's printed / "
-          f"corrected condition: {th1['printed_condition']} / {th1['corrected_condition']}, rigorous enclosures on the "
-          f"finite-mean objective), w0 a critical point of that objective at s0, printed D^[0]; eta chosen as "
-          f"fractions of ||w0||/||D^[0]|| (no quantity at st): "
-        + "; ".join(rows)
-        + f": {corr_v}. Paired fresh-draw tests; {lev.text()}. The printed D^[0] estimates -(s0/2) d/ds grad J "
-          f"(d0_limit), a rescaling the two-sided search absorbs",
+        + f". Refuting instances inside the printed hypotheses: {refuting or 'none'}. " + onn["text"],
         correction=correction,
         counterexample=None if verdict != "fails" else {
             "instances": [{"family": r["name"], "s0": r["s0"], "st": str(r["st"]), "global_minimiser_of_J_st": r["global_min"],
                            "algorithm1_J_st_difference": [float(d) for _, d, _ in r["runs"]]}
                           for r in exact if f"{r['name']}.py at s0 = {r['s0']}, st = {r['st']}" in refuting]},
-        hypotheses=hyps)
-
+        hypotheses=hyps + onn["hypotheses"])
 
 
 def _theorem2_correction(key, precise: bool, quick: bool) -> dict:
     """The correction of thm:ft-guarantee on the tanh ONN: Algorithm 1 (printed D^[0]) at steps eta
     set without knowledge of st, each run's J_st change tested and every comparison it made with
-    Eval checked against J_st ("K1, K2 large"); the corrected verdict and what it rests on."""
+    Eval checked against J_st ("K1, K2 large"). Returns {"setup", "verdict", "hypotheses" (the ONN's, none
+    needed for a refutation), "text" (the evidence)}."""
     st_ = _onn.setup(precise, quick=quick)
     p, th1 = st_.problem, st_.theorem1
     kappas = (0.004, 0.002)
@@ -298,8 +279,25 @@ def _theorem2_correction(key, precise: bool, quick: bool) -> dict:
     K_ok = bool(resolved_inside) and all(resolved_inside)
     ok = hyps_ok and bool(inside) and K_ok
     corr_v = decide(fails=ok and any(v_ == "fails" for v_ in inside), holds=ok and all(v_ == "holds" for v_ in inside))
-    return {"setup": st_, "problem": p, "theorem1": th1, "rows": rows, "inside": inside, "K_ok": K_ok,
-            "hyp_th1": hyp_th1, "verdict": corr_v, "kappas": kappas, "level": lev, "mc": mc, "K2e": K2e}
+    hyps = [dict(h, name=f"tanh ONN (correction): {h['name']}", needed_for_refutation=False) for h in hyp_th1] + [
+        hypothesis("tanh ONN (correction): eta_small", "eta sufficiently small (the proof: the step lies in Table "
+                   "alpha-values' range)", bool(inside), f"{len(inside)} of {len(kappas)} eta inside (0, C1/C2) "
+                   f"(C1, C2 enclosed on the finite-mean objective)", needed_for_refutation=False),
+        hypothesis("tanh ONN (correction): K_large", "K1, K2 sufficiently large", K_ok,
+                   f"K1 = all {p.x.shape[0]} points of mu, K2 = {K2e} draws per input in Eval, D^[0] from "
+                   f"{mc(K2=64 if precise else 32)['K2']} draws per input: at every eta inside the range, every comparison "
+                   f"Algorithm 1 made with Eval has the sign of the true difference, which exceeds z1 standard errors "
+                   f"of Eval's difference (one-sided, Bonferroni over the comparisons of each eta)",
+                   needed_for_refutation=False)]
+    text = (f"The correction, on the tanh ONN "
+            f"{p.arch}, n = {p.x.shape[0]} teacher points, s0 = {st_.s0:g}, st = {st_.st:g} (Theorem 1's printed / "
+            f"corrected condition: {th1['printed_condition']} / {th1['corrected_condition']}, rigorous enclosures on the "
+            f"finite-mean objective), w0 a critical point of that objective at s0, printed D^[0]; eta chosen as "
+            f"fractions of ||w0||/||D^[0]|| (no quantity at st): "
+            + "; ".join(rows)
+            + f": {corr_v}. Paired fresh-draw tests; {lev.text()}. The printed D^[0] estimates -(s0/2) d/ds grad J "
+              f"(d0_limit), a rescaling the two-sided search absorbs")
+    return {"setup": st_, "verdict": corr_v, "hypotheses": hyps, "text": text}
 
 
 def _theorem2_exact_rows(exact: list):

@@ -161,15 +161,8 @@ def paired_difference_on_mu(key, params_a, params_b, x, y, physics, arch, K2: in
     """
     kA, kB = jax.random.split(key)
     h = max(K2 // 2, 1)
-
-    def diff(k):
-        if chunk == 4096:                 # gt.paired_difference's own chunk: its numbers (one vmapped pass)
-            return gt.paired_difference(k, params_a, params_b, x, y, physics, arch, K2=h).samples
-        # the same draws for both (same key), another chunk (per_input_loss gives paired_difference's halves)
-        la = gt.per_input_loss(k, params_a, x, y, physics, arch, h, chunk)
-        return la - gt.per_input_loss(k, params_b, x, y, physics, arch, h, chunk)
-
-    dA, dB = diff(kA), diff(kB)
+    dA, dB = (gt.paired_difference(k, params_a, params_b, x, y, physics, arch, K2=h, chunk=chunk).samples
+              for k in (kA, kB))
     n = dA.shape[0]
     mean = float(0.5 * (dA.mean() + dB.mean()))
     se = float(np.sqrt(np.sum((dA - dB) ** 2)) / (2 * n))

@@ -174,12 +174,21 @@ def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
     # a residual centred within its input is biased against its neighbour of the same input by
     # m = -1 / (r - 1) without memory (the deals' mean) and by m (1 + alpha) with it (Nickell's bias
     # of a within regression): raw = alpha + m (1 + alpha)
-    alpha = (raw - m) / (1.0 + m) if 1.0 + m > 0.5 else raw - m
+    scale = 1.0 + m if 1.0 + m > 0.5 else 1.0
+    alpha, alpha_se = (raw - m) / scale, sd / scale
     row = row_of("memory", "lag", p, abs(z), alpha,
                  f"the shots of layer {layer} carry the shot acquired before them: {alpha:+.3g} of its value "
-                 f"(+- {sd:.2g}; beyond the shot {CONTROL} before, z = {z:.1f} over {PERMUTATIONS} deals of "
+                 f"(+- {alpha_se:.2g}; beyond the shot {CONTROL} before, z = {z:.1f} over {PERMUTATIONS} deals of "
                  f"each input's shots to its times)")
-    return Lag(row, float(alpha), float(sd), p, order)
+    row["effect_se"] = float(alpha_se)
+    return Lag(row, float(alpha), float(alpha_se), p, order)
+
+
+def previous_means(Y, lag: Lag) -> np.ndarray:
+    """(n, d): per input and neuron the mean of its shots' previous acquisitions' values -- how the
+    shots' means move with alpha in :func:`undo` (minus this per unit of alpha)."""
+    n, r, d = Y.shape
+    return _lagged(np.asarray(Y, np.float64).reshape(n * r, d), lag.order, 1).reshape(n, r, d).mean(1)
 
 
 def undo(Y, lag: Lag) -> np.ndarray:

@@ -140,6 +140,21 @@ def test_a_memory_is_found_estimated_and_taken_out(order):
     assert [m["mechanism"] for m in _first(ident)] == ["memory"]
 
 
+def test_a_memory_taken_out_leaves_its_alpha_s_error_in_the_map():
+    """Shots of an input taken one after the other: undoing the memory scales each input's mean by
+    (1 - alpha read), so the map read again is off by alpha's error along its gain -- the output's
+    gain standard error is at least alpha's times the share of an input's shots whose predecessor
+    is of the same input (without it the map's own error, half as large here, made a read alpha off
+    by 3.5 of its errors a readout nonlinearity at p = 1e-61 on a null file)."""
+    r = 48
+    ident = identify(sim(1, order="blocked", memory=0.1, r=r))
+    lag = {int(row["layer"]): row for row in ident.rows() if row["test"] == "lag"}
+    out = ident.layers[-1]
+    assert lag[out.layer]["p_adj"] < 0.01 and lag[out.layer]["effect_se"] > 0
+    assert out.gain_se >= 0.9 * (r - 1) / r * lag[out.layer]["effect_se"], (out.gain_se, lag[out.layer])
+    assert abs(out.gain - 1.0) < 3 * out.gain_se
+
+
 def test_without_times_memory_cannot_be_tested_and_the_row_says_so():
     meas = sim(2, memory=0.2)
     ident = identify(Measurement(meas.x, meas.y, meas.params, meas.taps, None))

@@ -213,8 +213,9 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     if memory and t is not None:
         lag = _memory.lag_test(l, _within(fit[8], fit[5], lay.A), lay.Y, t, _row, fit[5], lay.A)
         if lag.p < _memory.UNDO_P:
-            inner = identify_layer(dataclasses.replace(lay, Y=_memory.undo(lay.Y, lag), offset=None), act, s_guess,
-                                   t, depth, taps, trends, memory=False)
+            undone = dataclasses.replace(lay, Y=_memory.undo(lay.Y, lag), offset=None,
+                                         memory=(_memory.previous_means(lay.Y, lag), lag.alpha_se))
+            inner = identify_layer(undone, act, s_guess, t, depth, taps, trends, memory=False)
             return dataclasses.replace(inner, rows=inner.rows + (lag.row,))
         extra_rows.append(lag.row)
     elif memory:

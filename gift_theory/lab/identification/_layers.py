@@ -85,6 +85,11 @@ class _Layer:
     #: the smallest variance a cell's shots can be read with (:func:`~._discrete.resolution_var`):
     #: a shot's spread below it is not resolved (a quantized readout's cells of identical shots)
     res_var: float = 0.0
+    #: (P, se) or None: the shots had a memory taken out (:func:`.._memory.undo`), alpha read with
+    #: standard error ``se``; P (n, d) per input and neuron the mean of its shots' previous
+    #: acquisitions. The means moved by -alpha P, so alpha's error is an error of the map (acquired
+    #: input by input, P is about the mean itself: a gain) that its covariance and tests carry
+    memory: tuple | None = None
 
     @property
     def mean_factor(self) -> float:

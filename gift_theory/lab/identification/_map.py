@@ -102,10 +102,15 @@ def _score_omnibus(lay: _Layer, act: str, s2: float, tt, Chat, obs, r: float, al
     _, m0, g0, _ = _mean_model(lay, act, lay.W, lay.b, s2, _unit_var(lay, lay.W), tt, drift0, want_var=False)
     e = lay.Y.mean(1) - m0.mean(1)  # (n, d)
     X = _design(lay, g0, tt)
+    P = None if lay.memory is None else lay.memory[0]  # alpha's error moves the means along P
     if tt is not None:  # the trends free: both the residual and the design projected off them
         XT, X = X[:, :, p + 1:], X[:, :, :p + 1]
         Gi = np.linalg.inv(np.einsum("nia,nib->iab", XT, XT) + 1e-12 * np.eye(XT.shape[2]))
-        e = e - np.einsum("nia,ia->ni", XT, np.einsum("iab,ib->ia", Gi, np.einsum("nib,ni->ib", XT, e)))
+
+        def off(v):
+            return v - np.einsum("nia,ia->ni", XT, np.einsum("iab,ib->ia", Gi, np.einsum("nib,ni->ib", XT, v)))
+
+        e, P = off(e), (None if P is None else off(P))
         X = X - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, X))
     alive = np.asarray(alive, int)
     if alive.size == 0:
@@ -113,9 +118,12 @@ def _score_omnibus(lay: _Layer, act: str, s2: float, tt, Chat, obs, r: float, al
     e, X = e[:, alive], X[:, alive]
     da, kk = X.shape[1], X.shape[2]
     U = np.einsum("nip,ni->ip", X, e)
+    wm = None if P is None else lay.memory[1] * np.einsum("nip,ni->ip", X, P[:, alive])
     if Chat is not None and da * kk <= FULL_COV_MAX:
         Ca = Chat[:, alive][:, :, alive]
         V = _meat(Ca / r, X).reshape(da * kk, da * kk)
+        if wm is not None:
+            V = V + np.outer(wm.ravel(), wm.ravel())
         w, Q = np.linalg.eigh(V)
         keep = w > 1e-10 * max(w.max(), 1e-300)
         q = float(np.sum((Q[:, keep].T @ U.ravel()) ** 2 / w[keep]))
@@ -123,7 +131,8 @@ def _score_omnibus(lay: _Layer, act: str, s2: float, tt, Chat, obs, r: float, al
     ps = np.empty(da)
     for a_, i in enumerate(alive):
         Xi = X[:, a_]
-        w, Q = np.linalg.eigh(Xi.T @ (Xi * (obs[:, i] / r)[:, None]))
+        Vi = Xi.T @ (Xi * (obs[:, i] / r)[:, None])
+        w, Q = np.linalg.eigh(Vi if wm is None else Vi + np.outer(wm[a_], wm[a_]))
         keep = w > 1e-10 * max(w.max(), 1e-300)
         ps[a_] = _chi2(float(np.sum((Q[:, keep].T @ U[a_]) ** 2 / w[keep])), int(keep.sum()), nu)[0]
     pmin = float(min(1.0, da * ps.min()))
@@ -161,11 +170,16 @@ def _score_given_shape(lay: _Layer, act: str, s2: float, tt, Chat, r: float, ali
     poly = np.polynomial.legendre.legvander(u, SHAPE_DEGREE)[..., 1:]  # (n, r, da, SHAPE_DEGREE)
     H = np.concatenate([Hb, poly.mean(1)], axis=-1)  # (n, da, B + SHAPE_DEGREE)
     e, X = e[:, alive], X[:, alive]
+    P = None if lay.memory is None else lay.memory[0][:, alive]  # alpha's error moves the means along P
     da, k = X.shape[1], X.shape[2]
     if tt is not None:  # the time trends are nuisance parameters too, per neuron (as in the omnibus)
         XT, X = X[:, :, p + 1:], X[:, :, :p + 1]
         Gi = np.linalg.inv(np.einsum("nia,nib->iab", XT, XT) + 1e-12 * np.eye(XT.shape[2]))
-        e = e - np.einsum("nia,ia->ni", XT, np.einsum("iab,ib->ia", Gi, np.einsum("nib,ni->ib", XT, e)))
+
+        def off(v):
+            return v - np.einsum("nia,ia->ni", XT, np.einsum("iab,ib->ia", Gi, np.einsum("nib,ni->ib", XT, v)))
+
+        e, P = off(e), (None if P is None else off(P))
         X = X - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, X))
         H = H - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, H))
         k = X.shape[2]
@@ -177,13 +191,20 @@ def _score_given_shape(lay: _Layer, act: str, s2: float, tt, Chat, r: float, ali
     Hs = H.reshape(n * da, -1)
     Pi = np.linalg.pinv(Hs.T @ Hs)
     G = Pi @ np.einsum("nib,nik->bik", H, X).reshape(H.shape[2], da * k)  # (c, da k)
-    es = e - H @ (Pi @ (Hs.T @ e.reshape(-1)))  # (n, da)
-    U = np.einsum("nik,ni->ik", X, es).reshape(-1) - G.T @ (Hs.T @ es.reshape(-1))
+
+    def score(v):  # the score of residual means v (n, da), the shape profiled out
+        vs = v - H @ (Pi @ (Hs.T @ v.reshape(-1)))
+        return np.einsum("nik,ni->ik", X, vs).reshape(-1) - G.T @ (Hs.T @ vs.reshape(-1))
+
+    U = score(e)
     Ca = Chat[:, alive][:, :, alive] / r
     CH = np.matmul(Ca, H)  # (n, da, c)
     HCB = np.einsum("nic,nik->cik", CH, X).reshape(H.shape[2], da * k)  # sum_n H_n^T C_n B_n
     HCH = np.einsum("nic,nid->cd", H, CH)
     V = (_meat(Ca, X).reshape(da * k, da * k) - G.T @ HCB - HCB.T @ G + G.T @ HCH @ G)
+    if P is not None:
+        wm = score(P)
+        V = V + lay.memory[1] ** 2 * np.outer(wm, wm)
     w, Q = np.linalg.eigh(V)
     keep = w > 1e-10 * max(w.max(), 1e-300)
     q = float(np.sum((Q[:, keep].T @ U) ** 2 / w[keep]))

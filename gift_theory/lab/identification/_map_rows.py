@@ -43,6 +43,11 @@ def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, trend=None, 
         from .. import _time
 
         _time.add_cov(S, full, slow.cov, k)
+    if lay.memory is not None:  # alpha's error, through the means it moved (-alpha P), rank one
+        P, se_a = lay.memory
+        Binv = np.linalg.inv(_gram(X) + 1e-12 * np.eye(k))
+        v = np.einsum("iab,ib->ia", Binv, np.einsum("nib,ni->ib", X, P))  # (d, k): theta per unit of alpha
+        S += se_a ** 2 * (np.outer(v.ravel(), v.ravel()) if full else v[:, :, None] * v[:, None, :])
     r = lay.Y.shape[1]
     lev = np.einsum("nip->n", X ** 2)
     nu = float(lev.sum() ** 2 / max(np.sum(lev ** 2), 1e-300)) * max(r - 1, 1)
@@ -119,6 +124,9 @@ def shape_row(lay: _Layer, E, z, X, Chat, obs, alive, k: int, nu: float, cls: st
         Vg = Ht.reshape(-1, Ht.shape[2]).T @ CH.reshape(-1, Ht.shape[2])
     else:  # a wide layer: the neurons' noise taken as uncorrelated here (correlated_noise tests that)
         Vg = np.einsum("ni,nib,nic->bc", obs[:, alive] * mf / r, Ht, Ht, optimize=True)
+    if lay.memory is not None:  # alpha's error moved the means along P (see _Layer.memory)
+        wg = np.einsum("nib,ni->b", Ht, lay.memory[0][:, alive])
+        Vg = Vg + lay.memory[1] ** 2 * np.outer(wg, wg)
     w_, U_ = np.linalg.eigh(Vg)
     keep = w_ > 1e-9 * max(w_.max(), 1e-300)
     qs = float(np.sum((U_[:, keep].T @ Sg) ** 2 / w_[keep]))

@@ -8,11 +8,11 @@ numeric; reference §5b), ``theorem1_check`` on one's own model, data and traine
 
 from ._family import Family as Family
 from ._family import FamilyError as FamilyError
-from ._family import contract_json as contract_json
 from ._family import family as family
 from ._family import load_family as load_family
-from ._family import render as render_family_result
-from ._family import theorem1 as theorem1
+from ._family_check import contract_json as contract_json
+from ._family_check import render as render_family_result
+from ._family_check import theorem1 as theorem1
 from ._gift import algorithm1 as algorithm1
 from ._record import FAMILY_ALPHA as FAMILY_ALPHA
 from ._record import VERDICTS as VERDICTS

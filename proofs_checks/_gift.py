@@ -166,7 +166,8 @@ def theorem2_printed(rtol: float = 0.02):
     checker: s0, st > 0, 0 < |st - s0|, w0 critical, the printed condition, {grad J_st = 0} nonempty)
     and whether w0 is a global minimiser of J_st (then no output of Algorithm 1, for any eta, K1, K2,
     lowers J_st), with Algorithm 1 run at three eta."""
-    from ._family import load_family, theorem1
+    from ._family import load_family
+    from ._family_check import theorem1
     from .families import path
 
     rows = []

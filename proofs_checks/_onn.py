@@ -14,7 +14,8 @@ from jax.flatten_util import ravel_pytree
 import gift_theory as gt
 
 from . import _mc
-from ._family import family, theorem1
+from ._family import family
+from ._family_check import theorem1
 from ._record import hypothesis
 
 _CACHE: dict = {}

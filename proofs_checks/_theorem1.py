@@ -2,7 +2,7 @@
 steps of its proof (eqs. taylor_nabla_w_ENO, non_zero_direction, taylor_expanded_gift_descent,
 Table alpha-values), its conclusion, and :func:`theorem1_check` for one's own ONN.
 
-The checks evaluate the theorem with :func:`proofs_checks.theorem1` (``_family``) on exact
+The checks evaluate the theorem with :func:`proofs_checks.theorem1` (:mod:`._family_check`) on exact
 sympy families (:mod:`proofs_checks.families`) and on the tanh ONN of :mod:`._onn`.
 """
 
@@ -19,7 +19,8 @@ import sympy as sp
 import gift_theory as gt
 
 from . import _mc, _onn
-from ._family import family, load_family, render, theorem1
+from ._family import family, load_family
+from ._family_check import render, theorem1
 from ._mc import trivial_critical_point as trivial_critical_point
 from ._record import (
     decide,

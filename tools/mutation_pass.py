@@ -121,10 +121,11 @@ TARGETS = {
         tests=["tests/proofs/test_hypotheses.py::test_vector_linear_example_corrected_bound_is_free_of_V",
                f"{T}::test_linear_example_v_scaling"]),
     "(shared) Theorem-1 checker": dict(
-        code=[("_family", "critical_certificate"), ("_family", "_theorem1_numeric"), ("_family", "_numeric_conditions"),
-              ("_family", "_wt_row"), ("_family", "_theorem1_sympy"),
-              ("_family", "_critical_points"), ("_family", "_conditions_exact"), ("_family", "exact_sup_abs"),
-              ("_family", "_zero_proven"), ("_interval", "krawczyk"), ("_mc", "trivial_point_certificate"),
+        code=[("_family_numeric", "critical_certificate"), ("_family_numeric", "_theorem1_numeric"),
+              ("_family_numeric", "_numeric_conditions"), ("_family_numeric", "_wt_row"),
+              ("_family_sympy", "_theorem1_sympy"), ("_family_sympy", "_conditions_exact"),
+              ("_exact", "_critical_points"), ("_exact", "exact_sup_abs"),
+              ("_exact", "_zero_proven"), ("_interval", "krawczyk"), ("_mc", "trivial_point_certificate"),
               ("_mc", "symmetric_draws")],
         tests=["tests/proofs/test_family.py::test_quartic_exact",
                "tests/proofs/test_interval.py::test_krawczyk_certifies_a_simple_zero_and_refuses_a_degenerate_one",
@@ -153,7 +154,8 @@ SLIPS = [
 ]
 
 #: modules whose change can alter the shared ONN setup (proofs_checks._onn._CACHE is then rebuilt)
-_SETUP_MODULES = {"_family", "_interval", "_mc", "_onn", "_symbolic"}
+_SETUP_MODULES = {"_family", "_family_check", "_family_numeric", "_family_result", "_interval", "_mc", "_onn",
+                  "_symbolic"}
 
 _CMP = {ast.Lt: ast.LtE, ast.LtE: ast.Lt, ast.Gt: ast.GtE, ast.GtE: ast.Gt, ast.Eq: ast.NotEq, ast.NotEq: ast.Eq,
         ast.Is: ast.IsNot, ast.IsNot: ast.Is, ast.In: ast.NotIn, ast.NotIn: ast.In}

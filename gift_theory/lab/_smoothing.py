@@ -22,6 +22,8 @@ its own sd:
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import special
 
@@ -57,16 +59,62 @@ _Q = _WU / (np.exp(2.0 * _U) + 1.0)
 _SECH2 = _WU / np.cosh(_U) ** 2
 
 
+#: cells per call of the compiled wide rule (the last chunk padded: one program for every size)
+WIDE_CHUNK = 8192
+
+
+@functools.lru_cache(maxsize=1)
+def _wide_program():
+    """The wide rule compiled in float64: XLA's vectorised exp runs the (cells, nodes) Gaussian
+    densities about three times as fast as numpy's (the identification of a 784-500-... network
+    with taps spent 69 % of its time here)."""
+    import jax
+    import jax.numpy as jnp
+
+    with jax.enable_x64(True):
+        U, Q, S2 = (jnp.asarray(v, jnp.float64) for v in (_U, _Q, _SECH2))
+
+    def rule(z, sd):
+        zc, sc = z[:, None], sd[:, None]
+        c = 1.0 / (sc * np.sqrt(2.0 * np.pi))
+        a = jnp.exp(-0.5 * ((U - zc) / sc) ** 2) * c
+        b = jnp.exp(-0.5 * ((U + zc) / sc) ** 2) * c
+        return jax.scipy.special.erf(z / (sd * np.sqrt(2.0))) - 2.0 * ((a - b) @ Q), (a + b) @ S2
+
+    return jax.jit(rule)
+
+
 def _tanh_wide(z, sd):
     """(E tanh U, E tanh' U) for U ~ N(z, sd^2), sd > NARROW, over u (1-D arrays): both from the
     same two Gaussian densities at the nodes u >= 0 (sech^2 is even: its integral over
-    [-U_MAX, U_MAX] folds onto [0, U_MAX]), chunked to bound the (cells, nodes) temporaries."""
+    [-U_MAX, U_MAX] folds onto [0, U_MAX]), in float64, chunked to bound the (cells, nodes)
+    temporaries (:func:`_tanh_wide_numpy` is the same rule in numpy)."""
+    if z.size < WIDE_CHUNK // 4:  # a few cells: numpy's loop costs less than a padded chunk
+        return _tanh_wide_numpy(z, sd)
+    import jax
+
     m, g = np.empty(z.shape), np.empty(z.shape)
-    for c0 in range(0, z.size, 8192):
-        zc, sc = z[c0:c0 + 8192, None], sd[c0:c0 + 8192, None]
+    rule = _wide_program()
+    with jax.enable_x64(True):  # thread-local: the caller's other JAX work keeps its dtypes
+        for c0 in range(0, z.size, WIDE_CHUNK):
+            zc, sc = z[c0:c0 + WIDE_CHUNK], sd[c0:c0 + WIDE_CHUNK]
+            k = zc.size
+            if k < WIDE_CHUNK:  # padded with a harmless cell (z = 0, sd = 1)
+                zc = np.concatenate([zc, np.zeros(WIDE_CHUNK - k)])
+                sc = np.concatenate([sc, np.ones(WIDE_CHUNK - k)])
+            mc, gc = rule(zc, sc)
+            m[c0:c0 + k], g[c0:c0 + k] = np.asarray(mc)[:k], np.asarray(gc)[:k]
+    return m, g
+
+
+def _tanh_wide_numpy(z, sd):
+    """:func:`_tanh_wide` in numpy (the reference its compiled form is tested against)."""
+    m, g = np.empty(z.shape), np.empty(z.shape)
+    for c0 in range(0, z.size, WIDE_CHUNK):
+        zc, sc = z[c0:c0 + WIDE_CHUNK, None], sd[c0:c0 + WIDE_CHUNK, None]
         a, b = _phi(_U - zc, sc), _phi(_U + zc, sc)
-        m[c0:c0 + 8192] = special.erf(zc[:, 0] / (sc[:, 0] * np.sqrt(2.0))) - 2.0 * ((a - b) @ _Q)
-        g[c0:c0 + 8192] = (a + b) @ _SECH2
+        m[c0:c0 + WIDE_CHUNK] = special.erf(zc[:, 0] / (sc[:, 0] * np.sqrt(2.0))) - 2.0 * ((a - b) @ _Q)
+        g[c0:c0 + WIDE_CHUNK] = (a + b) @ _SECH2
     return m, g
 
 

@@ -115,13 +115,6 @@ def _partial(e, x1, xL, v):
     return (gLL * a1 - g1L * aL) / det if det > 0 else 0.0
 
 
-def _centred(x, n, r):
-    """(N, d) values less their mean over the shots of the input they stand for (slot i r + j: input i)."""
-    d = x.shape[1]
-    x = x.reshape(n, r, d)
-    return (x - x.mean(1, keepdims=True)).reshape(n * r, d)
-
-
 def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
     """The memory test of one layer (see the module). ``E`` (n, r, d) the residuals (with taps
     less their regression on the shot's own input), ``Y`` (n, r, d) the measured shots, ``t``
@@ -139,14 +132,32 @@ def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
     order = _order(t)
     first = np.zeros(N, bool)
     first[order[:CONTROL]] = True  # shots without a full history carry no term
+    # the deals' statistic on arrays scaled by 1 / sqrt(v) per neuron (every sum of _partial is
+    # then a plain dot product), each shot's lagged value one gather through the slot acquired
+    # ``lag`` before it (a zero row past the end for the first shots)
+    w = 1.0 / np.sqrt(v)
+    es, Ys = e * w, np.concatenate([Yf * w, np.zeros((1, d))])
+    before = {lag: np.full(N, N) for lag in (1, CONTROL)}
+    for lag, idx in before.items():
+        idx[order[lag:]] = order[:-lag]
 
-    def lagged(Yv):
-        x1, xL = _centred(_lagged(Yv, order, 1), n, r), _centred(_lagged(Yv, order, CONTROL), n, r)
-        x1[first], xL[first] = 0.0, 0.0
-        return x1, xL
+    def stat_of(perm):
+        """_partial of the deal ``perm`` (slot s holds record perm[s]; None: the campaign as taken)."""
+        ep = es if perm is None else es[perm]
+        xs = []
+        for lag in (1, CONTROL):
+            src = before[lag] if perm is None else np.where(before[lag] < N, perm[np.minimum(before[lag], N - 1)], N)
+            x = Ys[src].reshape(n, r, d)
+            x = (x - x.mean(1, keepdims=True)).reshape(N, d)
+            x[first] = 0.0
+            xs.append(x)
+        x1, xL = xs
+        a1, aL = float(np.vdot(ep, x1)), float(np.vdot(ep, xL))
+        g11, g1L, gLL = float(np.vdot(x1, x1)), float(np.vdot(x1, xL)), float(np.vdot(xL, xL))
+        det = g11 * gLL - g1L * g1L
+        return (gLL * a1 - g1L * aL) / det if det > 0 else 0.0
 
-    x1, xL = lagged(Yf)
-    stat = _partial(e, x1, xL, v)
+    stat = stat_of(None)
     # deals of each input's shots to its times: within each input a random permutation of its r shots
     rng = np.random.default_rng([48, int(layer), n, r, d])
     base = (np.arange(n) * r)[:, None]
@@ -155,7 +166,7 @@ def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
         perm = (base + rng.permuted(np.broadcast_to(np.arange(r), (n, r)), axis=1)).ravel()
         # a deal moves each shot's whole record: its residual and its value (the lagged values
         # are those of the shots dealt to the earlier times)
-        null[b] = _partial(e[perm], *lagged(Yf[perm]), v)
+        null[b] = stat_of(perm)
     m, sd = float(null.mean()), float(null.std(ddof=1))
     z = (stat - m) / sd if sd > 0 else 0.0
     p = float(min(1.0, 2.0 * stats.norm.sf(abs(z))))

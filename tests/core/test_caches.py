@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gift_theory import _cachedir, _memo
-from gift_theory._params import Layer
+from gift_theory import Layer
 
 
 @pytest.fixture

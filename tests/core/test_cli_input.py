@@ -116,7 +116,7 @@ def test_unknown_names_get_a_did_you_mean(capsys, argv, suggestion):
 
 
 def test_did_you_mean_says_nothing_when_nothing_is_close():
-    from gift_theory.cli._common import did_you_mean
+    from gift_theory.cli import did_you_mean
 
     msg = "gift: unknown command 'zzzz'; commands: demo, train"
     assert did_you_mean(msg) == msg
@@ -145,7 +145,7 @@ def test_every_flag_has_help_and_help_points_to_the_reference_page(capsys, comma
 def test_progress_counts_items_with_time_left_and_is_silent_when_quiet():
     import io
 
-    from gift_theory.cli._common import Progress
+    from gift_theory.cli import Progress
 
     buf = io.StringIO()
     p = Progress("gift x", stream=buf)
@@ -167,7 +167,7 @@ def test_progress_reported_as_items_finish_estimates_what_is_left(monkeypatch):
     import io
 
     from gift_theory.cli import _common
-    from gift_theory.cli._common import Progress
+    from gift_theory.cli import Progress
 
     clock = iter(range(100))
     monkeypatch.setattr(_common.time, "perf_counter", lambda: float(next(clock)))

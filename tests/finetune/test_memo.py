@@ -12,10 +12,8 @@ import pytest
 
 import gift_theory as gt
 from gift_theory import _memo
-from gift_theory.finetune import make_problem
-from gift_theory.finetune._directions import direction
+from gift_theory.finetune import direction, finetune_on, make_problem
 from gift_theory.finetune._problem import referee_scores
-from gift_theory.finetune._run import finetune_on
 
 ARCH = gt.Architecture((6, 8, 5, 3))
 

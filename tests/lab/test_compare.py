@@ -265,8 +265,9 @@ def test_the_fit_s_loss_runs_the_comparison_s_compiled_forward(setup, extra):
     """The fit's loss at theta is the moment loss of the comparison's forward program
     (``layer_outputs``) with the parameters set, bit for bit, and the fitted model's shots
     compile no forward of their own: one program per candidate serves its fit and its shots."""
-    from gift_theory.lab._fit_moments import MomentProblem, _loss_of_outputs, _positive, _scalar, theta_of
-    from gift_theory.lab._shots import draws, layer_outputs, model_shots, params32
+    from gift_theory.lab import MomentProblem, model_shots
+    from gift_theory.lab._fit_moments import _loss_of_outputs, _positive, _scalar, theta_of
+    from gift_theory.lab._shots import draws, layer_outputs, params32
 
     params0, x = setup
     meas = simulate_measurement(jax.random.PRNGKey(5), params0, x, gt.Physics.create(s=0.1, shot=0.02), shots=24,
@@ -300,7 +301,8 @@ def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
     comes from the cache or not (both draw through ``_model.site_draws``); the eager sampler
     and a plain gift_theory._random reference guard the site's subkey and law."""
     from gift_theory import _random
-    from gift_theory._model import compiled_draws, named_subkey, sample_noise
+    from gift_theory import sample_noise
+    from gift_theory._model import compiled_draws, named_subkey
     from gift_theory.lab._shots import draws
 
     phys = gt.Physics.create(s=0.1, **spec)
@@ -326,7 +328,7 @@ def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
 # ---- power stated ------------------------------------------------------------------------------
 
 def test_power_notes_say_what_is_weak_in_the_file_s_numbers():
-    from gift_theory.lab._compare import power_notes
+    from gift_theory.lab import power_notes
 
     rows = [{"mechanism": "noise_law", "power": 0.05, "se": 0.05, "power_with_taps": 0.95, "replicates": 20,
              "n": 60, "r": 16, "taps": False},
@@ -353,7 +355,8 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
     """The rate is the real test's on simulated files: at the model itself it is the level; shot
     noise is seen; a law change at equal variance on 40 inputs x 16 shots is not, with or
     without taps; an outputs-only file gets the with-taps figure of the same simulated files."""
-    from gift_theory.lab._compare import _power_p, _rate, power_of
+    from gift_theory.lab import power_of
+    from gift_theory.lab._compare import _power_p, _rate
 
     params, x = deep_setup
     model = Model(gt.Physics.create(s=0.1))
@@ -386,7 +389,7 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
 def test_power_of_agrees_with_compare_run_file_by_file(deep_setup):
     """Validation against compare itself, one file at a time (not the batched scoring): the
     outputs-only shot probe, whose power here is neither 0 nor 1."""
-    from gift_theory.lab._compare import power_of
+    from gift_theory.lab import power_of
 
     params, x = deep_setup
     model = Model(gt.Physics.create(s=0.1))
@@ -484,7 +487,7 @@ def test_the_log_variance_ratio_of_the_figures_has_mean_zero_under_the_true_mode
     """predictive_moments' log(measured / model variance) compares r = 8 shots with K = 32: the
     raw ratio sits ~0.12 low (0.2 of its sd per cell); net of the bias its mean over a 64-wide
     layer's cells (per input, then over 200 inputs) is within 4.5 se of 0."""
-    from gift_theory.lab._compare import predictive_moments
+    from gift_theory.lab import predictive_moments
 
     arch = gt.Architecture((8, 64, 4))
     params = gt.init_params(jax.random.PRNGKey(21), arch)
@@ -510,9 +513,10 @@ def test_the_chunks_of_inputs_do_not_change_the_numbers(setup, monkeypatch):
     the same channel values to float32 rounding, the same discrepancy and p-value. The file and
     its :class:`Reference` are made by hand (private names): simulating and a noise floor would
     compile programs that are not under test (this test runs in CI's budget)."""
-    from gift_theory._measurement import Measurement
+    from gift_theory import Measurement
     from gift_theory.lab import _channels
-    from gift_theory.lab._channels import Reference, channel_values, layer_scales
+    from gift_theory.lab import Reference
+    from gift_theory.lab._channels import channel_values, layer_scales
 
     params, x = setup
     n, r = 12, 8

@@ -119,8 +119,8 @@ def test_weight_offsets_are_fitted_at_the_data_s_noise_level_not_the_default():
     after s: at s = 0.03 the mean response tanh(z + n) of the default s = 0.1 is compressed,
     and offsets fitted to it came out 20-40 % off, failing the true model's own one-step check.
     Fitted on the fitting inputs, awgn + weight_error passes it there in every layer."""
-    from gift_theory.lab._compare import one_step_check
-    from gift_theory.lab._fit import fit_model
+    from gift_theory.lab import one_step_check
+    from gift_theory.lab import fit_model
 
     meas = _chip({"weight_error": {"e": 0.06, "seed": 5}}, seed=6, s=0.03, r=32)
     model = fit_model(jax.random.PRNGKey(1), meas, ["weight_error"])

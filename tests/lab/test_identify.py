@@ -10,8 +10,7 @@ import pytest
 from scipy import stats
 
 import gift_theory as gt
-from gift_theory._measurement import Measurement
-from gift_theory._params import Layer
+from gift_theory import Layer, Measurement
 from gift_theory.lab import simulate_measurement
 from gift_theory.lab import identify
 from gift_theory.lab._mechanisms import Context, mechanisms
@@ -268,7 +267,8 @@ def test_a_weight_error_as_large_as_W_is_identified_and_the_noise_level_stays_th
 
 
 def test_a_gross_outlier_among_offsets_is_refused_and_named():
-    from gift_theory.lab._offset_prior import outlier_test, refusing
+    from gift_theory.lab import refusing
+    from gift_theory.lab._offset_prior import outlier_test
 
     rng = np.random.default_rng(3)
     d = rng.normal(0, 0.05, 16)

@@ -177,7 +177,8 @@ def test_the_law_panels_numbers_are_calibrated_under_the_true_model_and_see_a_wr
 
 
 def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error():
-    from gift_theory.lab._compare import Comparison, _q_of, discrepancy_difference
+    from gift_theory.lab import Comparison, discrepancy_difference
+    from gift_theory.lab._compare import _q_of
     from gift_theory.lab._qtest import q_test
 
     rng = np.random.default_rng(0)

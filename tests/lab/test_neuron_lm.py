@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gift_theory.lab import _offset_fit as fo
+from gift_theory.lab import _offset_fit as fo  # private: the per-neuron LM kernel against closed-form and BFGS solutions, which a fitted offset mixes with the data's noise
 
 
 def test_neuron_lm_is_the_ridge_solution_of_a_linear_problem():

@@ -14,7 +14,8 @@ from gift_theory.effects import MECHANISMS, Effect, register
 from gift_theory.effects._base import unregister
 from gift_theory.lab import Model, fit_effects, save_measurement, signatures, simulate_measurement
 from gift_theory.lab._mechanisms import RULES, THRESHOLD, Context, mechanisms
-from gift_theory.lab._verdict import explanation, failing_layers
+from gift_theory.lab import failing_layers
+from gift_theory.lab._verdict import explanation
 
 
 # ---- the explained rule, on stand-ins ---------------------------------------------------------
@@ -82,7 +83,7 @@ def test_prior_check_tells_offsets_from_their_effect_s_prior():
     offsets all one way fail ``b_mean``; weight offsets drawn apart from W pass, offsets
     proportional to W fail ``w_correlation``; a coupling W M on an expanding layer fails
     ``w_structure``."""
-    from gift_theory.lab._offset_prior import prior_check
+    from gift_theory.lab import prior_check
 
     arch = gt.Architecture((4, 12, 3))
     params = gt.init_params(jax.random.PRNGKey(0), arch)
@@ -306,7 +307,7 @@ def test_plugin_flag_on_simulate_compare_and_diagnose(tmp_path, capsys):
 def test_layer_gain_is_a_name_on_every_command(tmp_path, capsys):
     """CONTRACTS §4: layer_gain in simulate --effect, fit --add, diagnose --candidates and
     finetune --true-effect (parsed by the same catalogue); the fit recovers a uniform loss."""
-    from gift_theory.finetune._run import true_physics
+    from gift_theory.finetune import true_physics
 
     assert float(true_physics(0.1, ("layer_gain=0.7",)).get("layer_gain").g) == 0.7
     path = tmp_path / "loss.npz"

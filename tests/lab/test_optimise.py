@@ -3,7 +3,7 @@ coordinate) or Nelder-Mead (several)."""
 
 import numpy as np
 
-from gift_theory.lab._fit_moments import XATOL, optimise
+from gift_theory.lab._fit_moments import XATOL, optimise  # private: the search kernel's accuracy and evaluation count, which no fit output isolates
 
 
 class Counted:

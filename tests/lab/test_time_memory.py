@@ -18,8 +18,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from gift_theory._measurement import Measurement
-from gift_theory._params import Layer
+from gift_theory import Layer, Measurement
 from gift_theory.effects import REGISTRY
 from gift_theory.effects.memory import previous_shot, with_memory
 from gift_theory.lab import identify
@@ -254,7 +253,8 @@ def test_the_next_measurement_separates_shot_from_multiplicative_noise():
     (the same two models can never be told apart on a campaign without signal)."""
     import gift_theory as gt
     from gift_theory.lab import Model, simulate_measurement
-    from gift_theory.lab._design import _power, designs, next_measurement
+    from gift_theory.lab import designs, next_measurement
+    from gift_theory.lab._design import _power
 
     arch = gt.Architecture((4, 8, 3))
     params = gt.init_params(jax.random.PRNGKey(1), arch, gain=1.5)

@@ -100,7 +100,7 @@ def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     """Rule b' of the verdict: drift explains a drifting chip only because its trend in time
     does -- the same model with every time at the mean fails the held-out test."""
     from gift_theory.lab import Session
-    from gift_theory.lab._verdict import time_free
+    from gift_theory.lab._verdict import time_free  # private: rule b's twin (every time at the mean), which the diagnosis only summarises
 
     meas = _chip(HIDDEN["drift"])
     calls = []
@@ -194,7 +194,7 @@ def test_fit_command_contract(tmp_path, capsys):
     assert abs(out["params"]["q"] - 0.05) < 0.02
     # without --json the command prints this result's text (the same run: one fit, not two), and
     # --figures writes the figure folder with each figure's numbers beside it
-    from gift_theory.cli._fit import render
+    from gift_theory.cli._fit import render  # private: the text of the result already run with --json (the same run: one fit)
 
     text = render(out)
     assert "error ladder" in text and "figures: " in text and (figs / "ladder.png").stat().st_size > 1000
@@ -221,7 +221,7 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
     meas = _chip(HIDDEN["weight_error"], seed=5, n=60, r=16, taps=taps)
     path = tmp_path / "we.npz"
     save_measurement(path, meas)
-    from gift_theory.cli._fit import render
+    from gift_theory.cli._fit import render  # private: the text of the result already run with --json (the same run: one fit)
 
     assert main(["fit", str(path), "--add", "weight_error", "--json", "--quiet", "--power-replicates", "0",
                  "--replicates", "2"]) == 0
@@ -239,7 +239,7 @@ def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them():
     depend on them); on a 50 MB file (16-32-16-8 with taps, 1740 inputs x 64 shots) the candidate
     threads fill the budget and the refit null's replicates inside each come out of the same budget -- every thread
     at once within it."""
-    from gift_theory.lab import _budget
+    from gift_theory.lab import _budget  # private: the thread budget, its contract (see the docstring)
 
     def file(n, r, widths):
         return types.SimpleNamespace(n=n, r=r, layers=lambda: [np.empty((0, 0, d)) for d in widths])
@@ -263,7 +263,7 @@ def test_order_of_candidates_and_threads_change_no_number():
     cands = ["shot", "multiplicative", "weight_error", "bias_offset"]
 
     def run(order, workers):
-        from gift_theory.cli._diagnose import render
+        from gift_theory.cli._diagnose import render  # private: the text of each run's result, compared across runs
 
         d = diagnose(jax.random.PRNGKey(21), meas, candidates=order, workers=workers)
         assert sum(c.comparison.replicates > 0 for c in d.ranking) >= 2
@@ -290,7 +290,7 @@ def test_candidates_the_identification_clears_are_not_fitted_and_change_nothing(
     check, so the candidates of the classes no test flags are not fitted (listed with the
     reason). Every candidate that is fitted has the numbers it has when all are (a candidate is
     a pure function of its own request), and the verdict is the same."""
-    from gift_theory.lab import _ranking  # the staging's switch: which classes are flagged
+    from gift_theory.lab import _ranking  # private: the staging's switch (which classes are flagged), monkeypatched
 
     meas = _chip(HIDDEN["shot"], seed=4, n=80, r=24)
     cands = ["shot", "multiplicative", "crosstalk", "layer_gain", "bias_offset"]
@@ -350,7 +350,7 @@ def test_ranking_order_rule_on_random_candidate_lists(seed):
 def test_reasons_wording_follows_the_p_value(p, words):
     """A candidate that passes but does not buy its keep: the reason speaks of the baseline from
     its p-value (never "barely inconsistent" next to p = 1e-37)."""
-    from gift_theory.lab._verdict import explanation, p_words
+    from gift_theory.lab._verdict import explanation, p_words  # private: the reason's wording at each p, on hand-made candidates
 
     class Cmp:
         def __init__(self, p, q):
@@ -399,7 +399,7 @@ def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
 def test_an_explaining_fit_leads_the_mechanisms_it_agrees_with_and_keeps_the_rest_in_order():
     from types import SimpleNamespace as NS
 
-    from gift_theory.lab._mechanisms import lead_with_explanation
+    from gift_theory.lab._mechanisms import lead_with_explanation  # private: the mechanisms' order rule, on hand-made candidates
 
     base = NS(discrepancy=500.0, se=5.0, p_value=1e-40)
     top = NS(effects=("layer_gain",), comparison=NS(discrepancy=10.0, p_value=0.5))
@@ -501,9 +501,8 @@ def test_a_law_with_the_wrong_tails_is_refused_and_the_right_law_is_not():
     reproduce the shots' tails (a two-sample test against its own shots). On a Laplace chip
     (heavy tails in every layer) uniform noise (light tails) is refused by it, Laplace is not;
     on an awgn chip the kurtosis names nothing and the rule has nothing to read."""
-    # the rule read on its own (its contract: which candidate it refuses), not through a diagnosis
     from gift_theory.lab import Session, identify
-    from gift_theory.lab._verdict import unmoved_tails_rule
+    from gift_theory.lab._verdict import unmoved_tails_rule  # private: the rule on its own (which candidate it refuses), not through a diagnosis
 
     meas = _chip(HIDDEN["laplace"], seed=2, n=60, r=24)
     session = Session.create(jax.random.PRNGKey(5), meas)
@@ -524,9 +523,8 @@ def test_a_model_without_the_measured_correlation_is_refused_and_one_with_it_is_
     correlations (a two-sample test against its own shots). On a chip with per-neuron and
     shared gain noise (multiplicative + common_mode) the per-neuron noise alone is refused by it,
     the pair is not; on an awgn chip the rule has nothing to read."""
-    # the rule read on its own (its contract: which candidate it refuses), not through a diagnosis
     from gift_theory.lab import Session, identify
-    from gift_theory.lab._verdict import unreproduced_correlations_rule
+    from gift_theory.lab._verdict import unreproduced_correlations_rule  # private: the rule on its own (which candidate it refuses), not through a diagnosis
 
     meas = _chip({"multiplicative": 0.3, "common_mode": 0.3}, seed=2, n=60, r=24)
     session = Session.create(jax.random.PRNGKey(5), meas)
@@ -559,7 +557,7 @@ def test_a_misfit_of_the_mean_is_no_trend_in_time_and_a_small_drift_is_one(spec,
 def test_rule_g_reads_each_pair_s_correlation_sample_by_sample():
     """_corr_z: per input and sample of r consecutive shots, Fisher's z of numpy's correlation
     of each pair of neurons (upper triangle, row by row)."""
-    from gift_theory.lab._verdict import _corr_z
+    from gift_theory.lab._verdict import _corr_z  # private: rule g's statistic against numpy's correlation, sample by sample
 
     rng = np.random.default_rng(0)
     x = rng.normal(size=(5, 32, 6))

@@ -12,9 +12,8 @@ import gift_theory as gt
 from gift_theory.cli import main
 from gift_theory.effects import MECHANISMS, Effect, register
 from gift_theory.effects._base import unregister  # private: leaves the process-wide registry as this file found it
-from gift_theory.lab import Model, fit_effects, save_measurement, signatures, simulate_measurement
+from gift_theory.lab import Model, failing_layers, fit_effects, save_measurement, signatures, simulate_measurement
 from gift_theory.lab._mechanisms import RULES, THRESHOLD, Context, mechanisms  # private: the naming rules on hand-made evidence, one per class
-from gift_theory.lab import failing_layers
 from gift_theory.lab._verdict import explanation  # private: each verdict rule at its edge, on hand-made candidates
 
 

@@ -123,14 +123,16 @@ def test_did_you_mean_says_nothing_when_nothing_is_close():
 
 
 def _commands():
-    from gift_theory.cli._main import commands  # private: the registry of every command, core and registered, to parametrise over
+    # private: the registry of every command, core and registered, to parametrise over
+    from gift_theory.cli._main import commands
 
     return list(commands())
 
 
 @pytest.mark.parametrize("command", _commands())
 def test_every_flag_has_help_and_help_points_to_the_reference_page(capsys, command):
-    from gift_theory.cli._main import _Parser, command_module  # private: the parser each command fills, read flag by flag
+    # private: the parser each command fills, read flag by flag
+    from gift_theory.cli._main import _Parser, command_module
 
     parser = _Parser(prog=f"gift {command}")
     command_module(command).add_arguments(parser)

@@ -15,7 +15,8 @@ import pytest
 
 import gift_theory as gt
 from gift_theory.lab import Model, compare, energy_cells, one_step_check, simulate_measurement
-from gift_theory.lab._channels import CHANNELS, floor_moment_channels, moment_channels  # private: the channels' means under the model, against brute-force definitions
+# private: the channels' means under the model, against brute-force definitions
+from gift_theory.lab._channels import CHANNELS, floor_moment_channels, moment_channels
 from gift_theory.lab._qtest import q_test  # private: the Q-test's calibration on channels with a known law
 
 ARCH = gt.Architecture((4, 8, 3))
@@ -130,7 +131,8 @@ def test_refit_null_allows_for_a_shared_estimation_error():
     always; with the shift and variance from 8 replicates of the same process the false
     alarms at 0.01 over 400 data sets stay within 3 binomial sd of 1 %, and a real excess
     beyond the estimation error is still found."""
-    from gift_theory.lab._qtest import replicate_null  # private: the refit null's false-alarm rate on channels with a known law
+    # private: the refit null's false-alarm rate on channels with a known law
+    from gift_theory.lab._qtest import replicate_null
 
     rng = np.random.default_rng(8)
     n, C, B = 60, 3, 8
@@ -213,7 +215,8 @@ def test_a_square_law_readout_s_level_is_read_through_its_measured_transfer(setu
     at s = 0.1 whose hidden layer read 0.1. The failing layer's level is read through its
     measured transfer (per-neuron polynomial of the model's means), near the chip's s again;
     the healthy layer keeps its own level."""
-    from gift_theory.lab._compare import layer_level  # private: the level read without the transfer, which no row reports
+    # private: the level read without the transfer, which no row reports
+    from gift_theory.lab._compare import layer_level
 
     params, x = setup
     phys = gt.Physics.create(s=0.1)
@@ -247,7 +250,8 @@ def test_empirical_bayes_scale_of_unidentified_offsets():
     is nearly unbiased over devices and scatters no more than the moment equation
     |rho|^2 = e^2 tr + n sigma^2. 300 simulated devices; tolerances from the observed spread
     (4 standard errors)."""
-    from gift_theory.lab._offset_null import marginal_e2 as _marginal_e2  # private: the estimator's bias and spread over devices
+    # private: the estimator's bias and spread over devices
+    from gift_theory.lab._offset_null import marginal_e2 as _marginal_e2
 
     rng = np.random.default_rng(0)
     n, P, e, sigma2 = 120, 300, 0.15, 1.5
@@ -363,7 +367,8 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
     noise is seen; a law change at equal variance on 40 inputs x 16 shots is not, with or
     without taps; an outputs-only file gets the with-taps figure of the same simulated files."""
     from gift_theory.lab import power_of
-    from gift_theory.lab._compare import _power_p, _rate  # private: the rejection rate recomputed file by file, against power_of's batched one
+    # private: the rejection rate recomputed file by file, against power_of's batched one
+    from gift_theory.lab._compare import _power_p, _rate
 
     params, x = deep_setup
     model = Model(gt.Physics.create(s=0.1))
@@ -418,7 +423,8 @@ def test_power_of_agrees_with_compare_run_file_by_file(deep_setup):
 def test_compare_command_states_power_next_to_the_verdict(deep_setup, tmp_path, capsys):
     import json
 
-    from gift_theory.cli._compare import render  # private: the text of the result already run with --json (a second run would double the cost)
+    # private: the text of the result already run with --json (a second run would double the cost)
+    from gift_theory.cli._compare import render
     from gift_theory.cli import main
     from gift_theory.lab import save_measurement
 
@@ -453,7 +459,8 @@ def test_the_moment_fit_compares_log_variances_net_of_their_bias(x64):
     model's K - 1 = 31. The log variances differ by ~1/15 - 1/31 in expectation; the moment
     loss's difference (the fitting target) is zero in expectation, within Z of its standard
     error, and the uncorrected one is not (the fitted s was 1.6-2.2 % low on 500-wide layers)."""
-    from gift_theory.lab._qtest import log_variance_bias  # private: E[log v] at k degrees of freedom, against Monte Carlo
+    # private: E[log v] at k degrees of freedom, against Monte Carlo
+    from gift_theory.lab._qtest import log_variance_bias
 
     rng = np.random.default_rng(5)
     cells, r, K, Z = 40_000, 16, 32, 4.5

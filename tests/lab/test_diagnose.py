@@ -110,7 +110,8 @@ def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     assert calls == [(0, 1, "drift: passes")]  # one progress line per candidate, as it is done
     session = Session.create(jax.random.PRNGKey(11), meas)
     held_out = session.test_meas
-    time_free = dataclasses.replace(held_out, t=np.full_like(held_out.t, float(np.mean(held_out.t))))  # every time at the mean
+    # every acquisition time at the mean of the times
+    time_free = dataclasses.replace(held_out, t=np.full_like(held_out.t, float(np.mean(held_out.t))))
     twin = session.score(d.ranking[0].model, held_out=time_free)
     assert twin.p_value < 0.01 < d.ranking[0].comparison.p_value
 
@@ -196,7 +197,8 @@ def test_fit_command_contract(tmp_path, capsys):
     assert abs(out["params"]["q"] - 0.05) < 0.02
     # without --json the command prints this result's text (the same run: one fit, not two), and
     # --figures writes the figure folder with each figure's numbers beside it
-    from gift_theory.cli._fit import render  # private: the text of the result already run with --json (the same run: one fit)
+    # private: the text of the result already run with --json (the same run: one fit)
+    from gift_theory.cli._fit import render
 
     text = render(out)
     assert "error ladder" in text and "figures: " in text and (figs / "ladder.png").stat().st_size > 1000
@@ -223,7 +225,8 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
     meas = _chip(HIDDEN["weight_error"], seed=5, n=60, r=16, taps=taps)
     path = tmp_path / "we.npz"
     save_measurement(path, meas)
-    from gift_theory.cli._fit import render  # private: the text of the result already run with --json (the same run: one fit)
+    # private: the text of the result already run with --json (the same run: one fit)
+    from gift_theory.cli._fit import render
 
     assert main(["fit", str(path), "--add", "weight_error", "--json", "--quiet", "--power-replicates", "0",
                  "--replicates", "2"]) == 0
@@ -352,7 +355,8 @@ def test_ranking_order_rule_on_random_candidate_lists(seed):
 def test_reasons_wording_follows_the_p_value(p, words):
     """A candidate that passes but does not buy its keep: the reason speaks of the baseline from
     its p-value (never "barely inconsistent" next to p = 1e-37)."""
-    from gift_theory.lab._verdict import explanation, p_words  # private: the reason's wording at each p, on hand-made candidates
+    # private: the reason's wording at each p, on hand-made candidates
+    from gift_theory.lab._verdict import explanation, p_words
 
     class Cmp:
         def __init__(self, p, q):
@@ -401,7 +405,8 @@ def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
 def test_an_explaining_fit_leads_the_mechanisms_it_agrees_with_and_keeps_the_rest_in_order():
     from types import SimpleNamespace as NS
 
-    from gift_theory.lab._mechanisms import lead_with_explanation  # private: the mechanisms' order rule, on hand-made candidates
+    # private: the mechanisms' order rule, on hand-made candidates
+    from gift_theory.lab._mechanisms import lead_with_explanation
 
     base = NS(discrepancy=500.0, se=5.0, p_value=1e-40)
     top = NS(effects=("layer_gain",), comparison=NS(discrepancy=10.0, p_value=0.5))
@@ -504,7 +509,8 @@ def test_a_law_with_the_wrong_tails_is_refused_and_the_right_law_is_not():
     (heavy tails in every layer) uniform noise (light tails) is refused by it, Laplace is not;
     on an awgn chip the kurtosis names nothing and the rule has nothing to read."""
     from gift_theory.lab import Session, identify
-    from gift_theory.lab._verdict import unmoved_tails_rule  # private: the rule on its own (which candidate it refuses), not through a diagnosis
+    # private: the rule on its own (which candidate it refuses), not through a diagnosis
+    from gift_theory.lab._verdict import unmoved_tails_rule
 
     meas = _chip(HIDDEN["laplace"], seed=2, n=60, r=24)
     session = Session.create(jax.random.PRNGKey(5), meas)
@@ -526,7 +532,8 @@ def test_a_model_without_the_measured_correlation_is_refused_and_one_with_it_is_
     shared gain noise (multiplicative + common_mode) the per-neuron noise alone is refused by it,
     the pair is not; on an awgn chip the rule has nothing to read."""
     from gift_theory.lab import Session, identify
-    from gift_theory.lab._verdict import unreproduced_correlations_rule  # private: the rule on its own (which candidate it refuses), not through a diagnosis
+    # private: the rule on its own (which candidate it refuses), not through a diagnosis
+    from gift_theory.lab._verdict import unreproduced_correlations_rule
 
     meas = _chip({"multiplicative": 0.3, "common_mode": 0.3}, seed=2, n=60, r=24)
     session = Session.create(jax.random.PRNGKey(5), meas)
@@ -559,7 +566,8 @@ def test_a_misfit_of_the_mean_is_no_trend_in_time_and_a_small_drift_is_one(spec,
 def test_rule_g_reads_each_pair_s_correlation_sample_by_sample():
     """_corr_z: per input and sample of r consecutive shots, Fisher's z of numpy's correlation
     of each pair of neurons (upper triangle, row by row)."""
-    from gift_theory.lab._verdict import _corr_z  # private: rule g's statistic against numpy's correlation, sample by sample
+    # private: rule g's statistic against numpy's correlation, sample by sample
+    from gift_theory.lab._verdict import _corr_z
 
     rng = np.random.default_rng(0)
     x = rng.normal(size=(5, 32, 6))

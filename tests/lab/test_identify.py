@@ -13,7 +13,8 @@ import gift_theory as gt
 from gift_theory import Layer, Measurement
 from gift_theory.lab import simulate_measurement
 from gift_theory.lab import identify
-from gift_theory.lab._mechanisms import Context, mechanisms  # private: the naming rules on an identification alone (diagnose fits every candidate first)
+# private: the naming rules on an identification alone (diagnose fits every candidate first)
+from gift_theory.lab._mechanisms import Context, mechanisms
 
 
 def _net(seed, widths=(6, 10, 8, 4)):
@@ -268,7 +269,8 @@ def test_a_weight_error_as_large_as_W_is_identified_and_the_noise_level_stays_th
 
 def test_a_gross_outlier_among_offsets_is_refused_and_named():
     from gift_theory.lab import refusing
-    from gift_theory.lab._offset_prior import outlier_test  # private: the outlier statistic's null law, which prior_check's rows only summarise
+    # private: the outlier statistic's null law, which prior_check's rows only summarise
+    from gift_theory.lab._offset_prior import outlier_test
 
     rng = np.random.default_rng(3)
     d = rng.normal(0, 0.05, 16)
@@ -335,7 +337,8 @@ def test_a_layer_with_fewer_inputs_than_parameters_is_tested_whole_not_resolved(
     # 40 inputs for 61 parameters per neuron at layer 1: W_eff cannot be read off; the
     # programmed map is still tested as a whole (null: passes; a weight error: rejected) and
     # the noise identified, without the (d, k, k) normal equations
-    from gift_theory.lab.identification._layer import RESOLVE_MARGIN  # private: the margin, below which a layer is tested whole, never fitted
+    # private: the margin, below which a layer is tested whole, never fitted
+    from gift_theory.lab.identification._layer import RESOLVE_MARGIN
 
     def run(err):
         Ws, bs = _net(7, (60, 12, 4))
@@ -362,7 +365,8 @@ def test_a_layer_with_fewer_inputs_than_parameters_is_tested_whole_not_resolved(
 
 
 def test_block_diagonal_gls_equals_the_dense_one():
-    from gift_theory.lab.identification._stats import _Blocks, _gls, _sub  # private: a numerical kernel against its dense definition
+    # private: a numerical kernel against its dense definition
+    from gift_theory.lab.identification._stats import _Blocks, _gls, _sub
 
     rng = np.random.default_rng(0)
     d, k = 7, 5
@@ -381,7 +385,8 @@ def test_block_diagonal_gls_equals_the_dense_one():
 def test_expected_kurtosis_of_a_normal_sample_is_minus_6_over_r_plus_1():
     # identity activation: the cell is normal, and a normal sample's m4 / m2^2 has mean
     # 3 (r - 1) / (r + 1) exactly; the Monte Carlo mean must agree within its standard error
-    from gift_theory.lab.identification._noise import _expected_kurtosis  # private: the kurtosis' small-sample law, which no public output isolates
+    # private: the kurtosis' small-sample law, which no public output isolates
+    from gift_theory.lab.identification._noise import _expected_kurtosis
 
     r = 12
     k = _expected_kurtosis("identity", np.zeros((50, 40)), np.full((50, 40), 0.3), 0.01, r)
@@ -505,7 +510,8 @@ def test_without_taps_uniform_noise_is_named_along_the_model_covariance_s_minor_
 def test_the_wide_layer_covariance_blocks_are_the_sandwich_per_neuron(monkeypatch):
     """A wide layer's map covariance, per neuron i: B_i^-1 M_i B_i^-T with B_i = sum_n x x^T and
     M_i = sum_n (obs / r) x x^T (computed by batched products; here against the definition)."""
-    from gift_theory.lab.identification import _stats  # private: the blocked sandwich against its definition, forced through its size switch
+    # private: the blocked sandwich against its definition, forced through its size switch
+    from gift_theory.lab.identification import _stats
 
     monkeypatch.setattr(_stats, "FULL_COV_MAX", 0)  # the blocks, whatever the size
     rng = np.random.default_rng(3)

@@ -15,7 +15,8 @@ import pytest
 import gift_theory as gt
 from gift_theory.lab import fit_effects, simulate_measurement
 from gift_theory.lab import fit_uncertainty
-from gift_theory.lab._intervals import scale_interval  # private: the profile interval's coverage on its own model, apart from the fit feeding it
+# private: the profile interval's coverage on its own model, apart from the fit feeding it
+from gift_theory.lab._intervals import scale_interval
 
 Z = 4.5
 

@@ -178,7 +178,8 @@ def test_the_law_panels_numbers_are_calibrated_under_the_true_model_and_see_a_wr
 
 def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error():
     from gift_theory.lab import Comparison, discrepancy_difference
-    from gift_theory.lab._compare import _q_of  # private: the statistic on bootstrap replicates and (below) its memory budget, the kernel of the public difference
+    # private: the statistic on bootstrap replicates and (below) its memory budget, the kernel of the public difference
+    from gift_theory.lab._compare import _q_of
     from gift_theory.lab._qtest import q_test  # private: builds two comparisons from hand-made channel values
 
     rng = np.random.default_rng(0)
@@ -211,7 +212,8 @@ def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error()
 
 def test_the_pair_plot_draws_the_intervals_gift_fit_reports():
     from gift_theory.lab import pairs_figure
-    from gift_theory.lab._figure_sets import pairs_data  # private: the numbers the pair figure draws, beside it on disk but not an API
+    # private: the numbers the pair figure draws, beside it on disk but not an API
+    from gift_theory.lab._figure_sets import pairs_data
     from scipy import stats as st
 
     cov = np.array([[0.01, -0.008], [-0.008, 0.02]])
@@ -229,7 +231,8 @@ def test_the_pair_plot_draws_the_intervals_gift_fit_reports():
 
 
 def test_the_demo_s_bars_say_what_their_colours_mean():
-    from gift_theory.cli._demo_parts import plot_finetune  # private: the demo's bar figure, which only a full `gift demo` run draws otherwise
+    # private: the demo's bar figure, which only a full `gift demo` run draws otherwise
+    from gift_theory.cli._demo_parts import plot_finetune
 
     rows = [{"method": m, "loss_before": 1.0, "loss_after": v} for m, v in (("gift", 0.9), ("spsa", 1.1), ("ift", 1.0))]
     curve = {k: [0.0, 1.0] for k in ("alpha", "truth", "truth_se", "predicted", "predicted_model_C2", "chip_alpha",
@@ -246,7 +249,8 @@ def test_each_command_has_a_figure_folder_of_its_own(tmp_path):
     import json
 
     from gift_theory import GiftInputError
-    from gift_theory.cli._labargs import figure_dir  # private: the figure-folder rule every lab command shares, without running one
+    # private: the figure-folder rule every lab command shares, without running one
+    from gift_theory.cli._labargs import figure_dir
 
     args = argparse.Namespace(measurement=str(tmp_path / "chip.npz"), figures=None, json=False)
     folders = {c: figure_dir(args, c) for c in ("compare", "diagnose", "fit")}

@@ -4,7 +4,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gift_theory.lab import _offset_fit as fo  # private: the per-neuron LM kernel against closed-form and BFGS solutions, which a fitted offset mixes with the data's noise
+# private: the per-neuron LM kernel against closed-form and BFGS solutions (a fit mixes it with the noise)
+from gift_theory.lab import _offset_fit as fo
 
 
 def test_neuron_lm_is_the_ridge_solution_of_a_linear_problem():

@@ -13,7 +13,8 @@ from gift_theory.cli import main
 from gift_theory.effects import MECHANISMS, Effect, register
 from gift_theory.effects._base import unregister  # private: leaves the process-wide registry as this file found it
 from gift_theory.lab import Model, failing_layers, fit_effects, save_measurement, signatures, simulate_measurement
-from gift_theory.lab._mechanisms import RULES, THRESHOLD, Context, mechanisms  # private: the naming rules on hand-made evidence, one per class
+# private: the naming rules on hand-made evidence, one per class
+from gift_theory.lab._mechanisms import RULES, THRESHOLD, Context, mechanisms
 from gift_theory.lab._verdict import explanation  # private: each verdict rule at its edge, on hand-made candidates
 
 
@@ -116,7 +117,8 @@ def test_coupling_test_is_exact_under_the_prior_and_finds_a_coupling():
     uniform, so P(p < 0.1) = 0.1 (200 draws: 99.9 % binomial bounds 0.04-0.18). A coupling
     E = W M (dense crosstalk on a contracting layer, where the F test ``w_structure`` cannot
     apply) is found; the normal law beyond 64 rows does too, and is centred under the prior."""
-    from gift_theory.lab._offset_prior import coupling_test  # private: the statistic's exact null law, which prior_check's rows only summarise
+    # private: the statistic's exact null law, which prior_check's rows only summarise
+    from gift_theory.lab._offset_prior import coupling_test
 
     rng = np.random.default_rng(5)
     d_out, d_in = 8, 14
@@ -329,7 +331,8 @@ def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_une
     signed tests reject it (a law change in one layer); then nothing is "missing" by the
     held-out test, but the data are not explained, and a passing candidate counts only with an
     effect of the class the identification flags."""
-    from gift_theory.lab._verdict import identification_refusals  # private: the rule that refuses what identification contradicts, on hand-made candidates
+    # private: the rule that refuses what identification contradicts, on hand-made candidates
+    from gift_theory.lab._verdict import identification_refusals
 
     base_passes = _Cmp(0.3)
     flagged = {"noise_law": 1e-3}

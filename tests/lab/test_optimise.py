@@ -3,7 +3,8 @@ coordinate) or Nelder-Mead (several)."""
 
 import numpy as np
 
-from gift_theory.lab._fit_moments import XATOL, optimise  # private: the search kernel's accuracy and evaluation count, which no fit output isolates
+# private: the search kernel's accuracy and evaluation count, which no fit output isolates
+from gift_theory.lab._fit_moments import XATOL, optimise
 
 
 class Counted:

@@ -186,7 +186,8 @@ def test_plugin_is_ranked_first(tmp_path, name):
         assert d.as_json()["explained_by"] == ["transmission"]
         # bias_offset keeps its prior: the per-neuron rule covers the plugin's family only
         from gift_theory.lab import Model
-        from gift_theory.lab._neurons import per_neuron_families  # private: which families the per-neuron rule covers, which no output lists
+        # private: which families the per-neuron rule covers, which no output lists
+        from gift_theory.lab._neurons import per_neuron_families
         assert per_neuron_families(d.ranking[0].model) == [("transmission", "alive")]
         assert per_neuron_families(Model(d.baseline.physics, None, {"bias_offset": 0.1})) == []
 

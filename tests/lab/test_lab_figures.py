@@ -200,7 +200,8 @@ def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error()
     idx = np.random.default_rng(1).integers(0, n, size=(1000, n))
     alone = np.hypot(np.std(_q_of(Ta[idx])), np.std(_q_of(Tb[idx])))
     assert 0 < se < 0.5 * alone
-    # the replicates in steps of 7 (the private memory budget set so): the same standard error
+    # the replicates in steps of 7: the same standard error
+    # private: the bootstrap's memory budget, a constant no argument sets
     from gift_theory.lab import _compare
 
     with pytest.MonkeyPatch.context() as mp:

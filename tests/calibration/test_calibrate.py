@@ -374,6 +374,7 @@ def test_a_chip_model_round_trips_and_refuses_a_file_that_is_not_one(tmp_path, s
 def test_the_demos_calibration_part_recovers_the_lost_accuracy():
     """gift demo's measurement section ends with a chip calibrated: a chip with a layer gain, bias
     offsets and weight errors (the catalogue's per-device effects), read with taps."""
+    # private: the demo's calibration section alone; `gift demo` runs every section
     from gift_theory.cli._demo_parts import calibrate_part
     c = calibrate_part("teacher", "4-8-2", 0.05, budget=20)
     assert c["accepted"] and c["accuracy_ideal"] - c["accuracy_before"] > 0.02, c

@@ -1,6 +1,10 @@
 """A cache only saves time (issue 45): the memo holds data, never code -- a planted pickle is not
 read, a tampered entry is computed again; a folder that cannot be written costs the reuse, not
-the result (one warning line); a truncated trained-weights entry is trained again."""
+the result (one warning line); a truncated trained-weights entry is trained again.
+
+Private names on purpose: the memo (``_memo``) and its warning registry (``_cachedir``) have no
+public API; that a planted or tampered entry is never trusted is a safety contract no public
+result shows (a safe and an unsafe cache give the same numbers)."""
 
 import io
 import os
@@ -11,7 +15,7 @@ import numpy as np
 import pytest
 
 from gift_theory import _cachedir, _memo
-from gift_theory._params import Layer
+from gift_theory import Layer
 
 
 @pytest.fixture

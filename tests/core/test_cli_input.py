@@ -116,13 +116,14 @@ def test_unknown_names_get_a_did_you_mean(capsys, argv, suggestion):
 
 
 def test_did_you_mean_says_nothing_when_nothing_is_close():
-    from gift_theory.cli._common import did_you_mean
+    from gift_theory.cli import did_you_mean
 
     msg = "gift: unknown command 'zzzz'; commands: demo, train"
     assert did_you_mean(msg) == msg
 
 
 def _commands():
+    # private: the registry of every command, core and registered, to parametrise over
     from gift_theory.cli._main import commands
 
     return list(commands())
@@ -130,6 +131,7 @@ def _commands():
 
 @pytest.mark.parametrize("command", _commands())
 def test_every_flag_has_help_and_help_points_to_the_reference_page(capsys, command):
+    # private: the parser each command fills, read flag by flag
     from gift_theory.cli._main import _Parser, command_module
 
     parser = _Parser(prog=f"gift {command}")
@@ -145,7 +147,7 @@ def test_every_flag_has_help_and_help_points_to_the_reference_page(capsys, comma
 def test_progress_counts_items_with_time_left_and_is_silent_when_quiet():
     import io
 
-    from gift_theory.cli._common import Progress
+    from gift_theory.cli import Progress
 
     buf = io.StringIO()
     p = Progress("gift x", stream=buf)
@@ -166,11 +168,12 @@ def test_progress_reported_as_items_finish_estimates_what_is_left(monkeypatch):
     (n - k) s are left; counting the finished item as still to run said ~3 s left after the last."""
     import io
 
-    from gift_theory.cli import _common
-    from gift_theory.cli._common import Progress
+    import time
+
+    from gift_theory.cli import Progress
 
     clock = iter(range(100))
-    monkeypatch.setattr(_common.time, "perf_counter", lambda: float(next(clock)))
+    monkeypatch.setattr(time, "perf_counter", lambda: float(next(clock)))
     buf = io.StringIO()
     p = Progress("gift x", stream=buf, after=True)
     for i in range(4):
@@ -204,7 +207,7 @@ def _demo_result():
 
 
 def test_demo_text_prints_evidence_whole_says_why_gift_kept_w0_and_counts_checks_from_the_result():
-    from gift_theory.cli._demo import render
+    from gift_theory.cli._demo import render  # private: the text for a given result, without running the demo (minutes)
 
     result, evidence = _demo_result()
     text = render(result)
@@ -219,7 +222,7 @@ def test_demo_text_prints_evidence_whole_says_why_gift_kept_w0_and_counts_checks
 def test_demo_theory_part_counts_the_registry():
     from proofs_checks import CHECK_IDS
 
-    from gift_theory.cli._main import command_module
+    from gift_theory.cli._main import command_module  # private: the demo's theory part of a registered command, alone
 
     out = command_module("check").demo_part(ids=("score_function_identity",))
     assert out["total_checks"] == len(CHECK_IDS) and [c["id"] for c in out["checks"]] == ["score_function_identity"]
@@ -246,12 +249,11 @@ def _tiny_mnist(folder, n_train=64, n_test=16):
     import numpy as np
 
     from gift_theory.data import write_idx
-    from gift_theory.data._idx import FILES
 
     rng = np.random.default_rng(0)
-    for split, n in (("train", n_train), ("test", n_test)):
-        write_idx(str(folder / FILES[f"{split}_images"]), rng.integers(0, 256, (n, 28, 28), dtype=np.uint8))
-        write_idx(str(folder / FILES[f"{split}_labels"]), (np.arange(n) % 10).astype(np.uint8))
+    for prefix, n in (("train", n_train), ("t10k", n_test)):  # MNIST's own file names
+        write_idx(str(folder / f"{prefix}-images-idx3-ubyte"), rng.integers(0, 256, (n, 28, 28), dtype=np.uint8))
+        write_idx(str(folder / f"{prefix}-labels-idx1-ubyte"), (np.arange(n) % 10).astype(np.uint8))
 
 
 @pytest.mark.slow
@@ -271,8 +273,7 @@ def test_gift_theory_never_imports_the_packages_on_top():
     no module of gift_theory names them in an import."""
     import ast
     import os
-
-    from gift_theory.cli._main import GROUP, registered
+    from importlib.metadata import entry_points
 
     root = os.path.dirname(gt.__file__)
     upward = []
@@ -288,11 +289,12 @@ def test_gift_theory_never_imports_the_packages_on_top():
                     upward += [f"{path}:{node.lineno} {n}" for n in names
                                if n.split(".")[0] in ("proofs_checks", "paper_figures", "studies", "linear_case")]
     assert not upward, upward
-    assert {"check", "figures"} <= set(registered()), f"pip install -e . registers the {GROUP} entry points"
+    registered = {ep.name for ep in entry_points(group="gift.commands")}
+    assert {"check", "figures"} <= registered, "pip install -e . registers the gift.commands entry points"
 
 
 def test_finetune_text_says_what_identify_retrain_identified():
-    from gift_theory.cli._finetune import render
+    from gift_theory.cli._finetune import render  # private: the text for a given result, without a fine-tuning run
 
     r = {"dataset": "digits", "arch": [64, 16, 10], "s0": 0.05, "st": 0.2, "method": "identify-retrain",
          **{k: 1.0 for k in ("loss_before", "loss_after", "accuracy_before", "accuracy_after", "test_loss_before",
@@ -305,7 +307,7 @@ def test_finetune_text_says_what_identify_retrain_identified():
 
 
 def test_training_on_a_few_mnist_images_says_so():
-    from gift_theory.cli._train import render
+    from gift_theory.cli._train import render  # private: the text for given results, without training
 
     r = {"dataset": "mnist", "arch": "784-4-10", "s0": 0.1, "seed": 0, "cached": False, "train_seconds": 1.0,
          "train_loss": 1.0, "train_accuracy": 0.5, "test_loss": 1.0, "test_accuracy": 0.5, "path": "w.npz",

@@ -14,7 +14,9 @@ import pytest
 
 import gift_theory as gt
 from gift_theory import effects as fx
-from gift_theory.effects import _plugins, bias_offset, weight_error
+# private: its record of loaded entry points, emptied so a test starts as a fresh process
+from gift_theory.effects import _plugins
+from gift_theory.effects import bias_offset, weight_error
 
 Z = 4.5
 
@@ -325,6 +327,7 @@ def test_per_neuron_recipe_and_value_in_hooks(x64):
 
 
 def test_a_noise_law_may_be_restricted_to_layers():
+    # private: which sites a law reaches, which the draws show only statistically
     from gift_theory._model import site_laws
 
     @fx.register

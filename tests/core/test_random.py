@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from jax.extend.random import threefry_2x32
 from scipy import stats
 
+# private: the sampler's cipher and laws, which every public draw goes through but none isolates
 from gift_theory import _random as R
 
 ALPHA = 1e-4

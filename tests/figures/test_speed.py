@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import xarray as xr
 
+# private: the cache folder's environment rule (use_compilation_cache keeps the folder this process set)
 from gift_theory import _xla
 from paper_figures import Sweep, run_sweep
 from paper_figures.claims import instance
@@ -36,6 +37,7 @@ hits = []
 monitoring.register_event_listener(lambda name, **kw: hits.append(name) if name.endswith("cache_hits") else None)
 import gift_theory as gt
 gt.use_compilation_cache()  # the explicit opt-in (importing gift_theory changes no setting)
+# private: the shared compiled sampler, the program every estimator and the referee reload
 from gift_theory._model import compiled_draws
 arch = gt.Architecture((64, 48, 32, 10))
 jax.block_until_ready(compiled_draws(jax.random.PRNGKey(0), gt.awgn(0.1), arch=arch, shape=(64, 8), dtype=jnp.float32))

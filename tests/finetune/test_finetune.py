@@ -11,12 +11,30 @@ import gift_theory as gt
 from gift_theory.chips import Ledger, Measurement
 from gift_theory.finetune import (conjugate_gradients, fit_quadratic, gift_printed, identify_noise_level,
                                   identify_physics, make_problem, paired_line_search, spsa)
-from gift_theory.finetune._tree import axpy, norm, unit
 
 ARCH = gt.Architecture((4, 3, 2))
 CONTRACT_KEYS = {"dataset", "arch", "s0", "st", "method", "loss_before", "loss_after", "accuracy_before",
                  "accuracy_after", "test_loss_before", "test_loss_after", "test_accuracy_before",
                  "test_accuracy_after", "in_situ_evaluations", "seconds"}
+
+
+def axpy(a, x, y):
+    """y + a x for weight trees (through the flat parameter vector)."""
+    vx, _ = gt.flatten(x)
+    vy, unflatten = gt.flatten(y)
+    return unflatten(vy + a * vx)
+
+
+def norm(x):
+    """The Euclidean norm of a weight tree over all its leaves."""
+    return jnp.linalg.norm(gt.flatten(x)[0])
+
+
+def unit(x):
+    """``(x / |x|, |x|)`` for a weight tree."""
+    n = norm(x)
+    v, unflatten = gt.flatten(x)
+    return unflatten(v / n), n
 
 
 class BowlChip:

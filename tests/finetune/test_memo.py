@@ -1,5 +1,9 @@
 """The in-silico memo: a run that differs only in its chip reuses the work at s0, bit for bit,
-on disk across processes, and never returns a result for different inputs."""
+on disk across processes, and never returns a result for different inputs.
+
+Private names on purpose: the memo's hit and miss counters (``_memo``) and the referee's
+per-input scores (``referee_scores``, ``per_input_scores``) are what shows that work is
+shared; a public result is the same number whether it was reused or recomputed."""
 
 import os
 import subprocess
@@ -12,10 +16,8 @@ import pytest
 
 import gift_theory as gt
 from gift_theory import _memo
-from gift_theory.finetune import make_problem
-from gift_theory.finetune._directions import direction
+from gift_theory.finetune import direction, finetune_on, make_problem
 from gift_theory.finetune._problem import referee_scores
-from gift_theory.finetune._run import finetune_on
 
 ARCH = gt.Architecture((6, 8, 5, 3))
 

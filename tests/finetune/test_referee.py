@@ -1,5 +1,9 @@
 """The fused referee (weight sets and quantities on one set of draws), the per-input directional
-derivative, and Theorem 1's first-order prediction against the realised change."""
+derivative, and Theorem 1's first-order prediction against the realised change.
+
+Private names on purpose: the shared draws across weight sets, the central-difference law of
+the directional derivative and the prediction's agreement with the realised change are
+numerical contracts that ``run_finetune``'s output only reports, never isolates."""
 
 import jax
 import jax.numpy as jnp
@@ -8,11 +12,11 @@ import pytest
 
 import gift_theory as gt
 from gift_theory._objective import directional_derivative, per_input_scores
-from gift_theory._params import cast
 from gift_theory.finetune import make_problem, referee, referee_losses
 from gift_theory.finetune._predict import candidate, first_order_prediction, realised_change
 from gift_theory.finetune._problem import referee_scores
-from gift_theory.finetune._tree import unit
+
+from .test_finetune import unit
 
 ARCH = gt.Architecture((6, 5, 4, 3))
 Z = 4.0
@@ -61,7 +65,7 @@ def test_without_noise_accuracy_is_the_argmax_of_the_deterministic_output():
 @pytest.mark.slow
 def test_directional_derivative_is_the_central_difference_on_common_draws(x64):
     x, y, _ = _data(80)
-    w = cast(_weights(4), jnp.float64)
+    w = gt.cast_params(_weights(4), jnp.float64)
     u, _ = unit(jax.tree_util.tree_map(lambda a: jax.random.normal(jax.random.PRNGKey(9), a.shape, a.dtype), w))
     phys, key, h = gt.awgn(0.3), jax.random.PRNGKey(5), 1e-4
     est = directional_derivative(key, w, u, x, y, phys, ARCH, K2=4)

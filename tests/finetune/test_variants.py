@@ -9,11 +9,9 @@ import numpy as np
 import pytest
 
 import gift_theory as gt
-from gift_theory.finetune import gift_printed, paired_line_search, run_ceiling, run_finetune, why
-from gift_theory.finetune._problem import referee
-from gift_theory.finetune._tree import axpy, norm, unit
+from gift_theory.finetune import gift_printed, paired_line_search, referee, run_ceiling, run_finetune, why
 
-from .test_finetune import _cli, _setup
+from .test_finetune import _cli, _setup, axpy, norm, unit
 
 
 def test_printed_with_w0_in_its_selection_returns_w0_at_the_optimum():

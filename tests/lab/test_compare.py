@@ -1,4 +1,9 @@
-"""The discrepancy: an unbiased U-statistic, a readable floor and a calibrated p-value."""
+"""The discrepancy: an unbiased U-statistic, a readable floor and a calibrated p-value.
+
+Private names on purpose, each import saying which contract: the channels, the Q-test and its
+refit null are statistics whose laws (unbiasedness, calibration on correlated channels) no
+public result isolates; the fit's loss and the draw caches are checked bit for bit against the
+programs the comparison runs; chunking is a memory budget set through its private constant."""
 
 import dataclasses
 import os
@@ -10,8 +15,9 @@ import pytest
 
 import gift_theory as gt
 from gift_theory.lab import Model, compare, energy_cells, one_step_check, simulate_measurement
+# private: the channels' means under the model, against brute-force definitions
 from gift_theory.lab._channels import CHANNELS, floor_moment_channels, moment_channels
-from gift_theory.lab._qtest import q_test
+from gift_theory.lab._qtest import q_test  # private: the Q-test's calibration on channels with a known law
 
 ARCH = gt.Architecture((4, 8, 3))
 
@@ -125,6 +131,7 @@ def test_refit_null_allows_for_a_shared_estimation_error():
     always; with the shift and variance from 8 replicates of the same process the false
     alarms at 0.01 over 400 data sets stay within 3 binomial sd of 1 %, and a real excess
     beyond the estimation error is still found."""
+    # private: the refit null's false-alarm rate on channels with a known law
     from gift_theory.lab._qtest import replicate_null
 
     rng = np.random.default_rng(8)
@@ -182,8 +189,8 @@ def test_each_layer_s_own_level_is_the_true_s_from_a_wrong_joint_one(setup):
     whose s is twice it, within a few standard errors: those of the measured mean log variance
     over the slope of the model's mean log variance in log s (small at a layer whose shots
     vary mostly through the measured layer before)."""
-    from gift_theory.lab._compare import layer_level
-    from gift_theory.lab._shots import one_step_shots
+    from gift_theory.lab._compare import layer_level  # private: the level's root against its own standard error
+    from gift_theory.lab._shots import one_step_shots  # private: the model side of that root, for its slope in log s
 
     params, x = setup
     meas = simulate_measurement(jax.random.PRNGKey(7), params, x, gt.Physics.create(s=0.1), shots=16, taps=True)
@@ -208,6 +215,7 @@ def test_a_square_law_readout_s_level_is_read_through_its_measured_transfer(setu
     at s = 0.1 whose hidden layer read 0.1. The failing layer's level is read through its
     measured transfer (per-neuron polynomial of the model's means), near the chip's s again;
     the healthy layer keeps its own level."""
+    # private: the level read without the transfer, which no row reports
     from gift_theory.lab._compare import layer_level
 
     params, x = setup
@@ -242,6 +250,7 @@ def test_empirical_bayes_scale_of_unidentified_offsets():
     is nearly unbiased over devices and scatters no more than the moment equation
     |rho|^2 = e^2 tr + n sigma^2. 300 simulated devices; tolerances from the observed spread
     (4 standard errors)."""
+    # private: the estimator's bias and spread over devices
     from gift_theory.lab._offset_null import marginal_e2 as _marginal_e2
 
     rng = np.random.default_rng(0)
@@ -265,8 +274,10 @@ def test_the_fit_s_loss_runs_the_comparison_s_compiled_forward(setup, extra):
     """The fit's loss at theta is the moment loss of the comparison's forward program
     (``layer_outputs``) with the parameters set, bit for bit, and the fitted model's shots
     compile no forward of their own: one program per candidate serves its fit and its shots."""
-    from gift_theory.lab._fit_moments import MomentProblem, _loss_of_outputs, _positive, _scalar, theta_of
-    from gift_theory.lab._shots import draws, layer_outputs, model_shots, params32
+    from gift_theory.lab import MomentProblem, model_shots
+    # private: the fit's loss against the comparison's compiled forward, bit for bit, and its compile count
+    from gift_theory.lab._fit_moments import _loss_of_outputs, _positive, _scalar, theta_of
+    from gift_theory.lab._shots import draws, layer_outputs, params32
 
     params0, x = setup
     meas = simulate_measurement(jax.random.PRNGKey(5), params0, x, gt.Physics.create(s=0.1, shot=0.02), shots=24,
@@ -299,8 +310,10 @@ def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
     site must be bit for bit what the core's compiled whole-physics sampler draws, whether it
     comes from the cache or not (both draw through ``_model.site_draws``); the eager sampler
     and a plain gift_theory._random reference guard the site's subkey and law."""
+    from gift_theory import sample_noise
+    # private: the lab's per-site draw cache against the core's compiled sampler and its named subkeys, bit for bit
     from gift_theory import _random
-    from gift_theory._model import compiled_draws, named_subkey, sample_noise
+    from gift_theory._model import compiled_draws, named_subkey
     from gift_theory.lab._shots import draws
 
     phys = gt.Physics.create(s=0.1, **spec)
@@ -326,7 +339,7 @@ def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
 # ---- power stated ------------------------------------------------------------------------------
 
 def test_power_notes_say_what_is_weak_in_the_file_s_numbers():
-    from gift_theory.lab._compare import power_notes
+    from gift_theory.lab import power_notes
 
     rows = [{"mechanism": "noise_law", "power": 0.05, "se": 0.05, "power_with_taps": 0.95, "replicates": 20,
              "n": 60, "r": 16, "taps": False},
@@ -353,7 +366,9 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
     """The rate is the real test's on simulated files: at the model itself it is the level; shot
     noise is seen; a law change at equal variance on 40 inputs x 16 shots is not, with or
     without taps; an outputs-only file gets the with-taps figure of the same simulated files."""
-    from gift_theory.lab._compare import _power_p, _rate, power_of
+    from gift_theory.lab import power_of
+    # private: the rejection rate recomputed file by file, against power_of's batched one
+    from gift_theory.lab._compare import _power_p, _rate
 
     params, x = deep_setup
     model = Model(gt.Physics.create(s=0.1))
@@ -386,7 +401,7 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
 def test_power_of_agrees_with_compare_run_file_by_file(deep_setup):
     """Validation against compare itself, one file at a time (not the batched scoring): the
     outputs-only shot probe, whose power here is neither 0 nor 1."""
-    from gift_theory.lab._compare import power_of
+    from gift_theory.lab import power_of
 
     params, x = deep_setup
     model = Model(gt.Physics.create(s=0.1))
@@ -408,6 +423,7 @@ def test_power_of_agrees_with_compare_run_file_by_file(deep_setup):
 def test_compare_command_states_power_next_to_the_verdict(deep_setup, tmp_path, capsys):
     import json
 
+    # private: the text of the result already run with --json (a second run would double the cost)
     from gift_theory.cli._compare import render
     from gift_theory.cli import main
     from gift_theory.lab import save_measurement
@@ -443,6 +459,7 @@ def test_the_moment_fit_compares_log_variances_net_of_their_bias(x64):
     model's K - 1 = 31. The log variances differ by ~1/15 - 1/31 in expectation; the moment
     loss's difference (the fitting target) is zero in expectation, within Z of its standard
     error, and the uncorrected one is not (the fitted s was 1.6-2.2 % low on 500-wide layers)."""
+    # private: E[log v] at k degrees of freedom, against Monte Carlo
     from gift_theory.lab._qtest import log_variance_bias
 
     rng = np.random.default_rng(5)
@@ -484,7 +501,7 @@ def test_the_log_variance_ratio_of_the_figures_has_mean_zero_under_the_true_mode
     """predictive_moments' log(measured / model variance) compares r = 8 shots with K = 32: the
     raw ratio sits ~0.12 low (0.2 of its sd per cell); net of the bias its mean over a 64-wide
     layer's cells (per input, then over 200 inputs) is within 4.5 se of 0."""
-    from gift_theory.lab._compare import predictive_moments
+    from gift_theory.lab import predictive_moments
 
     arch = gt.Architecture((8, 64, 4))
     params = gt.init_params(jax.random.PRNGKey(21), arch)
@@ -496,7 +513,7 @@ def test_the_log_variance_ratio_of_the_figures_has_mean_zero_under_the_true_mode
     per_input = (lr / sd).mean(1)
     se = per_input.std(ddof=1) / np.sqrt(per_input.size)
     assert abs(per_input.mean()) <= 4.5 * se, (per_input.mean(), se)
-    from gift_theory.lab._qtest import log_variance_bias
+    from gift_theory.lab._qtest import log_variance_bias  # private: the bias the ratio would carry uncorrected
 
     raw_bias = log_variance_bias(mom.r - 1) - log_variance_bias(mom.K - 1)  # what the uncorrected ratio carries
     assert abs(raw_bias) / sd > 2 * 4.5 * se
@@ -510,9 +527,11 @@ def test_the_chunks_of_inputs_do_not_change_the_numbers(setup, monkeypatch):
     the same channel values to float32 rounding, the same discrepancy and p-value. The file and
     its :class:`Reference` are made by hand (private names): simulating and a noise floor would
     compile programs that are not under test (this test runs in CI's budget)."""
-    from gift_theory._measurement import Measurement
+    from gift_theory import Measurement
+    from gift_theory.lab import Reference
+    # private: the chunk budget and the channel values it must not change (see the docstring)
     from gift_theory.lab import _channels
-    from gift_theory.lab._channels import Reference, channel_values, layer_scales
+    from gift_theory.lab._channels import channel_values, layer_scales
 
     params, x = setup
     n, r = 12, 8

@@ -6,6 +6,7 @@ rates over many seeds and the without-taps case are measured by
 ``python -m studies.calibrate ident`` (numbers in docs/lab.md).
 """
 
+import dataclasses
 import json
 import types
 
@@ -100,7 +101,6 @@ def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     """Rule b' of the verdict: drift explains a drifting chip only because its trend in time
     does -- the same model with every time at the mean fails the held-out test."""
     from gift_theory.lab import Session
-    from gift_theory.lab._verdict import time_free
 
     meas = _chip(HIDDEN["drift"])
     calls = []
@@ -109,7 +109,10 @@ def test_a_real_drift_is_explained_and_its_time_free_twin_fails():
     assert d.ranking[0].effects == ("drift",) and d.explained, d.reasons
     assert calls == [(0, 1, "drift: passes")]  # one progress line per candidate, as it is done
     session = Session.create(jax.random.PRNGKey(11), meas)
-    twin = session.score(d.ranking[0].model, held_out=time_free(session.test_meas))
+    held_out = session.test_meas
+    # every acquisition time at the mean of the times
+    time_free = dataclasses.replace(held_out, t=np.full_like(held_out.t, float(np.mean(held_out.t))))
+    twin = session.score(d.ranking[0].model, held_out=time_free)
     assert twin.p_value < 0.01 < d.ranking[0].comparison.p_value
 
 
@@ -119,8 +122,8 @@ def test_weight_offsets_are_fitted_at_the_data_s_noise_level_not_the_default():
     after s: at s = 0.03 the mean response tanh(z + n) of the default s = 0.1 is compressed,
     and offsets fitted to it came out 20-40 % off, failing the true model's own one-step check.
     Fitted on the fitting inputs, awgn + weight_error passes it there in every layer."""
-    from gift_theory.lab._compare import one_step_check
-    from gift_theory.lab._fit import fit_model
+    from gift_theory.lab import one_step_check
+    from gift_theory.lab import fit_model
 
     meas = _chip({"weight_error": {"e": 0.06, "seed": 5}}, seed=6, s=0.03, r=32)
     model = fit_model(jax.random.PRNGKey(1), meas, ["weight_error"])
@@ -194,6 +197,7 @@ def test_fit_command_contract(tmp_path, capsys):
     assert abs(out["params"]["q"] - 0.05) < 0.02
     # without --json the command prints this result's text (the same run: one fit, not two), and
     # --figures writes the figure folder with each figure's numbers beside it
+    # private: the text of the result already run with --json (the same run: one fit)
     from gift_theory.cli._fit import render
 
     text = render(out)
@@ -221,6 +225,7 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
     meas = _chip(HIDDEN["weight_error"], seed=5, n=60, r=16, taps=taps)
     path = tmp_path / "we.npz"
     save_measurement(path, meas)
+    # private: the text of the result already run with --json (the same run: one fit)
     from gift_theory.cli._fit import render
 
     assert main(["fit", str(path), "--add", "weight_error", "--json", "--quiet", "--power-replicates", "0",
@@ -239,7 +244,7 @@ def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them():
     depend on them); on a 50 MB file (16-32-16-8 with taps, 1740 inputs x 64 shots) the candidate
     threads fill the budget and the refit null's replicates inside each come out of the same budget -- every thread
     at once within it."""
-    from gift_theory.lab import _budget
+    from gift_theory.lab import _budget  # private: the thread budget, its contract (see the docstring)
 
     def file(n, r, widths):
         return types.SimpleNamespace(n=n, r=r, layers=lambda: [np.empty((0, 0, d)) for d in widths])
@@ -263,7 +268,7 @@ def test_order_of_candidates_and_threads_change_no_number():
     cands = ["shot", "multiplicative", "weight_error", "bias_offset"]
 
     def run(order, workers):
-        from gift_theory.cli._diagnose import render
+        from gift_theory.cli._diagnose import render  # private: the text of each run's result, compared across runs
 
         d = diagnose(jax.random.PRNGKey(21), meas, candidates=order, workers=workers)
         assert sum(c.comparison.replicates > 0 for c in d.ranking) >= 2
@@ -290,7 +295,7 @@ def test_candidates_the_identification_clears_are_not_fitted_and_change_nothing(
     check, so the candidates of the classes no test flags are not fitted (listed with the
     reason). Every candidate that is fitted has the numbers it has when all are (a candidate is
     a pure function of its own request), and the verdict is the same."""
-    from gift_theory.lab import _ranking  # the staging's switch: which classes are flagged
+    from gift_theory.lab import _ranking  # private: the staging's switch (which classes are flagged), monkeypatched
 
     meas = _chip(HIDDEN["shot"], seed=4, n=80, r=24)
     cands = ["shot", "multiplicative", "crosstalk", "layer_gain", "bias_offset"]
@@ -350,6 +355,7 @@ def test_ranking_order_rule_on_random_candidate_lists(seed):
 def test_reasons_wording_follows_the_p_value(p, words):
     """A candidate that passes but does not buy its keep: the reason speaks of the baseline from
     its p-value (never "barely inconsistent" next to p = 1e-37)."""
+    # private: the reason's wording at each p, on hand-made candidates
     from gift_theory.lab._verdict import explanation, p_words
 
     class Cmp:
@@ -399,6 +405,7 @@ def test_ranking_statuses_and_the_verdict_name_ranking_0(tmp_path, capsys):
 def test_an_explaining_fit_leads_the_mechanisms_it_agrees_with_and_keeps_the_rest_in_order():
     from types import SimpleNamespace as NS
 
+    # private: the mechanisms' order rule, on hand-made candidates
     from gift_theory.lab._mechanisms import lead_with_explanation
 
     base = NS(discrepancy=500.0, se=5.0, p_value=1e-40)
@@ -501,8 +508,8 @@ def test_a_law_with_the_wrong_tails_is_refused_and_the_right_law_is_not():
     reproduce the shots' tails (a two-sample test against its own shots). On a Laplace chip
     (heavy tails in every layer) uniform noise (light tails) is refused by it, Laplace is not;
     on an awgn chip the kurtosis names nothing and the rule has nothing to read."""
-    # the rule read on its own (its contract: which candidate it refuses), not through a diagnosis
     from gift_theory.lab import Session, identify
+    # private: the rule on its own (which candidate it refuses), not through a diagnosis
     from gift_theory.lab._verdict import unmoved_tails_rule
 
     meas = _chip(HIDDEN["laplace"], seed=2, n=60, r=24)
@@ -524,8 +531,8 @@ def test_a_model_without_the_measured_correlation_is_refused_and_one_with_it_is_
     correlations (a two-sample test against its own shots). On a chip with per-neuron and
     shared gain noise (multiplicative + common_mode) the per-neuron noise alone is refused by it,
     the pair is not; on an awgn chip the rule has nothing to read."""
-    # the rule read on its own (its contract: which candidate it refuses), not through a diagnosis
     from gift_theory.lab import Session, identify
+    # private: the rule on its own (which candidate it refuses), not through a diagnosis
     from gift_theory.lab._verdict import unreproduced_correlations_rule
 
     meas = _chip({"multiplicative": 0.3, "common_mode": 0.3}, seed=2, n=60, r=24)
@@ -559,6 +566,7 @@ def test_a_misfit_of_the_mean_is_no_trend_in_time_and_a_small_drift_is_one(spec,
 def test_rule_g_reads_each_pair_s_correlation_sample_by_sample():
     """_corr_z: per input and sample of r consecutive shots, Fisher's z of numpy's correlation
     of each pair of neurons (upper triangle, row by row)."""
+    # private: rule g's statistic against numpy's correlation, sample by sample
     from gift_theory.lab._verdict import _corr_z
 
     rng = np.random.default_rng(0)

@@ -4,6 +4,11 @@ output's mean (gift_theory.lab._explain_output).
 The files come from test_identify's plain-numpy simulator (CONTRACTS §1-§2, not gift's forward
 pass); the derivative columns are checked against central differences of the propagation
 itself, on the same draws.
+
+Private names on purpose: the propagation's derivative columns and the shape polynomials are
+numerical kernels; rule e's refusal and the "as well by" list are decided here on hand-made
+candidates no cheap simulated file produces, and ``explain`` at a given level is the part of
+``identify`` under test. The mechanisms named from the files go through :func:`identify`.
 """
 
 import numpy as np

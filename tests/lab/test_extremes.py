@@ -10,6 +10,7 @@ from scipy import integrate
 
 import gift_theory as gt
 from gift_theory.lab import identify, simulate_measurement
+# private: the level's root itself; one_step_check reports it only after a noise floor and a Q-test per layer
 from gift_theory.lab._compare import layer_level
 from gift_theory.lab import Model
 from gift_theory.lab.identification import smoothed
@@ -98,6 +99,7 @@ def test_a_coarse_quantizer_is_a_finding_named_readout_nonlinearity(taps):
     identification divided by: an overflow, then a singular normal matrix and exit 1). Now each
     layer's cells are read at its resolution (step^2 / 12), nothing overflows, and the lattice is
     the strongest finding: readout_nonlinearity, on every measured layer."""
+    # private: the naming rules on an identification alone (diagnose fits every candidate first)
     from gift_theory.lab._mechanisms import Context, mechanisms
 
     meas = _quantized(taps)

@@ -15,11 +15,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import gift_theory as gt
+# private: the statistics' finite guard, reached publicly only on an overflowing file (the CLI test below)
 from gift_theory._finite import NotFinite
 from gift_theory.cli import main
 from gift_theory.lab import Model, compare, load_measurement, save_measurement, simulate_measurement
 from gift_theory.lab import save_csv, save_netcdf, save_wide_csv
-from gift_theory.lab._io import save_weights  # the weights file beside a CSV: no public writer of its own
+
+from .test_formats import save_weights
+# private: that a statistic never drops a non-finite term, for terms no valid file yields
 from gift_theory.lab._qtest import over_inputs, q_test
 
 F32 = float(np.finfo(np.float32).max)
@@ -98,6 +101,7 @@ def test_the_finite_check_of_float32_shots_finds_every_bad_value_and_passes_the_
     """float32 values are checked by their float64 sum first (no mask as large as the shots):
     NaN, +inf, -inf and a +inf beside a -inf are found at their index; float32's largest values,
     whose float32 sum overflows, are finite."""
+    # private: the float32 scan's index of the first bad value, exact for sums that overflow
     from gift_theory._finite import first_bad
 
     big = np.full((4, 8, 3), np.finfo(np.float32).max, np.float32)

@@ -16,7 +16,11 @@ import gift_theory as gt
 from gift_theory.cli import main
 from gift_theory.lab import Measurement, load_measurement, save_measurement, simulate_measurement
 from gift_theory.lab import detect_format, save_file, save_netcdf, save_wide_csv
-from gift_theory.lab._io import save_weights  # the weights file beside a CSV: no public writer of its own
+
+def save_weights(path, meas):
+    """The weights file beside a CSV (reference §3): the programmed W{l}, b{l} and the activation."""
+    np.savez(path, **{k: v for k, v in meas.arrays().items() if k[:1] in "Wb" or k == "activation"})
+
 
 #: every float64 that float32 -- the precision gift computes in -- holds as a finite number
 finite = st.floats(-float(np.finfo(np.float32).max), float(np.finfo(np.float32).max), width=64)

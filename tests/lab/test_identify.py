@@ -10,10 +10,10 @@ import pytest
 from scipy import stats
 
 import gift_theory as gt
-from gift_theory._measurement import Measurement
-from gift_theory._params import Layer
+from gift_theory import Layer, Measurement
 from gift_theory.lab import simulate_measurement
 from gift_theory.lab import identify
+# private: the naming rules on an identification alone (diagnose fits every candidate first)
 from gift_theory.lab._mechanisms import Context, mechanisms
 
 
@@ -268,7 +268,9 @@ def test_a_weight_error_as_large_as_W_is_identified_and_the_noise_level_stays_th
 
 
 def test_a_gross_outlier_among_offsets_is_refused_and_named():
-    from gift_theory.lab._offset_prior import outlier_test, refusing
+    from gift_theory.lab import refusing
+    # private: the outlier statistic's null law, which prior_check's rows only summarise
+    from gift_theory.lab._offset_prior import outlier_test
 
     rng = np.random.default_rng(3)
     d = rng.normal(0, 0.05, 16)
@@ -335,7 +337,7 @@ def test_a_layer_with_fewer_inputs_than_parameters_is_tested_whole_not_resolved(
     # 40 inputs for 61 parameters per neuron at layer 1: W_eff cannot be read off; the
     # programmed map is still tested as a whole (null: passes; a weight error: rejected) and
     # the noise identified, without the (d, k, k) normal equations
-    # the margin is the subtle contract here: a layer below it is tested whole, never fitted
+    # private: the margin, below which a layer is tested whole, never fitted
     from gift_theory.lab.identification._layer import RESOLVE_MARGIN
 
     def run(err):
@@ -363,6 +365,7 @@ def test_a_layer_with_fewer_inputs_than_parameters_is_tested_whole_not_resolved(
 
 
 def test_block_diagonal_gls_equals_the_dense_one():
+    # private: a numerical kernel against its dense definition
     from gift_theory.lab.identification._stats import _Blocks, _gls, _sub
 
     rng = np.random.default_rng(0)
@@ -382,6 +385,7 @@ def test_block_diagonal_gls_equals_the_dense_one():
 def test_expected_kurtosis_of_a_normal_sample_is_minus_6_over_r_plus_1():
     # identity activation: the cell is normal, and a normal sample's m4 / m2^2 has mean
     # 3 (r - 1) / (r + 1) exactly; the Monte Carlo mean must agree within its standard error
+    # private: the kurtosis' small-sample law, which no public output isolates
     from gift_theory.lab.identification._noise import _expected_kurtosis
 
     r = 12
@@ -403,7 +407,7 @@ def test_expected_kurtosis_of_a_normal_sample_is_minus_6_over_r_plus_1():
 
 
 def test_kurtosis_transform_is_scipys_kurtosistest():
-    from gift_theory.lab.identification._stats import _sample_law
+    from gift_theory.lab.identification._stats import _sample_law  # private: the kurtosis transform against scipy's
 
     rng = np.random.default_rng(3)
     for r in (5, 9, 16, 48):
@@ -416,6 +420,7 @@ def test_kurtosis_transform_is_scipys_kurtosistest():
 def test_without_taps_the_propagation_matches_a_long_simulation():
     # the output layer's regressor and input covariance by Monte Carlo against 20000 shots of
     # the plain-numpy simulator at the same level (its own independent draws)
+    # private: the Monte Carlo propagation's mean, covariance and law against a long simulation
     from gift_theory.lab.identification._layers import _propagate
     from gift_theory.lab.identification._stats import _sample_law
 
@@ -505,6 +510,7 @@ def test_without_taps_uniform_noise_is_named_along_the_model_covariance_s_minor_
 def test_the_wide_layer_covariance_blocks_are_the_sandwich_per_neuron(monkeypatch):
     """A wide layer's map covariance, per neuron i: B_i^-1 M_i B_i^-T with B_i = sum_n x x^T and
     M_i = sum_n (obs / r) x x^T (computed by batched products; here against the definition)."""
+    # private: the blocked sandwich against its definition, forced through its size switch
     from gift_theory.lab.identification import _stats
 
     monkeypatch.setattr(_stats, "FULL_COV_MAX", 0)  # the blocks, whatever the size

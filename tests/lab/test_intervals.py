@@ -15,6 +15,7 @@ import pytest
 import gift_theory as gt
 from gift_theory.lab import fit_effects, simulate_measurement
 from gift_theory.lab import fit_uncertainty
+# private: the profile interval's coverage on its own model, apart from the fit feeding it
 from gift_theory.lab._intervals import scale_interval
 
 Z = 4.5

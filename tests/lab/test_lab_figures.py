@@ -177,8 +177,10 @@ def test_the_law_panels_numbers_are_calibrated_under_the_true_model_and_see_a_wr
 
 
 def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error():
-    from gift_theory.lab._compare import Comparison, _q_of, discrepancy_difference
-    from gift_theory.lab._qtest import q_test
+    from gift_theory.lab import Comparison, discrepancy_difference
+    # private: the statistic on bootstrap replicates and (below) its memory budget, the kernel of the public difference
+    from gift_theory.lab._compare import _q_of
+    from gift_theory.lab._qtest import q_test  # private: builds two comparisons from hand-made channel values
 
     rng = np.random.default_rng(0)
     n, C = 60, 10
@@ -198,7 +200,8 @@ def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error()
     idx = np.random.default_rng(1).integers(0, n, size=(1000, n))
     alone = np.hypot(np.std(_q_of(Ta[idx])), np.std(_q_of(Tb[idx])))
     assert 0 < se < 0.5 * alone
-    # the replicates in steps of 7 (the private memory budget set so): the same standard error
+    # the replicates in steps of 7: the same standard error
+    # private: the bootstrap's memory budget, a constant no argument sets
     from gift_theory.lab import _compare
 
     with pytest.MonkeyPatch.context() as mp:
@@ -210,7 +213,8 @@ def test_a_difference_of_discrepancies_has_its_paired_bootstrap_standard_error()
 
 def test_the_pair_plot_draws_the_intervals_gift_fit_reports():
     from gift_theory.lab import pairs_figure
-    from gift_theory.lab._figure_sets import pairs_data  # the numbers a figure draws: not public API
+    # private: the numbers the pair figure draws, beside it on disk but not an API
+    from gift_theory.lab._figure_sets import pairs_data
     from scipy import stats as st
 
     cov = np.array([[0.01, -0.008], [-0.008, 0.02]])
@@ -228,6 +232,7 @@ def test_the_pair_plot_draws_the_intervals_gift_fit_reports():
 
 
 def test_the_demo_s_bars_say_what_their_colours_mean():
+    # private: the demo's bar figure, which only a full `gift demo` run draws otherwise
     from gift_theory.cli._demo_parts import plot_finetune
 
     rows = [{"method": m, "loss_before": 1.0, "loss_after": v} for m, v in (("gift", 0.9), ("spsa", 1.1), ("ift", 1.0))]
@@ -245,6 +250,7 @@ def test_each_command_has_a_figure_folder_of_its_own(tmp_path):
     import json
 
     from gift_theory import GiftInputError
+    # private: the figure-folder rule every lab command shares, without running one
     from gift_theory.cli._labargs import figure_dir
 
     args = argparse.Namespace(measurement=str(tmp_path / "chip.npz"), figures=None, json=False)

@@ -4,6 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+# private: the per-neuron LM kernel against closed-form and BFGS solutions (a fit mixes it with the noise)
 from gift_theory.lab import _offset_fit as fo
 
 

@@ -11,10 +11,11 @@ import pytest
 import gift_theory as gt
 from gift_theory.cli import main
 from gift_theory.effects import MECHANISMS, Effect, register
-from gift_theory.effects._base import unregister
-from gift_theory.lab import Model, fit_effects, save_measurement, signatures, simulate_measurement
+from gift_theory.effects._base import unregister  # private: leaves the process-wide registry as this file found it
+from gift_theory.lab import Model, failing_layers, fit_effects, save_measurement, signatures, simulate_measurement
+# private: the naming rules on hand-made evidence, one per class
 from gift_theory.lab._mechanisms import RULES, THRESHOLD, Context, mechanisms
-from gift_theory.lab._verdict import explanation, failing_layers
+from gift_theory.lab._verdict import explanation  # private: each verdict rule at its edge, on hand-made candidates
 
 
 # ---- the explained rule, on stand-ins ---------------------------------------------------------
@@ -82,7 +83,7 @@ def test_prior_check_tells_offsets_from_their_effect_s_prior():
     offsets all one way fail ``b_mean``; weight offsets drawn apart from W pass, offsets
     proportional to W fail ``w_correlation``; a coupling W M on an expanding layer fails
     ``w_structure``."""
-    from gift_theory.lab._offset_prior import prior_check
+    from gift_theory.lab import prior_check
 
     arch = gt.Architecture((4, 12, 3))
     params = gt.init_params(jax.random.PRNGKey(0), arch)
@@ -116,6 +117,7 @@ def test_coupling_test_is_exact_under_the_prior_and_finds_a_coupling():
     uniform, so P(p < 0.1) = 0.1 (200 draws: 99.9 % binomial bounds 0.04-0.18). A coupling
     E = W M (dense crosstalk on a contracting layer, where the F test ``w_structure`` cannot
     apply) is found; the normal law beyond 64 rows does too, and is centred under the prior."""
+    # private: the statistic's exact null law, which prior_check's rows only summarise
     from gift_theory.lab._offset_prior import coupling_test
 
     rng = np.random.default_rng(5)
@@ -306,7 +308,7 @@ def test_plugin_flag_on_simulate_compare_and_diagnose(tmp_path, capsys):
 def test_layer_gain_is_a_name_on_every_command(tmp_path, capsys):
     """CONTRACTS §4: layer_gain in simulate --effect, fit --add, diagnose --candidates and
     finetune --true-effect (parsed by the same catalogue); the fit recovers a uniform loss."""
-    from gift_theory.finetune._run import true_physics
+    from gift_theory.finetune import true_physics
 
     assert float(true_physics(0.1, ("layer_gain=0.7",)).get("layer_gain").g) == 0.7
     path = tmp_path / "loss.npz"
@@ -329,6 +331,7 @@ def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_une
     signed tests reject it (a law change in one layer); then nothing is "missing" by the
     held-out test, but the data are not explained, and a passing candidate counts only with an
     effect of the class the identification flags."""
+    # private: the rule that refuses what identification contradicts, on hand-made candidates
     from gift_theory.lab._verdict import identification_refusals
 
     base_passes = _Cmp(0.3)

@@ -3,6 +3,7 @@ coordinate) or Nelder-Mead (several)."""
 
 import numpy as np
 
+# private: the search kernel's accuracy and evaluation count, which no fit output isolates
 from gift_theory.lab._fit_moments import XATOL, optimise
 
 

@@ -184,8 +184,9 @@ def test_plugin_is_ranked_first(tmp_path, name):
         assert d.explained and d.ranking[0].status == "passes", d.reasons
         assert "identified neuron by neuron" in d.reasons[0]
         assert d.as_json()["explained_by"] == ["transmission"]
-        # which families the rule covers is private (lab/_neurons.py): bias_offset keeps its prior
+        # bias_offset keeps its prior: the per-neuron rule covers the plugin's family only
         from gift_theory.lab import Model
+        # private: which families the per-neuron rule covers, which no output lists
         from gift_theory.lab._neurons import per_neuron_families
         assert per_neuron_families(d.ranking[0].model) == [("transmission", "alive")]
         assert per_neuron_families(Model(d.baseline.physics, None, {"bias_offset": 0.1})) == []

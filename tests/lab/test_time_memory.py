@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from gift_theory._measurement import Measurement
-from gift_theory._params import Layer
+from gift_theory import Layer, Measurement
 from gift_theory.effects import REGISTRY
 from gift_theory.effects.memory import previous_shot, with_memory
 from gift_theory.lab import identify
+# private: the naming rules on an identification alone (diagnose fits every candidate first)
 from gift_theory.lab._mechanisms import Context, mechanisms
 
 
@@ -216,6 +216,7 @@ def _cand(effects, discrepancy, status="passes"):
 
 
 def test_models_of_other_classes_within_two_sd_are_indistinguishable_and_only_they():
+    # private: the 2-sd rule on hand-made candidates at its edges (the command-line test below runs it whole)
     from gift_theory.lab import _ambiguity
 
     base = types.SimpleNamespace(se=3.0)
@@ -240,6 +241,7 @@ def test_models_of_other_classes_within_two_sd_are_indistinguishable_and_only_th
 # ---- the next measurement -----------------------------------------------------------------------
 
 def test_the_shots_needed_grow_as_the_square_of_the_gap_s_inverse():
+    # private: the shots-needed scaling law, which a design reports only at one gap
     from gift_theory.lab._design import _factor
 
     k1 = _factor([(10.0, 2.0, 2.0)])
@@ -254,7 +256,9 @@ def test_the_next_measurement_separates_shot_from_multiplicative_noise():
     (the same two models can never be told apart on a campaign without signal)."""
     import gift_theory as gt
     from gift_theory.lab import Model, simulate_measurement
-    from gift_theory.lab._design import _power, designs, next_measurement
+    from gift_theory.lab import designs, next_measurement
+    # private: the simulated power of one model against itself, which no design reports
+    from gift_theory.lab._design import _power
 
     arch = gt.Architecture((4, 8, 3))
     params = gt.init_params(jax.random.PRNGKey(1), arch, gain=1.5)
@@ -276,6 +280,7 @@ def test_the_next_measurement_separates_shot_from_multiplicative_noise():
 # ---- the time figure ----------------------------------------------------------------------------
 
 def test_the_time_figure_draws_each_layer_against_acquisition_time():
+    # private: drawn by diagnosis_figures only after a diagnosis of a timed file
     from gift_theory.lab._figures import time_figure
 
     tt = np.linspace(0, 1, 10)

@@ -63,6 +63,20 @@ _SECH2 = _WU / np.cosh(_U) ** 2
 WIDE_CHUNK = 8192
 
 
+def _x64():
+    """The thread-local float64 context of the installed JAX (``jax.enable_x64``, before it
+    ``jax.experimental.enable_x64``), or None."""
+    import jax
+
+    ctx = getattr(jax, "enable_x64", None)
+    if ctx is None:
+        try:
+            from jax.experimental import enable_x64 as ctx
+        except ImportError:
+            return None
+    return ctx
+
+
 @functools.lru_cache(maxsize=1)
 def _wide_program():
     """The wide rule compiled in float64: XLA's vectorised exp runs the (cells, nodes) Gaussian
@@ -71,7 +85,7 @@ def _wide_program():
     import jax
     import jax.numpy as jnp
 
-    with jax.enable_x64(True):
+    with _x64()(True):
         U, Q, S2 = (jnp.asarray(v, jnp.float64) for v in (_U, _Q, _SECH2))
 
     def rule(z, sd):
@@ -89,13 +103,12 @@ def _tanh_wide(z, sd):
     same two Gaussian densities at the nodes u >= 0 (sech^2 is even: its integral over
     [-U_MAX, U_MAX] folds onto [0, U_MAX]), in float64, chunked to bound the (cells, nodes)
     temporaries (:func:`_tanh_wide_numpy` is the same rule in numpy)."""
-    if z.size < WIDE_CHUNK // 4:  # a few cells: numpy's loop costs less than a padded chunk
+    x64 = _x64()
+    if z.size < WIDE_CHUNK // 4 or x64 is None:  # a few cells: numpy's loop costs less than a padded chunk
         return _tanh_wide_numpy(z, sd)
-    import jax
-
     m, g = np.empty(z.shape), np.empty(z.shape)
     rule = _wide_program()
-    with jax.enable_x64(True):  # thread-local: the caller's other JAX work keeps its dtypes
+    with x64(True):  # thread-local: the caller's other JAX work keeps its dtypes
         for c0 in range(0, z.size, WIDE_CHUNK):
             zc, sc = z[c0:c0 + WIDE_CHUNK], sd[c0:c0 + WIDE_CHUNK]
             k = zc.size

@@ -79,9 +79,8 @@ def _x64():
 
 @functools.lru_cache(maxsize=1)
 def _wide_program():
-    """The wide rule compiled in float64: XLA's vectorised exp runs the (cells, nodes) Gaussian
-    densities about three times as fast as numpy's (the identification of a 784-500-... network
-    with taps spent 69 % of its time here)."""
+    """The wide rule compiled in float64 (XLA's exp is vectorised where numpy's float64 exp may
+    not be: the (cells, nodes) Gaussian densities are most of a wide layer's identification)."""
     import jax
     import jax.numpy as jnp
 

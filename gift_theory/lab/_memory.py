@@ -107,12 +107,17 @@ def _detrended(E, Y, t):
     return out
 
 
-def _partial(e, x1, xL, v):
-    """The coefficient of x1 in the regression of e on (x1, xL), pooled over neurons weighted by 1 / v."""
-    a1, aL = float(np.sum(e * x1 / v)), float(np.sum(e * xL / v))
-    g11, g1L, gLL = float(np.sum(x1 * x1 / v)), float(np.sum(x1 * xL / v)), float(np.sum(xL * xL / v))
+def _coefficient(a1, aL, g11, g1L, gLL):
+    """The coefficient of x1 in the regression on (x1, xL), from the cross products (x1'e, xL'e,
+    x1'x1, x1'xL, xL'xL)."""
     det = g11 * gLL - g1L * g1L
     return (gLL * a1 - g1L * aL) / det if det > 0 else 0.0
+
+
+def _partial(e, x1, xL, v):
+    """The coefficient of x1 in the regression of e on (x1, xL), pooled over neurons weighted by 1 / v."""
+    return _coefficient(float(np.sum(e * x1 / v)), float(np.sum(e * xL / v)), float(np.sum(x1 * x1 / v)),
+                        float(np.sum(x1 * xL / v)), float(np.sum(xL * xL / v)))
 
 
 def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
@@ -152,10 +157,8 @@ def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
             x[first] = 0.0
             xs.append(x)
         x1, xL = xs
-        a1, aL = float(np.vdot(ep, x1)), float(np.vdot(ep, xL))
-        g11, g1L, gLL = float(np.vdot(x1, x1)), float(np.vdot(x1, xL)), float(np.vdot(xL, xL))
-        det = g11 * gLL - g1L * g1L
-        return (gLL * a1 - g1L * aL) / det if det > 0 else 0.0
+        return _coefficient(float(np.vdot(ep, x1)), float(np.vdot(ep, xL)), float(np.vdot(x1, x1)),
+                            float(np.vdot(x1, xL)), float(np.vdot(xL, xL)))
 
     stat = stat_of(None)
     # deals of each input's shots to its times: within each input a random permutation of its r shots

@@ -89,6 +89,20 @@ def _fit_map(lay: _Layer, act: str, s2: float, tt=None, iters: int = 40, W0=None
     return W, b, drift, z, m, g, var, X, E
 
 
+def _trends_free(X, p: int):
+    """The design's map columns (n, d, p + 1) and ``off``, which projects per-neuron arrays --
+    (n, d) residual means or (n, d, c) designs -- off its time-trend columns (the trends free)."""
+    XT = X[:, :, p + 1:]
+    Gi = np.linalg.inv(np.einsum("nia,nib->iab", XT, XT) + 1e-12 * np.eye(XT.shape[2]))
+
+    def off(v):
+        if v.ndim == 2:
+            return v - np.einsum("nia,ia->ni", XT, np.einsum("iab,ib->ia", Gi, np.einsum("nib,ni->ib", XT, v)))
+        return v - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, v))
+
+    return X[:, :, :p + 1], off
+
+
 def _score_omnibus(lay: _Layer, act: str, s2: float, tt, Chat, obs, r: float, alive, nu: float):
     """(p, z) of the programmed map (W, b; the time trends free) by a score test at it: each
     neuron's per-input mean residual at the programmed map, projected on its design there,
@@ -104,14 +118,8 @@ def _score_omnibus(lay: _Layer, act: str, s2: float, tt, Chat, obs, r: float, al
     X = _design(lay, g0, tt)
     P = None if lay.memory is None else lay.memory[0]  # alpha's error moves the means along P
     if tt is not None:  # the trends free: both the residual and the design projected off them
-        XT, X = X[:, :, p + 1:], X[:, :, :p + 1]
-        Gi = np.linalg.inv(np.einsum("nia,nib->iab", XT, XT) + 1e-12 * np.eye(XT.shape[2]))
-
-        def off(v):
-            return v - np.einsum("nia,ia->ni", XT, np.einsum("iab,ib->ia", Gi, np.einsum("nib,ni->ib", XT, v)))
-
-        e, P = off(e), (None if P is None else off(P))
-        X = X - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, X))
+        X, off = _trends_free(X, p)
+        e, P, X = off(e), (None if P is None else off(P)), off(X)
     alive = np.asarray(alive, int)
     if alive.size == 0:
         return 1.0, 0.0
@@ -173,15 +181,8 @@ def _score_given_shape(lay: _Layer, act: str, s2: float, tt, Chat, r: float, ali
     P = None if lay.memory is None else lay.memory[0][:, alive]  # alpha's error moves the means along P
     da, k = X.shape[1], X.shape[2]
     if tt is not None:  # the time trends are nuisance parameters too, per neuron (as in the omnibus)
-        XT, X = X[:, :, p + 1:], X[:, :, :p + 1]
-        Gi = np.linalg.inv(np.einsum("nia,nib->iab", XT, XT) + 1e-12 * np.eye(XT.shape[2]))
-
-        def off(v):
-            return v - np.einsum("nia,ia->ni", XT, np.einsum("iab,ib->ia", Gi, np.einsum("nib,ni->ib", XT, v)))
-
-        e, P = off(e), (None if P is None else off(P))
-        X = X - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, X))
-        H = H - np.einsum("nia,iac->nic", XT, Gi @ np.einsum("nib,nic->ibc", XT, H))
+        X, off = _trends_free(X, p)
+        e, P, X, H = off(e), (None if P is None else off(P)), off(X), off(H)
         k = X.shape[2]
     # stacked over (input, neuron): the map's design B is block-diagonal over neurons (neuron i's
     # row of input n is X[n, i] in its own block), the shape's columns H are shared; both are

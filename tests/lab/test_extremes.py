@@ -14,6 +14,8 @@ from gift_theory.lab import identify, simulate_measurement
 from gift_theory.lab._compare import layer_level
 from gift_theory.lab import Model
 from gift_theory.lab.identification import smoothed
+# private: a Wald statistic's pseudo-inverse and rank, a contract files reach only at extreme levels
+from gift_theory.lab.identification._stats import _wald
 
 
 def _exact(f, z, sd):
@@ -83,6 +85,47 @@ def test_a_correctly_specified_file_names_nothing_at_large_noise(s, taps):
     assert named == [], named
     for li in idn.layers:
         assert abs(li.s / s - 1) < 6 * li.s_se / s + 0.01, (li.layer, li.s)
+
+
+def test_a_map_the_data_see_in_part_names_no_dead_neuron():
+    """s = 1 with taps (set 27 of the levels null): layer 2's neurons are read at maps so steep that
+    their designs have rank 6-16 of 17 -- the Gram's plain inverse was rounding noise, the sandwich
+    covariance indefinite (eigenvalues -1.5e4 .. 1.9e4) and neuron 2:1 was called dead at p = 2e-9.
+    Only the directions the data identify are read and tested now."""
+    meas = _null(1.0, True, seed=27)
+    idn = identify(meas)
+    rows = idn.rows()
+    assert all(np.isfinite(r["p"]) and 0.0 <= r["p"] <= 1.0 for r in rows)
+    assert [r for r in rows if r["test"] == "dead"] == []
+    assert all(li.dead == () for li in idn.layers)
+    assert all(np.all(np.isfinite(li.W_eff)) for li in idn.layers)
+    # an entry the data do not see has an infinite error; the others' errors cover the map's
+    # departures (the fit's free steps had made a row of norm 3407 for a programmed 1.5)
+    assert np.any(np.isinf(idn.layers[1].theta_se)) and np.all(np.isfinite(idn.layers[0].theta_se))
+    for li, layer in zip(idn.layers, meas.params):
+        W = np.asarray(layer.W, np.float64)
+        W = W if W.shape == li.W_eff.shape else W.T
+        se = li.theta_se[:, :W.shape[1]]
+        z = np.abs(li.W_eff - W)[np.isfinite(se)] / se[np.isfinite(se)]
+        assert z.max() < 5, (li.layer, z.max())
+
+
+def test_a_wald_statistic_reads_only_the_directions_a_covariance_identifies():
+    """A covariance of rank 3 in 6 (badly scaled, with a negative eigenvalue of rounding's size):
+    the statistic of a vector in its range equals v' S^+ v on 3 degrees of freedom; a
+    well-conditioned one is the plain solve on all of them."""
+    rng = np.random.default_rng(0)
+    U = np.linalg.qr(rng.normal(size=(6, 6)))[0]
+    D = np.diag(10.0 ** rng.uniform(-3, 3, 6))
+    S = D @ (U * [2.0, 1.0, 0.3, 1e-17, 0.0, -1e-16]) @ U.T @ D
+    v = S @ rng.normal(size=6)
+    q, m = _wald(S, v)
+    assert m == 3
+    ref = float(v @ np.linalg.pinv(S, rcond=1e-12, hermitian=True) @ v)
+    assert abs(q / ref - 1) < 1e-6, (q, ref)
+    S2 = D @ (U * [2.0, 1.0, 0.3, 0.2, 0.1, 0.05]) @ U.T @ D
+    q2, m2 = _wald(S2, v)
+    assert m2 == 6 and abs(q2 / float(v @ np.linalg.solve(S2, v)) - 1) < 1e-9
 
 
 def _quantized(taps, seed=0):

@@ -517,7 +517,8 @@ def test_the_wide_layer_covariance_blocks_are_the_sandwich_per_neuron(monkeypatc
     rng = np.random.default_rng(3)
     n, d, k, r = 50, 6, 9, 4.0
     X, obs = rng.standard_normal((n, d, k)), rng.random((n, d)) + 0.1
-    S, full = _stats._covariance(X, None, obs, r)
+    S, full, unseen = _stats._covariance(X, None, obs, r)
+    assert unseen == {}
     assert not full and S.shape == (d, k, k)
     for i in range(d):
         Binv = np.linalg.inv(X[:, i].T @ X[:, i] + 1e-12 * np.eye(k))

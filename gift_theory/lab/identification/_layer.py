@@ -32,7 +32,9 @@ class LayerIdentity:
 
     layer : 1-based
     W_eff, b_eff : (d, p), (d,) the effective mean map
-    theta_se : (d, p+1) standard errors of its entries
+    theta_se : (d, p+1) standard errors of its entries; infinite for an entry the data do not see
+        (an input that is 0 everywhere, a neuron saturated at most inputs, collinear inputs): the
+        part of the map they cannot tell from the programmed one is read as the programmed one
     gain, gain_se : the best common gain g (W_eff ~ g W, biases free) and its standard error
     dead : neurons (0-based) whose effective row is 0 while the programmed one is not
     choice : the smallest restricted map the data do not reject: "programmed", "gain",
@@ -241,11 +243,19 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     Chat = _cell_cov(E) * f2 if (d <= WIDE or d * k <= FULL_COV_MAX) else None
 
     # ---- the mean map and its restrictions
-    S, full, nu = map_covariance(lay, X, Chat, obs, r / lay.mean_factor, k,
-                                 within[1:] if within is not None else None, slow)
+    S, full, nu, unseen = map_covariance(lay, X, Chat, obs, r / lay.mean_factor, k,
+                                         within[1:] if within is not None else None, slow)
     dW, db = W_eff - lay.W, b_eff - lay.b
     theta = np.concatenate([dW, db[:, None]] + ([drift[0][:, None], drift[1][:, None]] if tt is not None else []),
                            axis=1)  # (d, k)
+    if unseen:
+        # a neuron whose map the data see only in part: what they cannot tell from the programmed
+        # map is the programmed map (the fit's steps along those directions were free)
+        for i, (_, proj) in unseen.items():
+            theta[i] = proj @ theta[i]
+        dW, db = theta[:, :p], theta[:, p]
+        W_eff, b_eff = lay.W + dW, lay.b + db
+        drift = None if tt is None else (theta[:, p + 1], theta[:, p + 2])
     se = (np.sqrt(np.maximum(np.diag(S), 1e-300)).reshape(d, k) if full
           else np.sqrt(np.maximum(np.einsum("ipp->ip", S), 1e-300)))
     transfer_cls = "activation_mismatch" if lay.hidden else "readout_nonlinearity"
@@ -279,5 +289,8 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
             inner = identify_layer(dataclasses.replace(lay, offset=None), act, s_guess, t, depth, taps, trends=False,
                                    memory=False)
             return dataclasses.replace(inner, rows=inner.rows + tuple(extra_rows))
-    return LayerIdentity(l, W_eff, b_eff, se, mc.gain, mc.gain_se, tuple(dead), mc.choice, zc, gam, curve,
+    se_seen = se.copy()
+    for i, (mask, _) in unseen.items():
+        se_seen[i, mask] = np.inf  # an entry the data do not see has no finite error
+    return LayerIdentity(l, W_eff, b_eff, se_seen, mc.gain, mc.gain_se, tuple(dead), mc.choice, zc, gam, curve,
                          s_lvl, s_se, kurt, tuple(rows) + tuple(extra_rows))

@@ -12,7 +12,8 @@ from scipy import stats
 from .._level import ALPHA
 from ._layers import _Layer
 from ._map import _bin_shares, _detector_or_modulator, _score_given_shape, _score_omnibus, _shape_given_detector
-from ._stats import FULL_COV_MAX, _Blocks, _chi2, _covariance, _gls_all, _gram, _row, _solve_psd, _sub, _two_sided, _z_of_p
+from ._stats import (FULL_COV_MAX, _Blocks, _chi2, _covariance, _gls_all, _gram, _gram_inv, _row, _solve_psd, _sub,
+                     _two_sided, _wald, _z_of_p)
 from ._trend import _robust_trend_p
 
 
@@ -21,10 +22,11 @@ def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, trend=None, 
     the trends put into it: ``trend`` (kind, se) of a straight line within the inputs' shots (the
     map at t = 0 carries its error times the inputs' mean time: on the biases, additive per neuron,
     or along W as a common gain, rank one) and ``slow`` the wander's or drift's (:mod:`.._time`).
-    Returns (S, full, nu): ``nu`` the covariance's own degrees of freedom, r - 1 per input, the
-    inputs weighted by their leverage."""
+    Returns (S, full, nu, unseen): ``nu`` the covariance's own degrees of freedom, r - 1 per input,
+    the inputs weighted by their leverage; ``unseen`` the neurons whose map the data see only in
+    part (:func:`._stats._gram_inv`)."""
     d, p = lay.W.shape
-    S, full = _covariance(X, Chat, obs, r_eff)
+    S, full, unseen = _covariance(X, Chat, obs, r_eff)
     if trend is not None:
         kind, se = trend
         if kind == "additive":
@@ -45,13 +47,13 @@ def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, trend=None, 
         _time.add_cov(S, full, slow.cov, k)
     if lay.memory is not None:  # alpha's error, through the means it moved (-alpha P), rank one
         P, se_a = lay.memory
-        Binv = np.linalg.inv(_gram(X) + 1e-12 * np.eye(k))
+        Binv = _gram_inv(_gram(X))[0]
         v = np.einsum("iab,ib->ia", Binv, np.einsum("nib,ni->ib", X, P))  # (d, k): theta per unit of alpha
         S += se_a ** 2 * (np.outer(v.ravel(), v.ravel()) if full else v[:, :, None] * v[:, None, :])
     r = lay.Y.shape[1]
     lev = np.einsum("nip->n", X ** 2)
     nu = float(lev.sum() ** 2 / max(np.sum(lev ** 2), 1e-300)) * max(r - 1, 1)
-    return S, full, nu
+    return S, full, nu, unseen
 
 
 def _block(S, full: bool, i: int, k: int, p: int):
@@ -60,26 +62,31 @@ def _block(S, full: bool, i: int, k: int, p: int):
 
 def dead_neurons(lay: _Layer, W_eff, S, full: bool, k: int, nu: float, cls: str):
     """The neurons whose effective row is compatible with 0 where the programmed row is rejected
-    (Bonferroni over the layer's neurons), and their row (a list of at most one)."""
+    (Bonferroni over the layer's neurons), and their row (a list of at most one). Both Wald tests
+    read the directions of the row the data identify (a neuron saturated at most inputs has
+    fewer than its p), with that many degrees of freedom; a row with none is not tested."""
     d, p = lay.W.shape
     dW = W_eff - lay.W
-    dead, dead_p = [], []
+    dead, dead_p, tests = [], [], {}
     for i in range(d):
         Si = _block(S, full, i, k, p)
-        q0 = float(W_eff[i] @ _solve_psd(Si, W_eff[i]))
-        q1 = float(dW[i] @ _solve_psd(Si, dW[i]))
-        p0, p1 = _chi2(q0, p, nu)[0], _chi2(q1, p, nu)[0]
-        if p0 >= ALPHA and p1 * d < ALPHA and np.linalg.norm(lay.W[i]) > 0:
+        (q0, m0), (q1, m1) = _wald(Si, W_eff[i]), _wald(Si, dW[i])
+        if m0 == 0 or np.linalg.norm(lay.W[i]) == 0:
+            continue
+        p0, p1 = _chi2(q0, m0, nu)[0], _chi2(q1, m1, nu)[0]
+        tests[i] = (q1, m1)
+        if p0 >= ALPHA and p1 * d < ALPHA:
             dead.append(i)
             dead_p.append(min(1.0, p1 * d))
     if not dead:
         return dead, []
     j = int(np.argmin(dead_p))
-    q1 = float(dW[dead[j]] @ _solve_psd(_block(S, full, dead[j], k, p), dW[dead[j]]))
+    q1, m1 = tests[dead[j]]
     l = lay.layer
-    return dead, [_row(cls, "dead", min(dead_p), _chi2(q1, p, nu)[1], len(dead),
+    seen = "" if m1 == p else f" (on the {m1} of its {p} directions the data identify)"
+    return dead, [_row(cls, "dead", min(dead_p), _chi2(q1, m1, nu)[1], len(dead),
                        f"neuron(s) {', '.join(f'{l}:{i}' for i in dead)} respond to nothing: effective row 0 "
-                       f"(the programmed row rejected, p = {dead_p[j]:.2g}); a dead or stuck neuron", dead)]
+                       f"(the programmed row rejected, p = {dead_p[j]:.2g}{seen}); a dead or stuck neuron", dead)]
 
 
 def restricted_maps(Wa, ba, k: int, timed: bool) -> dict:
@@ -113,7 +120,7 @@ def shape_row(lay: _Layer, E, z, X, Chat, obs, alive, k: int, nu: float, cls: st
     ebar = E.mean(1)
     zz = z[:, :, alive] if alive else z
     edges, H = _bin_shares(zz, z)  # H: (n, d, B)
-    Bx = np.linalg.inv(_gram(X) + 1e-12 * np.eye(k))
+    Bx = _gram_inv(_gram(X))[0]
     Xn = X.transpose(1, 0, 2)  # (d, n, k), a view
     proj = np.matmul(Xn, Bx @ np.matmul(Xn.transpose(0, 2, 1), H.transpose(1, 0, 2))).transpose(1, 0, 2)  # (n, d, B)
     Ht = (H - proj)[:, alive]

@@ -5,10 +5,14 @@ maps, and the sample kurtosis of r shots."""
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import linalg, stats
 
 #: layers whose stacked parameters exceed this are treated neuron by neuron (block-diagonal)
 FULL_COV_MAX = 1600
+
+#: directions of a design or covariance whose eigenvalue, after scaling to unit diagonal, is below
+#: this share of the largest are not identified: float64 inverts them to rounding, not to data
+IDENTIFIED_RTOL = 1e-10
 
 
 def _z_of_p(p):
@@ -113,25 +117,111 @@ def _covariance(X, Chat, obs, r):
     """The sandwich covariance of the stacked per-neuron least squares (d (p+1) square), or
     its per-neuron blocks (d, p+1, p+1) when the layer is wide (``Chat``: per input the
     residuals' covariance across neurons, needed only then; ``obs`` its diagonal; ``r`` the
-    shots a per-input mean averages)."""
+    shots a per-input mean averages); whether it is the full matrix; and the neurons whose map
+    the data see only in part (:func:`_gram_inv`: the covariance holds the directions they see)."""
     n, d, k = X.shape
-    Binv = np.linalg.inv(_gram(X) + 1e-12 * np.eye(k))
+    Binv, unseen = _gram_inv(_gram(X))
     if d * k <= FULL_COV_MAX:
         meat = _meat(Chat / r, X)
         S = np.matmul(Binv, meat.transpose(2, 0, 1, 3))  # (j, i, a, c): Binv_i meat_ij
         S = np.matmul(S, Binv.transpose(0, 2, 1)[:, None])  # (j, i, a, d): ... Binv_j^T
-        return S.transpose(1, 2, 0, 3).reshape(d * k, d * k), True
+        S = S.transpose(1, 2, 0, 3).reshape(d * k, d * k)
+        return 0.5 * (S + S.T), True, unseen
     # Binv_i meat_i Binv_i^T per neuron (a three-operand einsum loops over all five indices:
     # d k^4 steps, hours on a 785-input layer; two batched products are 2 d k^3)
     T = np.matmul(Binv, _gram(X, obs / r))
-    return np.matmul(T, Binv.transpose(0, 2, 1)), False
+    S = np.matmul(T, Binv.transpose(0, 2, 1))
+    return 0.5 * (S + S.transpose(0, 2, 1)), False, unseen
+
+
+def _scaled(S):
+    """S scaled to unit diagonal: (the scaled matrix on the nonzero diagonal, the scale, its index)."""
+    dg = np.diagonal(S)
+    nz = np.flatnonzero(dg > 0)
+    D = np.sqrt(dg[nz])
+    return S[np.ix_(nz, nz)] / np.outer(D, D), D, nz
+
+
+def _well_conditioned(Ss) -> bool:
+    """Whether a unit-diagonal symmetric matrix is positive definite with reciprocal condition
+    above :data:`IDENTIFIED_RTOL` (its Cholesky factor and LAPACK's estimate from it)."""
+    if Ss.shape[0] == 0:
+        return True
+    try:
+        c = linalg.cholesky(Ss, check_finite=False)  # upper
+    except linalg.LinAlgError:
+        return False
+    rcond, info = linalg.lapack.dpocon(c, float(np.abs(Ss).sum(0).max()))
+    return info == 0 and rcond > IDENTIFIED_RTOL
+
+
+def _truncated(Ss):
+    """The eigen-pseudo-inverse of a unit-diagonal symmetric matrix without the directions below
+    :data:`IDENTIFIED_RTOL` of its largest eigenvalue (negative ones included), and its rank."""
+    w, U = np.linalg.eigh(Ss)
+    keep = w > IDENTIFIED_RTOL * max(float(w.max(initial=0.0)), 1e-300)
+    Uk = U[:, keep]
+    return (Uk / w[keep]) @ Uk.T, int(keep.sum())
+
+
+def _gram_inv(G):
+    """Per neuron the inverse of its design's Gram (d, k, k), and the neurons whose map the data
+    see only in part: {neuron: (its unseen entries (k,) bool, the projection (k, k) of its map's
+    entries onto what the data identify)}.
+
+    A neuron saturated at most inputs, or a layer whose inputs are collinear (zero pixels, inputs
+    pinned at a rail), has directions of its map the data do not see: its Gram, scaled to unit
+    diagonal, is singular to rounding (condition 1e15-1e17 on a tanh layer at s = 1), and its
+    plain inverse is rounding noise that made the sandwich covariance indefinite. There the
+    pseudo-inverse without those directions is used; an entry is unseen when a direction left
+    out moves it, and the projection (the pseudo-inverse times the Gram) removes from a map's
+    entries what the data cannot tell from zero."""
+    d, k = G.shape[:2]
+    Binv = np.linalg.inv(G + 1e-12 * np.eye(k))
+    unseen = {}
+    for i in range(d):
+        Ss, D, nz = _scaled(G[i])
+        if _well_conditioned(Ss):
+            if nz.size == k:
+                continue
+            inv, mask = np.linalg.inv(Ss), np.ones(k, bool)  # only inputs that are 0 at every input
+            mask[nz] = False
+        else:
+            w, U = np.linalg.eigh(Ss)
+            keep = w > IDENTIFIED_RTOL * max(float(w.max(initial=0.0)), 1e-300)
+            inv = (U[:, keep] / w[keep]) @ U[:, keep].T
+            mask = np.ones(k, bool)
+            mask[nz] = np.sum(U[:, ~keep] ** 2, axis=1) > 1e-6
+        Binv[i] = 0.0
+        Binv[i][np.ix_(nz, nz)] = inv / np.outer(D, D)
+        unseen[i] = (mask, Binv[i] @ G[i])
+    return Binv, unseen
+
+
+def _psd_solve(S, v):
+    """S^+ v for a covariance S and the rank it was inverted at: the plain solve where S, scaled to
+    unit diagonal, is well conditioned; else the pseudo-inverse on the directions S identifies
+    (those below :data:`IDENTIFIED_RTOL`, zero diagonals and negative rounding excluded)."""
+    S = 0.5 * (S + S.T)
+    Ss, D, nz = _scaled(S)
+    if nz.size == S.shape[0] and _well_conditioned(Ss):
+        return np.linalg.solve(S, v), S.shape[0]
+    P, rank = _truncated(Ss)
+    x = np.zeros(np.shape(v))
+    vs = np.asarray(v)[nz] / (D if np.ndim(v) == 1 else D[:, None])
+    x[nz] = (P @ vs) / (D if np.ndim(v) == 1 else D[:, None])
+    return x, rank
 
 
 def _solve_psd(S, v):
-    try:
-        return np.linalg.solve(S, v)
-    except np.linalg.LinAlgError:
-        return np.linalg.pinv(S) @ v
+    """S^+ v (:func:`_psd_solve` without the rank)."""
+    return _psd_solve(S, v)[0]
+
+
+def _wald(S, v):
+    """The Wald statistic v' S^+ v and its degrees of freedom (the rank S is inverted at)."""
+    x, rank = _psd_solve(S, v)
+    return float(v @ x), rank
 
 
 class _Blocks:

@@ -498,6 +498,34 @@ def test_without_taps_a_bottleneck_upstream_leaves_the_noise_level_the_chips():
     assert not [r for r in ident.rows() if r["p_adj"] < 0.01]
 
 
+@pytest.mark.parametrize("seed", [0, 3])
+def test_without_taps_noise_through_directions_the_means_do_not_span_is_read_at_both_maps(seed):
+    """3-21-8 without taps: three inputs through 21 hidden neurons span a 3-dimensional manifold,
+    and the output's map fitted freely (the general map chosen) is 0.8-1.0 of W away along the
+    directions it leaves out -- directions the propagated hidden noise does reach. Its covariance
+    read at that W_eff named correlated_noise at p = 3e-58 (seed 0) and 1e-76 (seed 3) on these
+    null files; read at the programmed map too, keeping the larger p, no noise class is named."""
+    arch = gt.Architecture((3, 21, 8))
+    params = gt.init_params(jax.random.PRNGKey(seed), arch, gain=1.5)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(100 + seed), (240, 3)))
+    meas = simulate_measurement(jax.random.PRNGKey(200 + seed), params, x, gt.Physics.create(s=0.083), shots=64,
+                                taps=False)
+    rows = identify(meas).rows()
+    cov = {r["test"]: r for r in rows if r["test"] in ("correlation", "common_gain")}
+    assert cov["correlation"]["p"] > 0.01
+    assert not [r for r in rows if r["p_adj"] < 0.01 and r["class"] in ("correlated_noise", "gain_fluctuation")]
+
+
+def test_without_taps_correlated_noise_on_a_general_weight_error_is_still_named():
+    """The other side of reading the covariance at both maps: a weight error of half of W (the
+    general map chosen) and noise common to the output's neurons; the programmed map's covariance
+    is wrong too, and the larger p still names the correlated noise."""
+    ident = identify(sim(1, widths=(3, 21, 8), n=240, r=64, s=0.083, taps=False, common=(2, 0.03),
+                         errors={2: 0.5}))
+    assert ident.layers[-1].choice == "general"
+    assert _sig(ident, "correlated_noise")
+
+
 def test_without_taps_uniform_noise_is_named_along_the_model_covariance_s_minor_components():
     """5-17-3-6 without taps, uniform noise in every layer: the output's own noise is diluted
     by the hidden layers' propagated noise on every neuron (kurtosis Holm p = 0.21 read per

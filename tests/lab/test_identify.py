@@ -504,16 +504,24 @@ def test_without_taps_noise_through_directions_the_means_do_not_span_is_read_at_
     and the output's map fitted freely (the general map chosen) is 0.8-1.0 of W away along the
     directions it leaves out -- directions the propagated hidden noise does reach. Its covariance
     read at that W_eff named correlated_noise at p = 3e-58 (seed 0) and 1e-76 (seed 3) on these
-    null files; read at the programmed map too, keeping the larger p, no noise class is named."""
+    null files; read at the programmed map too, keeping the larger p, no noise class is named.
+    And the map itself: its regressor, the Monte Carlo mean of the hidden layer, is mostly the
+    draws' error along the directions the inputs barely span; fitted there it shrank to 0.37 W and
+    named gain_error (Holm 6e-6) and weight_error. Those directions are unseen now: nothing is named
+    and the map reads within 5 % of W."""
     arch = gt.Architecture((3, 21, 8))
     params = gt.init_params(jax.random.PRNGKey(seed), arch, gain=1.5)
     x = np.asarray(jax.random.uniform(jax.random.PRNGKey(100 + seed), (240, 3)))
     meas = simulate_measurement(jax.random.PRNGKey(200 + seed), params, x, gt.Physics.create(s=0.083), shots=64,
                                 taps=False)
-    rows = identify(meas).rows()
+    ident = identify(meas)
+    rows = ident.rows()
     cov = {r["test"]: r for r in rows if r["test"] in ("correlation", "common_gain")}
     assert cov["correlation"]["p"] > 0.01
-    assert not [r for r in rows if r["p_adj"] < 0.01 and r["class"] in ("correlated_noise", "gain_fluctuation")]
+    assert not [r for r in rows if r["p_adj"] < 0.01]
+    W = np.asarray(params[-1].W, np.float64)
+    W = W if W.shape == ident.layers[-1].W_eff.shape else W.T
+    assert np.linalg.norm(ident.layers[-1].W_eff - W) < 0.1 * np.linalg.norm(W)
 
 
 def test_without_taps_correlated_noise_on_a_general_weight_error_is_still_named():

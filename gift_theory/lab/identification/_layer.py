@@ -244,7 +244,7 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
 
     # ---- the mean map and its restrictions
     S, full, nu, unseen = map_covariance(lay, X, Chat, obs, r / lay.mean_factor, k,
-                                         within[1:] if within is not None else None, slow)
+                                         within[1:] if within is not None else None, slow, s2)
     dW, db = W_eff - lay.W, b_eff - lay.b
     theta = np.concatenate([dW, db[:, None]] + ([drift[0][:, None], drift[1][:, None]] if tt is not None else []),
                            axis=1)  # (d, k)

@@ -10,23 +10,30 @@ import numpy as np
 from scipy import stats
 
 from .._level import ALPHA
-from ._layers import _Layer
+from ._layers import MC_ATTENUATION, _Layer
 from ._map import _bin_shares, _detector_or_modulator, _score_given_shape, _score_omnibus, _shape_given_detector
 from ._stats import (FULL_COV_MAX, _Blocks, _chi2, _covariance, _gls_all, _gram, _gram_inv, _row, _solve_psd, _sub,
                      _two_sided, _wald, _z_of_p)
 from ._trend import _robust_trend_p
 
 
-def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, trend=None, slow=None):
+def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, trend=None, slow=None, s2=None):
     """The sandwich covariance of the map's entries (:func:`._stats._covariance`) with the error of
     the trends put into it: ``trend`` (kind, se) of a straight line within the inputs' shots (the
     map at t = 0 carries its error times the inputs' mean time: on the biases, additive per neuron,
     or along W as a common gain, rank one) and ``slow`` the wander's or drift's (:mod:`.._time`).
     Returns (S, full, nu, unseen): ``nu`` the covariance's own degrees of freedom, r - 1 per input,
     the inputs weighted by their leverage; ``unseen`` the neurons whose map the data see only in
-    part (:func:`._stats._gram_inv`)."""
+    part (:func:`._stats._gram_inv`; with ``s2``, the level, also the directions where the Monte
+    Carlo regressor of a layer without taps is mostly its draws' error)."""
     d, p = lay.W.shape
-    S, full, unseen = _covariance(X, Chat, obs, r_eff)
+    N = None
+    if s2 is not None and lay.draws and lay.Cin is not None and lay.Cin.ndim == 3 and not lay.hidden:
+        # no taps: the regressor is the Monte Carlo mean of the layer before, its error per input
+        # s^2 Cin / draws (the output is linear in it: the design's error is the regressor's)
+        N = np.zeros((k, k))
+        N[:p, :p] = s2 * lay.Cin.sum(0) / lay.draws
+    S, full, unseen = _covariance(X, Chat, obs, r_eff, N, MC_ATTENUATION)
     if trend is not None:
         kind, se = trend
         if kind == "additive":

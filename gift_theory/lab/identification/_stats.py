@@ -113,14 +113,15 @@ def _meat(C, X):
     return out
 
 
-def _covariance(X, Chat, obs, r):
+def _covariance(X, Chat, obs, r, N=None, share: float = 0.05):
     """The sandwich covariance of the stacked per-neuron least squares (d (p+1) square), or
     its per-neuron blocks (d, p+1, p+1) when the layer is wide (``Chat``: per input the
     residuals' covariance across neurons, needed only then; ``obs`` its diagonal; ``r`` the
     shots a per-input mean averages); whether it is the full matrix; and the neurons whose map
-    the data see only in part (:func:`_gram_inv`: the covariance holds the directions they see)."""
+    the data see only in part (:func:`_gram_inv`, ``N`` and ``share`` its own: the covariance holds
+    the directions they see)."""
     n, d, k = X.shape
-    Binv, unseen = _gram_inv(_gram(X))
+    Binv, unseen = _gram_inv(_gram(X), N, share)
     if d * k <= FULL_COV_MAX:
         meat = _meat(Chat / r, X)
         S = np.matmul(Binv, meat.transpose(2, 0, 1, 3))  # (j, i, a, c): Binv_i meat_ij
@@ -164,7 +165,7 @@ def _truncated(Ss):
     return (Uk / w[keep]) @ Uk.T, int(keep.sum())
 
 
-def _gram_inv(G):
+def _gram_inv(G, N=None, share: float = 0.05):
     """Per neuron the inverse of its design's Gram (d, k, k), and the neurons whose map the data
     see only in part: {neuron: (its unseen entries (k,) bool, the projection (k, k) of its map's
     entries onto what the data identify)}.
@@ -175,17 +176,35 @@ def _gram_inv(G):
     plain inverse is rounding noise that made the sandwich covariance indefinite. There the
     pseudo-inverse without those directions is used; an entry is unseen when a direction left
     out moves it, and the projection (the pseudo-inverse times the Gram) removes from a map's
-    entries what the data cannot tell from zero."""
+    entries what the data cannot tell from zero.
+
+    ``N`` (k, k): the Gram of the design's own error, where the regressor is a Monte Carlo mean
+    (no taps). A direction whose error is more than ``share`` of the design's spread along it
+    (the generalised eigenvalues of N against the Gram) is unseen too: the least squares reads
+    the draws' noise there and shrinks the map towards 0 along it (three inputs through 21
+    hidden neurons: W_eff = 0.37 W, gain_error named on a null file)."""
     d, k = G.shape[:2]
     Binv = np.linalg.inv(G + 1e-12 * np.eye(k))
     unseen = {}
     for i in range(d):
         Ss, D, nz = _scaled(G[i])
-        if _well_conditioned(Ss):
+        well = _well_conditioned(Ss)
+        drop = None
+        if well and N is not None:
+            mu, V = linalg.eigh(N[np.ix_(nz, nz)] / np.outer(D, D), Ss)  # V' Ss V = I
+            drop = mu > share
+            if not drop.any():
+                drop = None
+        if well and drop is None:
             if nz.size == k:
                 continue
             inv, mask = np.linalg.inv(Ss), np.ones(k, bool)  # only inputs that are 0 at every input
             mask[nz] = False
+        elif drop is not None:
+            inv = V[:, ~drop] @ V[:, ~drop].T
+            Vd = V[:, drop] / np.linalg.norm(V[:, drop], axis=0)
+            mask = np.ones(k, bool)
+            mask[nz] = np.sum(Vd ** 2, axis=1) > 1e-6
         else:
             w, U = np.linalg.eigh(Ss)
             keep = w > IDENTIFIED_RTOL * max(float(w.max(initial=0.0)), 1e-300)

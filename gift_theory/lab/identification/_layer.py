@@ -277,9 +277,7 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     sub = _subset(d)
     E, obs, Chat_s, z, g, var, s2, W_n = _noise_model(lay, act, fit, mc, E, obs, Chat, f2, s2, tt, sub)
     noise_rows, s_lvl, s_se, kurt = _noise_rows(lay, act, l, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2,
-                                                _unit_var(lay, W_n), _unit_cov(lay, W_n, sub), E_time,
-                                                _unit_cov(lay, lay.W, sub) if lay.Cin is not None and W_n is fit[0]
-                                                else None)
+                                                _unit_var(lay, W_n), _unit_cov(lay, W_n, sub), E_time)
     rows.extend(noise_rows)
     _time.attach_share(extra_rows, noise_rows)  # the wander's share of the gain's variance
     if within is not None and within[1] == "gain":

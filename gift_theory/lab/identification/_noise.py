@@ -327,34 +327,18 @@ def _time_within_row(l: int, t, E, E_time, sub, g, u, Chat_s, gain_var: float):
 
 
 def _noise_rows(lay: _Layer, act: str, l: int, t, E, obs, Chat_s, sub, z, g, var, b_eff, s2: float, vz, Czu_s,
-                E_time=None, Czu_programmed=None):
+                E_time=None):
     """The noise's tests at one layer from the within-input residuals ``E`` (n, r, d) and their
     variances ``obs`` (n, d); the covariance across neurons ``Chat_s`` on the neurons ``sub``
     (with the model's unit covariance ``Czu_s`` there); ``var`` the model's variance of each
     shot, ``vz`` the unit variance of the pre-activation noise (n, d). Returns (rows, s, s_se,
-    excess kurtosis beyond the model's).
-
-    ``Czu_programmed``: the unit covariance at the programmed map, given where ``Czu_s`` is read at
-    the freely fitted one. The unmeasured input noise reaches the layer through all of W, the mean
-    map shows only the directions its inputs span: three inputs through 21 hidden neurons left
-    W_eff 0.9 of W away along the others, and the covariance W_eff C W_eff^T named correlated_noise
-    at p = 3e-40 on a null file. Each covariance test is then read at both maps and keeps the larger
-    p (an intersection-union test: the noise is unexplained only if neither map explains it, at
-    level 0.01 when each is)."""
+    excess kurtosis beyond the model's)."""
     n, r, d = E.shape
     row, s_lvl, s_se, vcell, u, wg, rho, signal = _level_and_signal_rows(lay, l, E, obs, z, g, var, b_eff, s2)
     rows = [row]
     row, kurt = _law_row(lay, act, l, E, z, var, b_eff, s2, vz, signal)
     rows.append(row)
     cov_rows, gain_var = _covariance_rows(lay, l, obs, Chat_s, sub, g, wg, Czu_s, d)
-    if Czu_programmed is not None and cov_rows:
-        alt, alt_var = _covariance_rows(lay, l, obs, Chat_s, sub, g, wg, Czu_programmed, d)
-        for j, (a, b) in enumerate(zip(cov_rows, alt)):
-            if b["p"] > a["p"]:
-                cov_rows[j] = dict(b, evidence=b["evidence"] + " (read at the programmed map: the fitted one's "
-                                                                  f"p is {a['p']:.2g})")
-                if b["test"] == "common_gain":
-                    gain_var = alt_var
     rows.extend(cov_rows)
     if t is not None and r > 2 and np.std(t - t.mean(1, keepdims=True)) > 0:
         rows.append(_time_within_row(l, t, E, E_time, sub, g, u, Chat_s, gain_var))

@@ -158,11 +158,11 @@ def _well_conditioned(Ss) -> bool:
 
 def _truncated(Ss):
     """The eigen-pseudo-inverse of a unit-diagonal symmetric matrix without the directions below
-    :data:`IDENTIFIED_RTOL` of its largest eigenvalue (negative ones included), and its rank."""
+    :data:`IDENTIFIED_RTOL` of its largest eigenvalue (negative ones included): (it, the
+    eigenvectors, which of them are kept)."""
     w, U = np.linalg.eigh(Ss)
     keep = w > IDENTIFIED_RTOL * max(float(w.max(initial=0.0)), 1e-300)
-    Uk = U[:, keep]
-    return (Uk / w[keep]) @ Uk.T, int(keep.sum())
+    return (U[:, keep] / w[keep]) @ U[:, keep].T, U, keep
 
 
 def _gram_inv(G, N=None, share: float = 0.05):
@@ -206,9 +206,7 @@ def _gram_inv(G, N=None, share: float = 0.05):
             mask = np.ones(k, bool)
             mask[nz] = np.sum(Vd ** 2, axis=1) > 1e-6
         else:
-            w, U = np.linalg.eigh(Ss)
-            keep = w > IDENTIFIED_RTOL * max(float(w.max(initial=0.0)), 1e-300)
-            inv = (U[:, keep] / w[keep]) @ U[:, keep].T
+            inv, U, keep = _truncated(Ss)
             mask = np.ones(k, bool)
             mask[nz] = np.sum(U[:, ~keep] ** 2, axis=1) > 1e-6
         Binv[i] = 0.0
@@ -225,7 +223,8 @@ def _psd_solve(S, v):
     Ss, D, nz = _scaled(S)
     if nz.size == S.shape[0] and _well_conditioned(Ss):
         return np.linalg.solve(S, v), S.shape[0]
-    P, rank = _truncated(Ss)
+    P, _, keep = _truncated(Ss)
+    rank = int(keep.sum())
     x = np.zeros(np.shape(v))
     vs = np.asarray(v)[nz] / (D if np.ndim(v) == 1 else D[:, None])
     x[nz] = (P @ vs) / (D if np.ndim(v) == 1 else D[:, None])

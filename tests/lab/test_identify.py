@@ -4,6 +4,8 @@ Most files here come from a plain-numpy simulator written from CONTRACTS §1-§2
 (not gift's forward pass), with physics switched on one at a time; one from gift's own chip.
 """
 
+import re
+
 import jax
 import numpy as np
 import pytest
@@ -528,6 +530,21 @@ def test_without_taps_correlated_noise_on_a_general_weight_error_is_still_named(
                          errors={2: 0.5}))
     assert ident.layers[-1].choice == "general"
     assert _sig(ident, "correlated_noise")
+
+
+def test_a_weight_error_s_misfit_counts_only_the_directions_the_data_see():
+    """3-21-8 without taps with a weight error: the general map is chosen and most directions of the
+    output's map are unseen (the Monte Carlo regressor does not resolve them; the covariance is 0
+    along them). The weight error's chi-square counts the rest: fewer degrees of freedom than the
+    stacked map's d (p + 1) less the gain+bias columns (it counted all 167)."""
+    ident = identify(sim(1, widths=(3, 21, 8), n=240, r=64, s=0.083, taps=False, errors={2: 0.5}))
+    out = ident.layers[-1]
+    d, p = out.W_eff.shape
+    assert out.choice == "general" and np.isinf(out.theta_se).any()
+    row = next(r for r in ident.rows() if r["test"] == "map" and r["layer"] == 2)
+    df = int(re.search(r"on (\d+) df", row["evidence"]).group(1))
+    assert 0 < df < d * (p + 1) - (1 + d), row["evidence"]
+    assert row["p_adj"] < 0.01
 
 
 def test_without_taps_uniform_noise_is_named_along_the_model_covariance_s_minor_components():

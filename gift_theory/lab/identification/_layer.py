@@ -267,8 +267,9 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     rows.append(row)
     mc = MapChoice("general", {}, {}, 0.0, 0.0, 1.0, float("inf"), 1.0, float("inf"), 0.0)
     if alive:
+        unseen_dims = sum(k - int(round(np.trace(proj))) for i, (_, proj) in unseen.items() if i in alive)
         ev = MapEvidence(lay, act, s2, tt, X, Chat, obs, r / lay.mean_factor, alive, k, theta[alive].ravel(), Sa, nu,
-                         transfer_cls)
+                         transfer_cls, unseen_dims)
         mc = map_rows(ev, restricted_maps(lay.W[alive], lay.b[alive], k, tt is not None), dW, se, theta, E.mean(1),
                       rows, ps)
     curve = _curve(lay, act, s2)

@@ -162,7 +162,9 @@ class MapEvidence:
     mean-map's design ``X``, the within-input residuals' covariances (``Chat`` or None, ``obs``),
     the effective shots per mean ``r_eff``, the alive neurons, the stacked deviation ``th`` of
     their (W_eff - W, b_eff - b[, trends]) and its covariance ``Sa``, the covariance's degrees of
-    freedom ``nu`` and the class a transfer is named under."""
+    freedom ``nu``, the class a transfer is named under, and ``unseen_dims``: how many directions of
+    ``th`` the data do not see (:func:`._stats._gram_inv`; ``Sa`` is 0 along them and a misfit
+    counts only the rest)."""
 
     lay: _Layer
     act: str
@@ -178,6 +180,7 @@ class MapEvidence:
     Sa: object
     nu: float
     cls: str
+    unseen_dims: int = 0
 
     @property
     def da(self) -> int:
@@ -213,7 +216,8 @@ def choose_map(ev: MapEvidence, models: dict, dW, se) -> MapChoice:
     its weighted sum); the common gain read off by projection on W."""
     lay, alive, p = ev.lay, ev.alive, ev.p
     fits = _gls_all(ev.th, ev.Sa, models)
-    pfit = {name: _chi2(f[2], ev.th.size - models[name].shape[1], ev.nu)[0] for name, f in fits.items()}
+    seen = ev.th.size - ev.unseen_dims
+    pfit = {name: _chi2(f[2], seen - models[name].shape[1], ev.nu)[0] for name, f in fits.items()}
     p_omni, z_omni = _score_omnibus(lay, ev.act, ev.s2, ev.tt, ev.Chat, ev.obs, ev.r_eff, alive, ev.nu)
     order = (("programmed", "transfer", "gain") if lay.hidden else ("programmed", "gain", "transfer")) \
         + ("bias", "gain+bias", "rows")
@@ -337,7 +341,7 @@ def _beyond_gain_rows(ev: MapEvidence, mc: MapChoice, choice: str, models: dict,
                          f"the map's error)"))
     if choice == "general":
         q_w = mc.fits["gain+bias"][2]
-        df_w = th.size - models["gain+bias"].shape[1]
+        df_w = th.size - ev.unseen_dims - models["gain+bias"].shape[1]
         pw, zw = _chi2(q_w, df_w, ev.nu)
         rows.append(_row("weight_error", "map", floor(pw), zw, mc.rel,
                          f"W_eff - W beyond a gain and bias shifts at layer {l}: rms {mc.rel:.2g} of rms W "

@@ -14,7 +14,7 @@ from ._layers import BINS, WIDE, _Layer, _curve, _level, _mean_model, _subset, _
 from ._map import _fit_map, _map_uncertainty
 from ._map_rows import MapChoice, MapEvidence, dead_neurons, map_covariance, map_rows, restricted_maps, shape_row
 from ._noise import _noise_rows
-from ._stats import FULL_COV_MAX, _Blocks, _cell_cov, _cell_var, _row, _within, _z_of_p
+from ._stats import FULL_COV_MAX, _Blocks, _cell_cov, _cell_var, _gram, _gram_inv, _row, _within, _z_of_p
 from ._trend import TREND_SHARE, _within_trend
 
 #: a layer's map is resolved (fitted, its restrictions tested) only with at least this many
@@ -243,7 +243,9 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     Chat = _cell_cov(E) * f2 if (d <= WIDE or d * k <= FULL_COV_MAX) else None
 
     # ---- the mean map and its restrictions
-    S, full, nu, unseen = map_covariance(lay, X, Chat, obs, r / lay.mean_factor, k,
+    G = _gram(X)
+    inv = _gram_inv(G)  # one inverse for the covariance, the memory's error and the shape test
+    S, full, nu, unseen = map_covariance(lay, X, Chat, obs, r / lay.mean_factor, k, G, inv,
                                          within[1:] if within is not None else None, slow, s2)
     dW, db = W_eff - lay.W, b_eff - lay.b
     theta = np.concatenate([dW, db[:, None]] + ([drift[0][:, None], drift[1][:, None]] if tt is not None else []),
@@ -263,7 +265,7 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     alive = [i for i in range(d) if i not in dead]
     idx = np.concatenate([np.arange(i * k, (i + 1) * k) for i in alive]) if alive else np.zeros(0, int)
     Sa = S[np.ix_(idx, idx)] if full else _Blocks(S[alive])
-    ps, zc, gam, row = shape_row(lay, E, z, X, Chat, obs, alive, k, nu, transfer_cls)
+    ps, zc, gam, row = shape_row(lay, E, z, X, inv[0], Chat, obs, alive, k, nu, transfer_cls)
     rows.append(row)
     mc = MapChoice("general", {}, {}, 0.0, 0.0, 1.0, float("inf"), 1.0, float("inf"), 0.0)
     if alive:

@@ -12,17 +12,18 @@ from scipy import stats
 from .._level import ALPHA
 from ._layers import MC_ATTENUATION, _Layer
 from ._map import _bin_shares, _detector_or_modulator, _score_given_shape, _score_omnibus, _shape_given_detector
-from ._stats import (FULL_COV_MAX, _Blocks, _chi2, _covariance, _gls_all, _gram, _gram_inv, _row, _solve_psd, _sub,
+from ._stats import (FULL_COV_MAX, _Blocks, _chi2, _covariance, _gls_all, _gram_inv, _row, _solve_psd, _sub,
                      _two_sided, _wald, _z_of_p)
 from ._trend import _robust_trend_p
 
 
-def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, trend=None, slow=None, s2=None):
+def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, G, inv, trend=None, slow=None, s2=None):
     """The sandwich covariance of the map's entries (:func:`._stats._covariance`) with the error of
     the trends put into it: ``trend`` (kind, se) of a straight line within the inputs' shots (the
     map at t = 0 carries its error times the inputs' mean time: on the biases, additive per neuron,
     or along W as a common gain, rank one) and ``slow`` the wander's or drift's (:mod:`.._time`).
-    Returns (S, full, nu, unseen): ``nu`` the covariance's own degrees of freedom, r - 1 per input,
+    ``G`` is the design's Gram and ``inv`` its :func:`._stats._gram_inv` (the caller's, which the
+    shape test shares). Returns (S, full, nu, unseen): ``nu`` the covariance's own degrees of freedom, r - 1 per input,
     the inputs weighted by their leverage; ``unseen`` the neurons whose map the data see only in
     part (:func:`._stats._gram_inv`; with ``s2``, the level, also the directions where the Monte
     Carlo regressor of a layer without taps is mostly its draws' error)."""
@@ -33,7 +34,7 @@ def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, trend=None, 
         # s^2 Cin / draws (the output is linear in it: the design's error is the regressor's)
         N = np.zeros((k, k))
         N[:p, :p] = s2 * lay.Cin.sum(0) / lay.draws
-    S, full, unseen = _covariance(X, Chat, obs, r_eff, N, MC_ATTENUATION)
+    S, full, unseen = _covariance(X, Chat, obs, r_eff, inv if N is None else _gram_inv(G, N, MC_ATTENUATION))
     if trend is not None:
         kind, se = trend
         if kind == "additive":
@@ -54,7 +55,7 @@ def map_covariance(lay: _Layer, X, Chat, obs, r_eff: float, k: int, trend=None, 
         _time.add_cov(S, full, slow.cov, k)
     if lay.memory is not None:  # alpha's error, through the means it moved (-alpha P), rank one
         P, se_a = lay.memory
-        Binv = _gram_inv(_gram(X))[0]
+        Binv = inv[0]
         v = np.einsum("iab,ib->ia", Binv, np.einsum("nib,ni->ib", X, P))  # (d, k): theta per unit of alpha
         S += se_a ** 2 * (np.outer(v.ravel(), v.ravel()) if full else v[:, :, None] * v[:, None, :])
     r = lay.Y.shape[1]
@@ -120,14 +121,14 @@ def restricted_maps(Wa, ba, k: int, timed: bool) -> dict:
             "rows": np.concatenate([Rr, Rb, free], 1)}
 
 
-def shape_row(lay: _Layer, E, z, X, Chat, obs, alive, k: int, nu: float, cls: str):
+def shape_row(lay: _Layer, E, z, X, Bx, Chat, obs, alive, k: int, nu: float, cls: str):
     """The activation's shape: the binned residual shared by the neurons, beyond each neuron's
-    affine map. Returns (p, bin centres, the shared shape, its row)."""
+    affine map (``Bx``: per neuron the inverse of the design's Gram, :func:`._stats._gram_inv`).
+    Returns (p, bin centres, the shared shape, its row)."""
     r, mf = lay.Y.shape[1], lay.mean_factor
     ebar = E.mean(1)
     zz = z[:, :, alive] if alive else z
     edges, H = _bin_shares(zz, z)  # H: (n, d, B)
-    Bx = _gram_inv(_gram(X))[0]
     Xn = X.transpose(1, 0, 2)  # (d, n, k), a view
     proj = np.matmul(Xn, Bx @ np.matmul(Xn.transpose(0, 2, 1), H.transpose(1, 0, 2))).transpose(1, 0, 2)  # (n, d, B)
     Ht = (H - proj)[:, alive]

@@ -113,15 +113,15 @@ def _meat(C, X):
     return out
 
 
-def _covariance(X, Chat, obs, r, N=None, share: float = 0.05):
+def _covariance(X, Chat, obs, r, inv=None):
     """The sandwich covariance of the stacked per-neuron least squares (d (p+1) square), or
     its per-neuron blocks (d, p+1, p+1) when the layer is wide (``Chat``: per input the
     residuals' covariance across neurons, needed only then; ``obs`` its diagonal; ``r`` the
     shots a per-input mean averages); whether it is the full matrix; and the neurons whose map
-    the data see only in part (:func:`_gram_inv`, ``N`` and ``share`` its own: the covariance holds
-    the directions they see)."""
+    the data see only in part. ``inv``: the design Gram's :func:`_gram_inv` where the caller has
+    it (the covariance holds the directions it sees)."""
     n, d, k = X.shape
-    Binv, unseen = _gram_inv(_gram(X), N, share)
+    Binv, unseen = _gram_inv(_gram(X)) if inv is None else inv
     if d * k <= FULL_COV_MAX:
         meat = _meat(Chat / r, X)
         S = np.matmul(Binv, meat.transpose(2, 0, 1, 3))  # (j, i, a, c): Binv_i meat_ij

@@ -130,10 +130,11 @@ def line_ceiling(problem, ds, physics, kinds=("pathwise", "score_paper"), *, dir
 
 def run_ceiling(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st: float = 0.2, true_effects=(),
                 seed: int = 0, kinds=("pathwise", "score_paper"), train_epochs: int | None = None, K1=None,
-                K2: int = 1, **options) -> dict:
+                K2: int = 1, data_folder: str | None = None, **options) -> dict:
     """:func:`line_ceiling` on the setting of :func:`gift_theory.finetune.run_finetune` (same w0,
     same problem key, so the directions are those its line searches use).
 
+    ``data_folder``: the MNIST IDX folder for ``dataset="mnist"``, as in ``run_finetune``.
     ``options`` go to :func:`line_ceiling`; ``referee_K2`` also names the referee's draws.
     """
     from ._problem import make_problem
@@ -141,7 +142,8 @@ def run_ceiling(dataset: str = "digits", arch="64-32-32-10", s0: float = 0.1, st
 
     physics = true_physics(st, true_effects)
     with phase("setting"):
-        ds, arch_, w0 = load_setting(dataset, arch, s0, seed, train_epochs=train_epochs, progress=False)
+        ds, arch_, w0 = load_setting(dataset, arch, s0, seed, train_epochs=train_epochs, progress=False,
+                                      data_folder=data_folder)
     problem = make_problem(arch_, w0, ds.x_train, ds.y_train, s0=s0, true_physics=physics, budget=0, K1=K1, K2=K2,
                            seed=seed)
     res = line_ceiling(problem, ds, physics, tuple(kinds), **options)

@@ -268,6 +268,24 @@ def test_finetune_reads_mnist_from_the_data_folder(capsys, tmp_path, monkeypatch
     assert obj["dataset"] == "mnist" and obj["arch"] == [784, 4, 10] and obj["loss_after"] == obj["loss_before"]
 
 
+@pytest.mark.slow
+def test_the_line_s_ceiling_reads_mnist_from_the_data_folder(tmp_path, monkeypatch):
+    """run_ceiling takes the IDX folder as run_finetune does, so the ceiling sweeps run on full MNIST."""
+    from gift_theory.finetune import run_ceiling
+
+    monkeypatch.setenv("GIFT_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "mnist").mkdir()
+    _tiny_mnist(tmp_path / "mnist")
+    res = run_ceiling(dataset="mnist", arch="784-4-10", s0=0.1, st=0.2, kinds=("pathwise",), train_epochs=1,
+                      data_folder=str(tmp_path / "mnist"), direction_K2=2, n_side=2, refine=0, scan_K2=1,
+                      referee_K2=2)
+    assert res["dataset"] == "mnist" and res["arch"] == [784, 4, 10]
+    assert 0.0 <= res["pathwise_accuracy"] <= 1.0 and res["accuracy_before"] == res["accuracy_before"]
+    with pytest.raises(Exception, match="(?i)mnist|idx|folder"):
+        run_ceiling(dataset="mnist", arch="784-4-10", s0=0.1, st=0.2, kinds=("pathwise",), train_epochs=1,
+                    data_folder=str(tmp_path / "nowhere"))
+
+
 def test_gift_theory_never_imports_the_packages_on_top():
     """proofs_checks and paper_figures register their commands (entry-point group gift.commands);
     no module of gift_theory names them in an import."""

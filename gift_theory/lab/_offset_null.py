@@ -81,16 +81,54 @@ def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, i
         # columns per neuron: each W kind contributes d_in (entry j of every row), b / per-neuron 1
         basis, owner = kind_columns(here, arch, l)
         zero = tuple(np.zeros(k.shape(arch, l), np.float32) for k in here)
-        cols = np.asarray(_layer_jvps(zero, W, b, a, noise, model.physics, t, basis, arch, l, axis, here)[1],
-                          np.float64)
-        cols = cols.reshape(len(owner), -1, d_l)  # (P_i, samples, neurons)
         prior = np.array([e[here[o]] ** 2 for o in owner])
-        # per neuron i, J_i (samples, P_i) scaled by the prior and the noise; the eigenvalues of
-        # J_i^T J_i (a P_i x P_i Gram matrix per neuron: the squared singular values of J_i)
-        Js = np.ascontiguousarray(np.transpose(cols * (np.sqrt(prior) / np.sqrt(resid_var))[:, None, None], (2, 1, 0)))
-        lam = np.clip(np.linalg.eigvalsh(np.swapaxes(Js, 1, 2) @ Js), 0.0, None)
+        draws = max(int(np.prod(v.shape[1:axis + 1])) for v in jax.tree_util.tree_leaves(noise))
+        spans, size = input_chunks(meas.n, len(owner) * draws * d_l * 4)
+        gram = 0.0
+        for i0, i1 in spans:
+            part = functools.partial(_rows, i0=i0, i1=i1, size=size)
+            cols = np.asarray(_layer_jvps(zero, W, b, part(a), jax.tree_util.tree_map(part, noise), model.physics,
+                                          None if t is None else part(t), basis, arch, l, axis, here)[1], np.float64)
+            cols = cols[:, :i1 - i0].reshape(len(owner), -1, d_l)  # (P_i, samples, neurons)
+            # per neuron i, J_i (samples, P_i) scaled by the prior and the noise; the eigenvalues
+            # of J_i^T J_i (a P_i x P_i Gram matrix per neuron: the squared singular values of
+            # J_i), the Gram summed over the chunks of inputs
+            Js = np.ascontiguousarray(np.transpose(cols * (np.sqrt(prior) / np.sqrt(resid_var))[:, None, None],
+                                                   (2, 1, 0)))
+            del cols
+            gram = gram + np.swapaxes(Js, 1, 2) @ Js
+            del Js
+        lam = np.clip(np.linalg.eigvalsh(gram), 0.0, None)
         total += float(np.sum(lam / (lam + 1.0)))
     return total, nominal
+
+
+#: bytes of one layer's tangents (directions x inputs x draws x neurons, float32) that
+#: :func:`effective_dof` computes at once; a larger measurement is read in chunks of inputs
+JVP_CHUNK_BYTES = 96 << 20
+
+
+def input_chunks(n: int, per_input: int, budget: int | None = None):
+    """``(spans, size)``: ``range(n)`` in equal chunks of ``size`` inputs (the last one shorter,
+    padded by :func:`_rows` so that one compiled program serves every chunk) of at most
+    ``budget`` bytes (default :data:`JVP_CHUNK_BYTES`) at ``per_input`` bytes an input; one
+    chunk, unpadded, when all fit."""
+    budget = JVP_CHUNK_BYTES if budget is None else budget
+    k = max(1, -(-n * int(per_input) // int(budget)))
+    size = -(-n // k)
+    return [(i, min(i + size, n)) for i in range(0, n, size)], size
+
+
+def _rows(v, i0: int, i1: int, size: int):
+    """Rows ``i0:i1`` of ``v``, the last row repeated up to ``size`` rows (the rows past ``i1``
+    are computed and dropped)."""
+    if i0 == 0 and i1 == size == v.shape[0]:
+        return v  # the whole measurement in one chunk
+    v = jnp.asarray(v)
+    part = v[i0:i1]
+    if i1 - i0 < size:
+        part = jnp.concatenate([part, jnp.repeat(v[i1 - 1:i1], size - (i1 - i0), axis=0)], axis=0)
+    return part
 
 
 def _output_jacobian(key, meas: Measurement, model: Model, kinds, chunk: int = 64):

@@ -176,6 +176,17 @@ def _noise_model(lay: _Layer, act: str, fit, mc, E, obs, Chat, f2: float, s2: fl
     return E, obs, Chat_s, z, g, var, s2, W_n
 
 
+def _seen_part(lay: _Layer, theta, unseen: dict, p: int, tt):
+    """``(theta, W_eff, b_eff, drift)`` with each neuron's steps along the directions the data do
+    not see (``unseen``: {neuron: (mask, projector on the seen directions)}) taken out: what the
+    data cannot tell from the programmed map is the programmed map (the fit's steps there were
+    free)."""
+    for i, (_, proj) in unseen.items():
+        theta[i] = proj @ theta[i]
+    return (theta, lay.W + theta[:, :p], lay.b + theta[:, p],
+            None if tt is None else (theta[:, p + 1], theta[:, p + 2]))
+
+
 def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: bool,
                    trends: bool = True, memory: bool = True) -> LayerIdentity:
     """One layer's identification: the map at its noise level, the time's terms put into it, the
@@ -251,13 +262,8 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     theta = np.concatenate([dW, db[:, None]] + ([drift[0][:, None], drift[1][:, None]] if tt is not None else []),
                            axis=1)  # (d, k)
     if unseen:
-        # a neuron whose map the data see only in part: what they cannot tell from the programmed
-        # map is the programmed map (the fit's steps along those directions were free)
-        for i, (_, proj) in unseen.items():
-            theta[i] = proj @ theta[i]
+        theta, W_eff, b_eff, drift = _seen_part(lay, theta, unseen, p, tt)
         dW, db = theta[:, :p], theta[:, p]
-        W_eff, b_eff = lay.W + dW, lay.b + db
-        drift = None if tt is None else (theta[:, p + 1], theta[:, p + 2])
     se = (np.sqrt(np.maximum(np.diag(S), 1e-300)).reshape(d, k) if full
           else np.sqrt(np.maximum(np.einsum("ipp->ip", S), 1e-300)))
     transfer_cls = "activation_mismatch" if lay.hidden else "readout_nonlinearity"

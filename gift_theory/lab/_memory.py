@@ -22,7 +22,8 @@ difference. Under the null (no memory), the shots of one input are exchangeable:
 may be dealt to the input's acquisition times in any order. T's law under the null is read off
 :data:`PERMUTATIONS` such deals (within each input, a fixed seed per layer): z is T against
 their mean and standard deviation. Where z, read as normal, gives p below :data:`EXTEND_P`, the
-deals go on to :data:`MORE_PERMUTATIONS` in all and p is read off the deals themselves
+deals go on to :data:`MORE_PERMUTATIONS` in all (unless p is below :data:`BEYOND_P`: far beyond
+any deal) and p is read off the deals themselves
 (two-sided: a memory may be negative), ``(1 + #{|T_b - m| >= |T - m|}) / (1 + B)``; only
 beyond every deal is the normal tail used (at most ``1 / (1 + B)``). The deals' law has heavier
 tails than a normal: read as normal, 11 of 440 null layers gave p below 0.01.
@@ -58,6 +59,9 @@ PERMUTATIONS = 100
 #: p is read off them
 EXTEND_P = 0.05
 MORE_PERMUTATIONS = 1000
+#: ... unless it is below this (|z| > 6.1): no deal of a thousand reaches such a statistic under
+#: any law the deals of a sum over a campaign's shots follow, and the normal tail stands
+BEYOND_P = 1e-9
 #: a layer's memory is taken out of its shots (and the layer read again) below this p
 UNDO_P = 1e-3
 #: cosines of t (besides a line) the residuals are detrended by before the lag is read, where an
@@ -185,7 +189,7 @@ def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
     m, sd = float(null.mean()), float(null.std(ddof=1))
     z = (stat - m) / sd if sd > 0 else 0.0
     p = float(min(1.0, 2.0 * stats.norm.sf(abs(z))))
-    if p < EXTEND_P and sd > 0:
+    if BEYOND_P <= p < EXTEND_P and sd > 0:
         null = np.concatenate([null, deals(MORE_PERMUTATIONS - PERMUTATIONS)])
         m, sd = float(null.mean()), float(null.std(ddof=1))
         z = (stat - m) / sd if sd > 0 else 0.0

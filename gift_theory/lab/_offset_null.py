@@ -82,7 +82,7 @@ def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, i
         basis, owner = kind_columns(here, arch, l)
         zero = tuple(np.zeros(k.shape(arch, l), np.float32) for k in here)
         prior = np.array([e[here[o]] ** 2 for o in owner])
-        draws = max(int(np.prod(v.shape[1:axis + 1])) for v in jax.tree_util.tree_leaves(noise))
+        draws = max((int(np.prod(v.shape[1:axis + 1])) for v in jax.tree_util.tree_leaves(noise)), default=1)
         spans, size = input_chunks(meas.n, len(owner) * draws * d_l * 4)
         gram = 0.0
         for i0, i1 in spans:

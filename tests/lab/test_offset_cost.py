@@ -30,7 +30,8 @@ def test_the_offsets_cost_read_in_chunks_of_inputs_equals_the_whole(chip, effect
     model = Model(gt.Physics.create(s=0.05), None, {effect: 0.05})
     key = jax.random.PRNGKey(0)
     whole, nominal = _offset_null.effective_dof(key, chip, model, kinds)
-    # a budget of a few inputs: 37 inputs in chunks of 5-8, the last one padded
+    # a budget of a few inputs' tangents: weight_error's layers and bias_offset's first read in
+    # several chunks of the 37 inputs, the last one padded
     monkeypatch.setattr(_offset_null, "JVP_CHUNK_BYTES", 20 * 16 * 4 * 9 * 4 * 5)
     spans, size = _offset_null.input_chunks(chip.n, 20 * 16 * 4 * 9 * 4)
     assert len(spans) > 4 and spans[-1][1] - spans[-1][0] < size and spans[-1][1] == chip.n

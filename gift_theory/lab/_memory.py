@@ -190,10 +190,10 @@ def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
     m, sd = float(null.mean()), float(null.std(ddof=1))
     z = (stat - m) / sd if sd > 0 else 0.0
     p = float(min(1.0, 2.0 * stats.norm.sf(abs(z))))
-    if BEYOND_P <= p < EXTEND_P and sd > 0:
+    if BEYOND_P <= p < EXTEND_P:  # (z != 0 here, so the deals spread: sd > 0 with more of them too)
         null = np.concatenate([null, deals(MORE_PERMUTATIONS - PERMUTATIONS)])
         m, sd = float(null.mean()), float(null.std(ddof=1))
-        z = (stat - m) / sd if sd > 0 else 0.0
+        z = (stat - m) / sd
         p = deals_p(null, stat, m, z)
     # the estimate: the same partial regression, the previous shots' values less (with taps) their
     # regression on the shot's own input too; its null mean (the residual's bias against a

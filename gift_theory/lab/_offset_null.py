@@ -82,6 +82,7 @@ def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, i
         basis, owner = kind_columns(here, arch, l)
         zero = tuple(np.zeros(k.shape(arch, l), np.float32) for k in here)
         prior = np.array([e[here[o]] ** 2 for o in owner])
+        scale = (np.sqrt(prior) / np.sqrt(resid_var))[:, None, None]  # per column: the prior over the noise
         draws = max((int(np.prod(v.shape[1:axis + 1])) for v in jax.tree_util.tree_leaves(noise)), default=1)
         spans, size = input_chunks(meas.n, len(owner) * draws * d_l * 4)
         gram = 0.0
@@ -93,8 +94,7 @@ def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, i
             # per neuron i, J_i (samples, P_i) scaled by the prior and the noise; the eigenvalues
             # of J_i^T J_i (a P_i x P_i Gram matrix per neuron: the squared singular values of
             # J_i), the Gram summed over the chunks of inputs
-            Js = np.ascontiguousarray(np.transpose(cols * (np.sqrt(prior) / np.sqrt(resid_var))[:, None, None],
-                                                   (2, 1, 0)))
+            Js = np.ascontiguousarray(np.transpose(cols * scale, (2, 1, 0)))
             del cols
             gram = gram + np.swapaxes(Js, 1, 2) @ Js
             del Js

@@ -19,6 +19,7 @@ from scipy import optimize, stats
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
+from .._process import release_freed_memory
 from ..chips import simulate_measurement
 from ._channels import (
     Reference,
@@ -510,6 +511,7 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
             if not meas.has_taps and hidden:
                 pts.append(_power_p(named_subkey(kb, "score"), model, big, meas.n))
             del big, seen
+            release_freed_memory()  # the batch's files and their scoring, not kept for the next
         p, se = _rate(np.concatenate(ps), alpha)
         pt = _rate(np.concatenate(pts), alpha)[0] if pts else None
         out.append({"mechanism": mech, "probe": name, "power": p, "se": se, "power_with_taps": pt,

@@ -55,6 +55,7 @@ import jax
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
+from .._process import release_freed_memory
 from ..effects import BUILTIN, REGISTRY
 from ..effects._physics import scope_error
 from . import _ambiguity
@@ -101,9 +102,17 @@ def _localise(session: Session, base: Model, meas: Measurement, shots):
     steps = tuple(session.one_step(base)) if taps else ()
     failing = failing_layers(steps) if taps else None
     res = residuals(session.k_step, base, meas, shots)
-    local = one_step_residuals(session.k_step, base, meas, {r["layer"]: r["s"] for r in steps}) if taps else res
-    evidence = layer_evidence(local)
-    sigs, where = signatures(session.k_step, base, meas, res=res), where_it_fails(session.k_step, base, meas, res=res)
+    if taps:
+        local = one_step_residuals(session.k_step, base, meas, {r["layer"]: r["s"] for r in steps})
+        evidence = layer_evidence(local)
+        del local  # (its model shots: as large as the measurement's taps, four times over)
+        release_freed_memory()
+    else:
+        evidence = layer_evidence(res)
+    sigs = signatures(session.k_step, base, meas, res=res)
+    release_freed_memory()
+    where = where_it_fails(session.k_step, base, meas, res=res)
+    release_freed_memory()
     return steps, failing, evidence, sigs, where
 
 

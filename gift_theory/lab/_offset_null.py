@@ -25,6 +25,7 @@ import numpy as np
 from scipy import optimize
 
 from .._measurement import Measurement
+from .._process import release_freed_memory
 from .._model import (
     forward,
     named_subkey,
@@ -270,7 +271,9 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
         deltas = estimate_offsets(k_fit, sim_tr, base.physics, base.weights(fit_meas), kinds, scales, start=fitted)
         p, ph = apply_all(kinds, deltas, base.weights(fit_meas), base.physics, arch)
         refit = Model(ph, p, model.offsets)
-        return channel_values(k_cmp, refit, resimulate(k_te, truth, test_meas), ref, shots)
+        out = channel_values(k_cmp, refit, resimulate(k_te, truth, test_meas), ref, shots)
+        release_freed_memory()  # a replicate's simulated campaigns, not kept for the next
+        return out
 
     # the replicates are independent (each from its own subkey): ``workers`` threads make them at once
     if workers > 1 and B > 1:

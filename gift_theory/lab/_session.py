@@ -20,6 +20,7 @@ import numpy as np
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
+from .._process import release_freed_memory
 from ..effects import REGISTRY
 from ._budget import candidate_threads, replicate_threads
 from ._channels import Reference, channel_values, reference
@@ -258,6 +259,7 @@ class Session:
         lock = threading.Lock()
 
         def report(cand):
+            release_freed_memory()  # the candidate's temporaries back to the system, not kept for the next
             if progress is not None:
                 with lock:
                     progress(done[0], len(requests), f"{cand.name}: {cand.status}")

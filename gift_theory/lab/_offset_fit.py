@@ -22,13 +22,13 @@ import numpy as np
 from scipy import optimize
 
 from .._measurement import Measurement
-from .._process import release_freed_memory
 from .._model import (
     compiled_draws,
     layer_step,
     named_subkey,
     noisy_input,
 )
+from .._process import release_freed_memory
 from ._shots import Model, params32, tiled_times, to32
 from ._offset_kinds import _initial_scale, _split_by_kind, apply_all, apply_layer, kinds_of, reset, unflat_vector
 

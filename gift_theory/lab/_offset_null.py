@@ -25,12 +25,12 @@ import numpy as np
 from scipy import optimize
 
 from .._measurement import Measurement
-from .._process import release_freed_memory
 from .._model import (
     forward,
     named_subkey,
     simulate,
 )
+from .._process import release_freed_memory
 from ._shots import Model, params32, to32
 from ._offset_kinds import (
     _initial_scale,

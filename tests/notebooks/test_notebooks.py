@@ -6,7 +6,11 @@ held on this run. The notebooks are stored executed, so a reader sees every numb
 without running them; the slow test runs each again (the kernel inherits the test environment:
 a temporary weight cache, no persistent compilation cache) and checks that the stored outputs
 are what the code prints now -- the same text, every number within two units of its last printed
-digit, the same figures in the same cells.
+digit, the same figures in the same cells. A cell tagged ``machine-dependent`` prints one draw of
+a stochastic search whose path the last bit of the floating point changes as a new seed would
+(notebook 03's GIFT runs: on another CPU, or with XLA capped at AVX2, the confirmation of one
+seed's step moved from z = 3.46 to 2.96 and 3.20 against a threshold of 3.1): its text is not
+compared, only its figures; what it teaches is in its asserts, which hold over several seeds.
 
 Refresh the stored outputs after a change (from the repository root)::
 
@@ -101,6 +105,10 @@ def test_there_are_at_least_four_notebooks_stored_executed_each_with_figures_of_
         assert not private, f"{path}: imports private modules {private}"
         assert "Sign convention" in nb.cells[0].source, f"{path}: the sign convention is not stated"
         assert any("Exercise" in c.source for c in nb.cells if c.cell_type == "markdown"), f"{path}: no exercise"
+        # a cell whose text is not compared (machine-dependent) asserts what it teaches, or only draws
+        for c in code:
+            if MACHINE_DEPENDENT in c.metadata.get("tags", []):
+                assert "assert " in c.source or (_images(c) == 1 and not _text(c).strip()), (path, c.source[:80])
 
 
 def test_the_comparison_of_outputs_allows_the_last_digit_and_nothing_else():
@@ -111,6 +119,8 @@ def test_the_comparison_of_outputs_allows_the_last_digit_and_nothing_else():
     assert not same_text("z = 5.12", "z = 5.19") and not same_text("loss 1.6893", "loss 1.6303")
 
 
+#: the tag of a cell whose printed numbers are one machine's draw of a stochastic search (module docstring)
+MACHINE_DEPENDENT = "machine-dependent"
 #: XLA's backend optimisation level the notebooks' stored outputs were written at
 NOTEBOOK_XLA_OPT_LEVEL = 1
 
@@ -134,6 +144,8 @@ def test_notebook_runs_and_its_stored_outputs_are_current(path, tmp_path, monkey
         if a.cell_type != "code":
             continue
         assert _images(a) == _images(b), f"{path} cell {i}: figures differ from the stored ones"
+        if MACHINE_DEPENDENT in a.metadata.get("tags", []):
+            continue  # one draw of a stochastic search: its asserts, run above, are its test
         assert same_text(_text(a), _text(b)), (
             f"{path} cell {i}: the stored output is not current (python tests/notebooks/test_notebooks.py --write)\n"
             f"stored:\n{_text(a)}\nnow:\n{_text(b)}")

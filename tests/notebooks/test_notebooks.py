@@ -8,9 +8,9 @@ a temporary weight cache, no persistent compilation cache) and checks that the s
 are what the code prints now -- the same text, every number within two units of its last printed
 digit, the same figures in the same cells. A cell tagged ``machine-dependent`` prints one draw of
 a stochastic search whose path the last bit of the floating point changes as a new seed would
-(notebook 03's GIFT runs: on another CPU, or with XLA capped at AVX2, the confirmation of one
-seed's step moved from z = 3.46 to 2.96 and 3.20 against a threshold of 3.1): its text is not
-compared, only its figures; what it teaches is in its asserts, which hold over several seeds.
+(notebook 03's GIFT runs: on two CPUs, and with XLA capped at AVX2, one seed's confirmation read
+z = 3.46, 2.96 and 3.20 against a threshold of about 3.1): its text is not compared, only its
+figures; what it teaches is in its asserts, which hold over several seeds.
 
 Refresh the stored outputs after a change (from the repository root)::
 

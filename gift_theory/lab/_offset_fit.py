@@ -131,7 +131,7 @@ def _neuron_lm(linearised, ds, target, inv_v: float, inv_e2, iters: int = 50, at
     eye = np.eye(P)[None]
 
     def evaluate(d):
-        release_freed_memory()  # the step before's Jacobian, not kept beside this one
+        release_freed_memory()  # what the steps before freed (their Jacobians, solves), before this one is made
         p0, cols = linearised(tuple(np.asarray(x, np.float32) for x in d))
         r = tg - np.asarray(p0, np.float64).reshape(-1, n_l)
         loss = 0.5 * inv_v * np.sum(r * r, axis=0) + 0.5 * np.sum(lam * d * d, axis=0)

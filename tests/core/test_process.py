@@ -7,7 +7,7 @@ import sys
 import pytest
 
 _CHILD = r"""
-import ctypes.util, sys
+import sys
 import numpy as np
 from gift_theory._process import _glibc, release_freed_memory
 

@@ -606,3 +606,21 @@ def test_a_chance_signal_dependence_does_not_name_the_noise_law():
     law = [r for r in rows if r["class"] == "noise_law" and r["layer"] == 3]
     assert len(law) == 1 and law[0]["p_adj"] > 0.01, law
     assert "variance fitted to the signal" not in law[0]["evidence"]
+
+
+def test_the_activation_s_shape_is_read_on_the_neurons_whose_map_the_data_see_in_full():
+    """At s = 1 with taps a hidden layer's map is seen only in part for about half its neurons
+    (the per-input means barely span their inputs): along the unseen directions W_eff is the
+    fit's noise, and so is each shot's z there. The null study's set 11 (awgn only: the model is
+    right) had its layer-2 shape rejected at p = 4e-4 and activation_mismatch named; read on the
+    neurons seen in full, it is not, and the row says which neurons were left out."""
+    from studies.calibrate import _network
+
+    _, params = _network(1011, (8, 16, 8, 4))
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(2011), (120, 8)))
+    meas = simulate_measurement(jax.random.PRNGKey(3011), params, x, gt.Physics.create(s=1.0), shots=32, taps=True)
+    rows = identify(meas).rows()
+    shape = [r for r in rows if r["test"] == "shape" and r["layer"] == 2]
+    assert len(shape) == 1 and "seen only in part left out" in shape[0]["evidence"], shape
+    assert shape[0]["p"] > 0.01, shape
+    assert not [r for r in rows if r["class"] == "activation_mismatch" and r["p_adj"] < 0.01]

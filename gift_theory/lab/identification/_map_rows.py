@@ -125,7 +125,7 @@ def shape_row(lay: _Layer, E, z, X, Bx, Chat, obs, alive, k: int, nu: float, cls
     """The activation's shape: the binned residual shared by the neurons ``alive`` (none: not
     read, p = 1), beyond each neuron's affine map (``Bx``: per neuron the inverse of the design's
     Gram, :func:`._stats._gram_inv`); ``left_out`` the neurons the caller left out (their map seen
-    only in part), named in the row. Returns (p, bin centres, the shared shape, its row)."""
+    the data do not resolve), named in the row. Returns (p, bin centres, the shared shape, its row)."""
     r, mf = lay.Y.shape[1], lay.mean_factor
     ebar = E.mean(1)
     zz = z[:, :, alive] if alive else z
@@ -152,13 +152,14 @@ def shape_row(lay: _Layer, E, z, X, Bx, Chat, obs, alive, k: int, nu: float, cls
     zc = np.concatenate([[inner[0] - 0.5 * (inner[1] - inner[0])], 0.5 * (inner[:-1] + inner[1:]),
                          [inner[-1] + 0.5 * (inner[-1] - inner[-2])]])
     jmax = int(np.argmax(np.abs(gam)))
-    note = (f" (read on the {len(alive)} neurons whose map the data see in full; {left_out} seen only in part left "
-            "out)" if left_out and alive else "")
+    note = (f" (read on the {len(alive)} neurons whose z the data resolve; {left_out} left out: their map seen only in "
+            "part or their z's error beyond the activation's scale)" if left_out and alive else "")
     row = (_row(cls, "shape", ps, zs_, float(np.max(np.abs(gam))),
                 f"the residual at layer {lay.layer} is a function of z shared by its neurons: {gam[jmax]:+.3g} "
                 f"near z = {zc[jmax]:.2g} beyond each neuron's affine map" + note) if alive else
            _row(cls, "shape", 1.0, 0.0, 0.0, f"the activation's shape at layer {lay.layer} is not read: no neuron's map "
-                "is both alive and seen in full by the data"))
+                "is alive with its z resolved by the data (its map seen in full, z's error within the activation's "
+                "scale)"))
     return ps, zc, gam, row
 
 

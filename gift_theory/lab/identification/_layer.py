@@ -294,9 +294,9 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     # they do not see, W_eff is the fit's noise, and so is each shot's z there) and, under a
     # curved activation, with z's standard error below the activation's own scale (RESOLVED_Z).
     # A shot binned at an unresolved z leaves a shared "shape" in the residuals that the
-    # test's first-order law does not hold (at s = 1 with taps a hidden layer's W_eff is known to
-    # thousands of times |W|, its z reached 1e4 on a tanh, and the test rejected 10 % of null
-    # files at 0.01)
+    # test's first-order law does not hold (at s = 1 with taps the per-input means barely
+    # identify a hidden layer's map: z's standard error reached 1e3-1e5, its z 1e4 on a tanh, and
+    # the test rejected 10 % of null files at 0.01)
     seen = [i for i in alive if i not in unseen and (act == "identity" or not lay.hidden
                                                      or z_error[i] < RESOLVED_Z)] if alive else []
     ps, zc, gam, row = shape_row(lay, E, z, X, inv[0], Chat, obs, seen, k, nu, transfer_cls,

@@ -124,7 +124,7 @@ def restricted_maps(Wa, ba, k: int, timed: bool) -> dict:
 def shape_row(lay: _Layer, E, z, X, Bx, Chat, obs, alive, k: int, nu: float, cls: str, left_out: int = 0):
     """The activation's shape: the binned residual shared by the neurons ``alive`` (none: not
     read, p = 1), beyond each neuron's affine map (``Bx``: per neuron the inverse of the design's
-    Gram, :func:`._stats._gram_inv`); ``left_out`` the neurons the caller left out (their map seen
+    Gram, :func:`._stats._gram_inv`); ``left_out`` how many neurons the caller left out (whose z
     the data do not resolve), named in the row. Returns (p, bin centres, the shared shape, its row)."""
     r, mf = lay.Y.shape[1], lay.mean_factor
     ebar = E.mean(1)

@@ -355,7 +355,9 @@ def slow_terms(lay, E, g, X, t, layer: int, row_of, within) -> Slow:
     t = np.asarray(t, np.float64)
     G = A if lay.A.shape[1] > 1 else None  # with taps: the shot's own input varies within an input
     Ew = within(E, g, lay.A)
-    obs = np.maximum(np.var(Ew, axis=1, ddof=1), 1e-300) if r > 1 else np.ones((n, d))
+    # a cell of identical shots (a quantized readout) weighs as much as the layer's resolution
+    # lets it, not 1 / 1e-300 (which overflowed the sandwich and stopped the identification)
+    obs = np.maximum(np.var(Ew, axis=1, ddof=1), max(float(lay.res_var), 1e-300)) if r > 1 else np.ones((n, d))
     tbar = t.mean(1)
     rd = _Reads(Ew - Ew.mean(1, keepdims=True), E.mean(1), obs, g, G, X, t,
                 r > 2 and float(np.std(t - tbar[:, None])) >= SPREAD, float(np.std(tbar)) >= SPREAD)

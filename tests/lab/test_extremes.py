@@ -215,3 +215,23 @@ def test_a_weak_shot_and_crosstalk_pair_is_ranked_in_the_top_three(taps):
     assert set(first.effects) >= {"shot", "crosstalk"} or {"shot", "crosstalk"} <= set(names), \
         [c.effects for c in d.ranking[:4]]
     assert first.comparison.p_value >= 0.01
+
+
+def test_a_quantized_cell_of_identical_shots_with_times_is_read_not_overflowed():
+    """A 5-bit readout over +-2.5 on a 3-12-24-6 net at s = 0.046 with acquisition times: one cell
+    of layer 1 has 32 identical shots (its input is x itself, so its model mean does not move
+    within the input). The time tests weighed each cell by 1 / its variance, floored at 1e-300:
+    the sandwich overflowed (with numpy's defaults, "SVD did not converge" and no identification).
+    The cell now weighs as much as the lattice's resolution lets it; the quantizer is named."""
+    from studies.calibrate import _network
+
+    _, params = _network(3, (3, 12, 24, 6))
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(3), (120, 3)))
+    meas = simulate_measurement(jax.random.PRNGKey(4), params, x,
+                                gt.Physics.create(s=0.046, quantization={"bits": 5, "v_range": 2.5}), shots=32,
+                                taps=True, times=True)
+    assert int((np.var(np.asarray(meas.taps[0]), 1) == 0).sum()) >= 1  # inside the case
+    with np.errstate(over="raise", invalid="raise", divide="raise"):
+        idn = identify(meas)
+    named = {(r["class"], r["layer"]) for r in idn.rows() if r["p_adj"] < 0.01}
+    assert ("readout_nonlinearity", 1) in named, named

@@ -290,15 +290,16 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     alive = [i for i in range(d) if i not in dead]
     idx = np.concatenate([np.arange(i * k, (i + 1) * k) for i in alive]) if alive else np.zeros(0, int)
     Sa = S[np.ix_(idx, idx)] if full else _Blocks(S[alive])
-    # the shape is read on the neurons whose z the data resolve: seen in full (along a direction
-    # they do not see, W_eff is the fit's noise, and so is each shot's z there) and, under a
-    # curved activation, with z's standard error below the activation's own scale (RESOLVED_Z).
-    # A shot binned at an unresolved z leaves a shared "shape" in the residuals that the
-    # test's first-order law does not hold (at s = 1 with taps the per-input means barely
-    # identify a hidden layer's map: z's standard error reached 1e3-1e5, its z 1e4 on a tanh, and
-    # the test rejected 10 % of null files at 0.01)
-    seen = [i for i in alive if i not in unseen and (act == "identity" or not lay.hidden
-                                                     or z_error[i] < RESOLVED_Z)] if alive else []
+    # under a curved activation the shape is read on the neurons whose z the data resolve: seen
+    # in full (along a direction they do not see, W_eff is the fit's noise, and so is each shot's
+    # z there) and with z's standard error below the activation's own scale (RESOLVED_Z). A shot
+    # binned at an unresolved z leaves a shared "shape" in the residuals that the test's
+    # first-order law does not hold (at s = 1 with taps the per-input means barely identify a
+    # hidden layer's map: z's standard error reached 1e3-1e5, its z 1e4 on a tanh, and the test
+    # rejected 10 % of null files at 0.01). A linear layer's residual is linear in the map's
+    # error: its law holds as it is.
+    seen = ([i for i in alive if i not in unseen and z_error[i] < RESOLVED_Z] if z_error is not None
+            else alive)
     ps, zc, gam, row = shape_row(lay, E, z, X, inv[0], Chat, obs, seen, k, nu, transfer_cls,
                                  left_out=len(alive) - len(seen))
     rows.append(row)

@@ -142,6 +142,21 @@ def _z_error(lay: _Layer, S, full: bool, k: int) -> np.ndarray:
     return np.where(np.isfinite(v), np.sqrt(np.maximum(v, 0.0)), np.inf)
 
 
+def _resolved(lay: _Layer, act: str, S, full: bool, k: int, alive: list, unseen: dict) -> list:
+    """The neurons the activation's shape is read on. Under a curved activation, those whose z the
+    data resolve: seen in full (along a direction they do not see, W_eff is the fit's noise, and
+    so is each shot's z there) and with z's standard error (:func:`_z_error`) below the
+    activation's own scale :data:`RESOLVED_Z`. A shot binned at an unresolved z leaves a shared
+    "shape" in the residuals that the test's first-order law does not hold (at s = 1 with taps
+    the per-input means barely identify a hidden layer's map: z's standard error reached
+    1e3-1e5, its z 1e4 on a tanh, and the test rejected 10 % of null files at 0.01). A linear
+    layer's residual is linear in the map's error: its law holds as it is, every alive neuron."""
+    if not lay.hidden or act == "identity":
+        return alive
+    z_error = _z_error(lay, S, full, k)
+    return [i for i in alive if i not in unseen and z_error[i] < RESOLVED_Z]
+
+
 def _fit_at_level(lay: _Layer, act: str, s2: float, tt, f2: float, W0=None, b0=None):
     """The map and the noise level in two passes (the smoothing of sigma depends on the level only
     at second order), then the map at the level found: ((W_eff, b_eff, drift, z, m, g, var, X, E),
@@ -286,20 +301,10 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
           else np.sqrt(np.maximum(np.einsum("ipp->ip", S), 1e-300)))
     transfer_cls = "activation_mismatch" if lay.hidden else "readout_nonlinearity"
     dead, rows = dead_neurons(lay, W_eff, S, full, k, nu, transfer_cls)
-    z_error = _z_error(lay, S, full, k) if lay.hidden and act != "identity" else None
     alive = [i for i in range(d) if i not in dead]
     idx = np.concatenate([np.arange(i * k, (i + 1) * k) for i in alive]) if alive else np.zeros(0, int)
     Sa = S[np.ix_(idx, idx)] if full else _Blocks(S[alive])
-    # under a curved activation the shape is read on the neurons whose z the data resolve: seen
-    # in full (along a direction they do not see, W_eff is the fit's noise, and so is each shot's
-    # z there) and with z's standard error below the activation's own scale (RESOLVED_Z). A shot
-    # binned at an unresolved z leaves a shared "shape" in the residuals that the test's
-    # first-order law does not hold (at s = 1 with taps the per-input means barely identify a
-    # hidden layer's map: z's standard error reached 1e3-1e5, its z 1e4 on a tanh, and the test
-    # rejected 10 % of null files at 0.01). A linear layer's residual is linear in the map's
-    # error: its law holds as it is.
-    seen = ([i for i in alive if i not in unseen and z_error[i] < RESOLVED_Z] if z_error is not None
-            else alive)
+    seen = _resolved(lay, act, S, full, k, alive, unseen)
     ps, zc, gam, row = shape_row(lay, E, z, X, inv[0], Chat, obs, seen, k, nu, transfer_cls,
                                  left_out=len(alive) - len(seen))
     rows.append(row)

@@ -132,10 +132,12 @@ RESOLVED_Z = 1.0
 def _z_error(lay: _Layer, S, full: bool, k: int) -> np.ndarray:
     """Per neuron the root-mean-square standard error of the shots' z from the map's error
     (``S``, its covariance): sqrt(tr(S_i M)), M the shots' second moments of (a, 1)."""
-    p = lay.W.shape[1]
-    Af = np.concatenate([lay.A.reshape(-1, p), np.ones((lay.A.shape[0] * lay.A.shape[1], 1))], axis=1)
-    M = Af.T @ Af / Af.shape[0]
-    d = lay.W.shape[0]
+    d, p = lay.W.shape
+    Ar = lay.A.reshape(-1, p)  # (no copy of the shots' inputs: a wide layer's are as large as its taps)
+    M = np.empty((p + 1, p + 1))
+    M[:p, :p] = Ar.T @ Ar / Ar.shape[0]
+    M[:p, p] = M[p, :p] = Ar.mean(0)
+    M[p, p] = 1.0
     Sd = (np.stack([S[i * k:i * k + p + 1, i * k:i * k + p + 1] for i in range(d)]) if full
           else np.asarray(S)[:, :p + 1, :p + 1])
     v = np.einsum("ikl,kl->i", Sd, M)

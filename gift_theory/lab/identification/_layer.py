@@ -12,7 +12,8 @@ from .. import _memory, _time
 from .._qtest import over_inputs
 from ._layers import BINS, WIDE, _Layer, _curve, _level, _mean_model, _subset, _unit_cov, _unit_var
 from ._map import _fit_map, _map_uncertainty
-from ._map_rows import MapChoice, MapEvidence, dead_neurons, map_covariance, map_rows, restricted_maps, shape_row
+from ._map_rows import (MapChoice, MapEvidence, _block, dead_neurons, map_covariance, map_rows, restricted_maps,
+                        shape_row)
 from ._noise import _noise_rows
 from ._stats import FULL_COV_MAX, _Blocks, _cell_cov, _cell_var, _gram, _gram_inv, _row, _within, _z_of_p
 from ._trend import TREND_SHARE, _within_trend
@@ -138,8 +139,7 @@ def _z_error(lay: _Layer, S, full: bool, k: int) -> np.ndarray:
     M[:p, :p] = Ar.T @ Ar / Ar.shape[0]
     M[:p, p] = M[p, :p] = Ar.mean(0)
     M[p, p] = 1.0
-    Sd = (np.stack([S[i * k:i * k + p + 1, i * k:i * k + p + 1] for i in range(d)]) if full
-          else np.asarray(S)[:, :p + 1, :p + 1])
+    Sd = np.stack([_block(S, full, i, k, p + 1) for i in range(d)])
     v = np.einsum("ikl,kl->i", Sd, M)
     return np.where(np.isfinite(v), np.sqrt(np.maximum(v, 0.0)), np.inf)
 

@@ -4,18 +4,42 @@ A candidate's fit and held-out score hold its model shots (4 r per input of ever
 float32), the channels' pair distances in chunks of inputs (:data:`~._channels.CHUNK_BYTES`) and
 the moment fit's draws: measured on a 50 MB file (16-32-16-8 with taps, 1740 inputs x 64 shots),
 some 20 times the file's float32 shots per thread. The candidates run in up to 4 threads; for a
-large file fewer, so that all of them together stay within :data:`LAB_MEMORY` (the numbers do not
+large file fewer, so that all of them together stay within :func:`lab_memory` (the numbers do not
 depend on the thread count). A candidate with fitted offsets makes its refit null's replicates in
 threads of its own (:func:`replicate_threads`): they come out of the same budget (on that file
-two candidates with two replicate threads each raised the peak by 1.1 GB within seconds).
+two candidates with two replicate threads each raised the peak by 1.1 GB within seconds). The
+localisation (the baseline's residuals, one-step residuals and signatures) holds about as much
+as a candidate: it runs beside the candidates only when the budget has a thread left for it
+(:func:`localise_beside`), after them otherwise.
 """
 
 from __future__ import annotations
 
-#: bytes the threads of a diagnosis (candidates, and the replicates inside them) may hold together
+import os
+import re
+
+from .._errors import GiftInputError
+
+#: bytes the threads of a diagnosis (candidates, their replicates and the localisation) may hold
+#: together, unless ``$GIFT_LAB_MEMORY`` says otherwise (:func:`lab_memory`)
 LAB_MEMORY = 2 << 30
 #: a candidate thread's working memory over the file's float32 shots (measured, see above)
 PER_THREAD = 20
+
+_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def lab_memory() -> int:
+    """The budget in bytes: ``$GIFT_LAB_MEMORY`` (a whole number of bytes, or with a suffix K, M,
+    G or T: binary units, e.g. ``512M``), else :data:`LAB_MEMORY`. A value that is not one of
+    those is a bad input."""
+    env = os.environ.get("GIFT_LAB_MEMORY", "").strip()
+    if not env:
+        return LAB_MEMORY
+    m = re.fullmatch(r"(\d+)\s*([KMGT]?)(?:i?B)?", env, flags=re.I)
+    if m is None or int(m.group(1)) == 0:
+        raise GiftInputError(f"environment variable GIFT_LAB_MEMORY={env!r} is not a size: expected a positive number of bytes such as 512M or 2G")
+    return int(m.group(1)) * _UNITS[m.group(2).upper()]
 
 
 def shot_bytes(meas) -> int:
@@ -24,8 +48,8 @@ def shot_bytes(meas) -> int:
 
 
 def candidate_threads(meas) -> int:
-    """How many candidate threads fit in :data:`LAB_MEMORY` for ``meas`` (at least 1)."""
-    return int(max(1, LAB_MEMORY // max(PER_THREAD * shot_bytes(meas), 1)))
+    """How many candidate threads fit in :func:`lab_memory` for ``meas`` (at least 1)."""
+    return int(max(1, lab_memory() // max(PER_THREAD * shot_bytes(meas), 1)))
 
 
 def replicate_threads(meas, candidates: int) -> int:
@@ -33,3 +57,9 @@ def replicate_threads(meas, candidates: int) -> int:
     once: what :func:`candidate_threads` allows, shared among them (at least 1, at most
     ``candidates``)."""
     return int(max(1, min(candidates, candidate_threads(meas) // max(candidates, 1))))
+
+
+def localise_beside(meas, candidates: int) -> bool:
+    """Whether the localisation runs beside ``candidates`` candidate threads: only when the
+    budget holds one thread more than they and their replicates may use at once."""
+    return candidate_threads(meas) > candidates * replicate_threads(meas, candidates)

@@ -59,6 +59,7 @@ from .._process import release_freed_memory
 from ..effects import BUILTIN, REGISTRY
 from ..effects._physics import scope_error
 from . import _ambiguity
+from ._budget import localise_beside
 from ._channels import reference
 from ._compare import compare, failing_layers, one_step_check
 from ._explain_output import also_explaining, summary
@@ -101,13 +102,13 @@ def _localise(session: Session, base: Model, meas: Measurement, shots):
     taps = meas.has_taps
     steps = tuple(session.one_step(base)) if taps else ()
     failing = failing_layers(steps) if taps else None
-    res = residuals(session.k_step, base, meas, shots)
-    if taps:
+    if taps:  # the one-step residuals first, given back before the baseline's own are made
         local = one_step_residuals(session.k_step, base, meas, {r["layer"]: r["s"] for r in steps})
         evidence = layer_evidence(local)
         del local  # (its model shots: as large as the measurement's taps, four times over)
         release_freed_memory()
-    else:
+    res = residuals(session.k_step, base, meas, shots)
+    if not taps:
         evidence = layer_evidence(res)
     sigs = signatures(session.k_step, base, meas, res=res)
     release_freed_memory()
@@ -151,6 +152,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     # the layer-wise identification (closed form, numpy: the mechanisms' backbone, and which
     # candidates to fit first) needs only the data: with threads to spare it runs beside the
     # baseline's fit, and localising -- which needs only the baseline -- beside the candidates
+    # when the memory budget holds a thread for it (after them otherwise)
     with concurrent.futures.ThreadPoolExecutor(max_workers=2) as side:
         ident_f = side.submit(identify, meas) if threads > 1 else None
         session = Session.create(key, meas, shots, workers)
@@ -160,7 +162,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         # the identification first (the candidates wait for it): localising starts when it is done
         ident = ident_f.result() if ident_f is not None else identify(meas)
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
-                 if threads > 1 else None)
+                 if threads > 1 and localise_beside(meas, threads) else None)
         ranking, not_fitted = rank_candidates(session, names, second, verbose, ident, progress)
         ranking, not_fitted = with_alternatives(session, ranking, not_fitted, ident, verbose, progress)  # issue 48
         steps, failing, evidence, sigs, where = (local.result() if local is not None

@@ -257,6 +257,31 @@ def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them():
     assert _budget.replicate_threads(big, c) == 1 and _budget.replicate_threads(big, 1) == 1  # the budget is spent
     for cand in (1, 2, 4):  # within the budget whatever the candidate threads (one thread at least)
         assert cand * _budget.replicate_threads(big, cand) * per <= max(_budget.LAB_MEMORY, cand * per)
+    # the localisation holds about a candidate's memory: beside the candidates only with a thread to spare
+    assert _budget.localise_beside(small, 2) and not _budget.localise_beside(big, 2)
+    assert _budget.localise_beside(big, 1) == (c > 1)
+
+
+def test_the_lab_s_memory_budget_is_set_by_the_environment_and_a_bad_value_is_one_line(monkeypatch):
+    """``GIFT_LAB_MEMORY`` (bytes, or with K/M/G/T) sets the budget the threads share (private
+    ``_budget``, as above): a small budget runs one candidate thread and the localisation after
+    them, on the same numbers; a value that is not a size is a bad input, named."""
+    from gift_theory.lab import _budget  # private: the thread budget, its contract (see the test above)
+    from gift_theory.lab._session import default_workers
+
+    big = types.SimpleNamespace(n=1740, r=64, layers=lambda: [np.empty((0, 0, d)) for d in (32, 16, 8)])
+    monkeypatch.delenv("GIFT_LAB_THREADS", raising=False)
+    monkeypatch.setenv("GIFT_LAB_MEMORY", "8G")
+    assert _budget.lab_memory() == 8 << 30 and _budget.candidate_threads(big) == (8 << 30) // (20 * _budget.shot_bytes(big))
+    monkeypatch.setenv("GIFT_LAB_MEMORY", "256M")
+    assert _budget.lab_memory() == 256 << 20 and _budget.candidate_threads(big) == 1
+    assert default_workers(big) == 1 and not _budget.localise_beside(big, 1)
+    monkeypatch.setenv("GIFT_LAB_MEMORY", str(3 << 30))
+    assert _budget.lab_memory() == 3 << 30
+    for bad in ("lots", "2.5G", "0", "-1G", "12X"):
+        monkeypatch.setenv("GIFT_LAB_MEMORY", bad)
+        with pytest.raises(gt.GiftInputError, match="GIFT_LAB_MEMORY"):
+            _budget.lab_memory()
 
 
 @pytest.mark.slow

@@ -19,6 +19,7 @@ independent, the neurons of one input are not (noise upstream reaches them all).
 
 from __future__ import annotations
 
+import collections.abc
 import dataclasses
 import warnings
 
@@ -50,12 +51,30 @@ def _kurt(A):
     return np.mean(c2 * c2, 1) / np.maximum(v * v, 1e-300) - 3.0
 
 
+class ModelHalf(collections.abc.Sequence):
+    """One half of the model's shots, per layer: held as drawn (float32, half the memory of
+    float64) and read as float64 -- item ``l`` is layer ``l``'s shots widened, which is exact, and
+    then sliced, so every statistic reads the same numbers as from float64 shots."""
+
+    def __init__(self, shots, halves):
+        self._shots, self._halves = list(shots), list(halves)
+
+    def __len__(self) -> int:
+        return len(self._shots)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        return np.asarray(self._shots[i], np.float64)[:, self._halves[i]]
+
+
 @dataclasses.dataclass
 class Residuals:
     """Measured shots against a model, per measured layer (lists over layers, each (n, d_l)
     unless said).
 
-    Y, MA, MB : (n, r, d), (n, K/2, d), (n, K/2, d) measured shots and the model's halves
+    Y, MA, MB : (n, r, d), (n, K/2, d), (n, K/2, d) measured shots and the model's halves (MA, MB:
+        :class:`ModelHalf`, each layer's shots held in float32 and read as float64 arrays)
     mean_resid : (md - mA) / sqrt(vB (1/r + 2/K)), ~ N(0, 1) per cell under the model
     var_resid : (vd - vA) / vB, mean zero under the model
     kurt_resid : excess kurtosis of the r measured shots minus that of r model shots (half A,
@@ -129,10 +148,13 @@ def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres, paired
     layers = dict(zip(meas.layer_ids(), meas.layers()))
     out = {k: [] for k in ("Y", "MA", "MB", "mean_resid", "var_resid", "kurt_resid", "mB", "vB", "pre", "gain_dir",
                            "slope")}
-    for l, M, pre in zip(layer_ids, Ms, pres):
+    halves = []
+    for l, M32, pre in zip(layer_ids, Ms, pres):
         Y = layers[l]
+        M = np.asarray(M32, np.float64)  # this layer's shots only, widened while its statistics are made
         h = M.shape[1] // 2
         MA, MB = M[:, :h], M[:, h:2 * h]
+        halves.append((slice(0, h), slice(h, 2 * h)))
         mA, vA = MA.mean(1), MA.var(1, ddof=1)
         mB, vB = MB.mean(1), MB.var(1, ddof=1)
         md, vd = Y.mean(1), Y.var(1, ddof=1)
@@ -140,8 +162,6 @@ def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres, paired
         groups = max(h // r, 1)
         kM = np.mean([_kurt(MA[:, g * r:(g + 1) * r]) for g in range(groups)], axis=0) if h >= r else _kurt(MA)
         out["Y"].append(Y)
-        out["MA"].append(MA)
-        out["MB"].append(MB)
         out["mean_resid"].append((md - mA) / np.sqrt(vB * (1.0 / r + 1.0 / h) + floor))
         out["var_resid"].append((vd - vA) / (vB + floor))
         out["kurt_resid"].append(_kurt(Y) - kM)
@@ -151,13 +171,16 @@ def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres, paired
         g, sl = _directions(model, meas, l, pre)
         out["gain_dir"].append(g)
         out["slope"].append(sl)
+        del M, MA, MB
+    out["MA"] = ModelHalf(Ms, [a for a, _ in halves])
+    out["MB"] = ModelHalf(Ms, [b for _, b in halves])
     return Residuals(meas, model, tuple(layer_ids), t=meas.t, paired=paired, **out)
 
 
 def residuals(key, model: Model, meas: Measurement, shots: int | None = None) -> Residuals:
     """The :class:`Residuals` of ``model`` on ``meas``: the model's own shots of every measured
     layer (K = ``shots``, default 4 r), errors of earlier layers propagated."""
-    Ms = [np.asarray(M, np.float64) for M in model_shots(named_subkey(key, "residual_shots"), model, meas, shots)]
+    Ms = [np.asarray(M) for M in model_shots(named_subkey(key, "residual_shots"), model, meas, shots)]  # float32
     pres = noiseless_pre(model, meas)
     return _residuals_from(meas, model, meas.layer_ids(), Ms, [pres[l - 1] for l in meas.layer_ids()])
 
@@ -174,7 +197,7 @@ def one_step_residuals(key, model: Model, meas: Measurement, levels: dict | None
         if levels and l in levels and "awgn" in model.physics:
             m = Model(model.physics.replace(s=levels[l]), model.params, model.offsets)
         Ms.append(np.asarray(one_step_shots(jax.random.fold_in(named_subkey(key, "one_step_residuals"), l), m, meas,
-                                            l, draws=draws), np.float64))
+                                            l, draws=draws)))  # float32, read as float64 (ModelHalf)
         pres.append(one_step_pre(model, meas, l))
     return _residuals_from(meas, model, ids, Ms, pres, paired=True)
 

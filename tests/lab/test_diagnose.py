@@ -601,3 +601,30 @@ def test_rule_g_reads_each_pair_s_correlation_sample_by_sample():
     xs = x.reshape(5, 4, 8, 6)
     ref = np.array([[np.corrcoef(xs[i, j].T)[np.triu_indices(6, 1)] for j in range(4)] for i in range(5)])
     np.testing.assert_allclose(np.tanh(z), ref, atol=1e-12)
+
+
+def test_the_residuals_hold_the_model_s_shots_as_drawn_and_read_them_as_float64():
+    """:func:`gift_theory.lab.residuals`: the model's halves A and B of each layer read as the
+    float64 arrays of its shots (the same numbers, exactly: a float32 draw widens without loss) --
+    and they are held as drawn, in float32, half the memory (private ``_shots``: the memory is
+    the point of the class, and nothing public shows it)."""
+    from gift_theory.lab import Model, residuals
+    from gift_theory.lab._shots import model_shots, named_subkey  # private: the shots the residuals were made from
+
+    meas = _chip({}, seed=5, n=30, r=8)
+    model = Model(gt.Physics.create(s=0.1))
+    key = jax.random.PRNGKey(3)
+    res = residuals(key, model, meas)
+    shots = model_shots(named_subkey(key, "residual_shots"), model, meas)
+    assert len(res.MA) == len(res.MB) == len(shots) == len(meas.layer_ids()) == 3
+    for li, M in enumerate(shots):
+        M = np.asarray(M, np.float64)
+        h = M.shape[1] // 2
+        a, b = res.MA[li], res.MB[li]
+        assert a.dtype == b.dtype == np.float64 and a.shape == b.shape == (30, h, M.shape[2])
+        assert np.array_equal(a, M[:, :h]) and np.array_equal(b, M[:, h:2 * h])
+        vB = M[:, h:].var(1, ddof=1)
+        assert np.allclose(res.mean_resid[li], (meas.layers()[li].mean(1) - M[:, :h].mean(1))
+                           / np.sqrt(vB * (1 / 8 + 1 / h) + 1e-12 * np.mean(vB)), rtol=1e-12, atol=0)
+    assert [m.dtype for m in res.MA._shots] == [np.float32] * 3
+    assert [np.array_equal(x, y) for x, y in zip(res.MA[1:], [res.MA[1], res.MA[2]])] == [True, True]

@@ -53,8 +53,8 @@ def _kurt(A):
 
 class ModelHalf(collections.abc.Sequence):
     """One half of the model's shots, per layer: held as drawn (float32, half the memory of
-    float64) and read as float64 -- item ``l`` is layer ``l``'s shots widened, which is exact, and
-    then sliced, so every statistic reads the same numbers as from float64 shots."""
+    float64) and read as float64 -- item ``l`` is layer ``l``'s half widened, which is exact, so
+    every statistic reads the same numbers as from float64 shots."""
 
     def __init__(self, shots, halves):
         self._shots, self._halves = list(shots), list(halves)
@@ -65,7 +65,7 @@ class ModelHalf(collections.abc.Sequence):
     def __getitem__(self, i):
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
-        return np.asarray(self._shots[i], np.float64)[:, self._halves[i]]
+        return np.asarray(self._shots[i][:, self._halves[i]], np.float64)
 
 
 @dataclasses.dataclass

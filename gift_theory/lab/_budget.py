@@ -1,4 +1,4 @@
-"""Memory within a small multiple of the file (issue 45): what a diagnosis holds per thread.
+"""The lab's memory budget: how many threads a diagnosis runs for the size of its file.
 
 A candidate's fit and held-out score hold its model shots (4 r per input of every measured layer,
 float32), the channels' pair distances in chunks of inputs (:data:`~._channels.CHUNK_BYTES`) and

@@ -164,7 +164,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
                  if threads > 1 and localise_beside(meas, threads) else None)
         ranking, not_fitted = rank_candidates(session, names, second, verbose, ident, progress)
-        ranking, not_fitted = with_alternatives(session, ranking, not_fitted, ident, verbose, progress)  # issue 48
+        ranking, not_fitted = with_alternatives(session, ranking, not_fitted, ident, verbose, progress)
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))
     taps = meas.has_taps
@@ -182,7 +182,7 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
             reasons = list(reasons) + [also]
             line += "; " + also
     names_baseline = bool(explained and base_cmp.p_value >= ALPHA and not flagged)
-    # ---- issue 48 hooks: the models the data cannot tell apart (lab/_ambiguity.py), and the
+    # ---- the models the data cannot tell apart (lab/_ambiguity.py), and the
     # measurement that would (lab/_design.py)
     others = _ambiguity.peers(ranking, base_cmp) if explained and not names_baseline else []
     if others:

@@ -65,7 +65,7 @@ class ModelHalf(collections.abc.Sequence):
     def __getitem__(self, i):
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
-        return np.asarray(self._shots[i][:, self._halves[i]], np.float64)
+        return np.array(self._shots[i][:, self._halves[i]], np.float64)  # a fresh array each read
 
 
 @dataclasses.dataclass
@@ -470,9 +470,15 @@ def where_it_fails(key, model: Model, meas: Measurement, bins: int = 6, shots: i
         pit_cells[int(l)] = int(Y.shape[0] * Y.shape[2])
         if Y.shape[2] > 1 and r >= 4:
             corr[int(l)] = _correlation_z(Y, MB)
+        del MB  # (the model's shots are read one half at a time, and standardised in place)
         sd = np.sqrt(res.vB[li] + 1e-300)[:, None, :]
-        ys = np.ravel((Y - res.mB[li][:, None, :]) / sd)
-        ms = np.ravel((res.MA[li] - res.mB[li][:, None, :]) / sd)
+        ys = Y - res.mB[li][:, None, :]
+        ys /= sd
+        ys = np.ravel(ys)
+        ms = res.MA[li]
+        ms -= res.mB[li][:, None, :]
+        ms /= sd
+        ms = np.ravel(ms)
         qq[int(l)] = {"measured": np.quantile(ys, QQ_PROBS), "model": np.quantile(ms, QQ_PROBS),
                       "kurtosis_measured": float(stats.kurtosis(ys)), "kurtosis_model": float(stats.kurtosis(ms))}
     worst.sort(key=lambda w: -abs(w["z"]))

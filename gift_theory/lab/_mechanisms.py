@@ -321,7 +321,7 @@ RULES = {
     "bias_offset": rule_bias,
     "activation_mismatch": rule_activation,
     "readout_nonlinearity": rule_readout,
-    # issue 48: the lag test of lab/_memory.py (a layer's shots depend on the shot acquired before)
+    # the lag test of lab/_memory.py (a layer's shots depend on the shot acquired before)
     "memory": rule_fitted_only("memory"),
 }
 assert set(RULES) == set(MECHANISMS), "every reference §6 class has a rule"
@@ -402,7 +402,7 @@ def mechanisms(ctx: Context) -> list[dict]:
                         "evidence": text, "p_value": float(p)})
     out.sort(key=lambda m: -m["score"])
     out = _fluctuation_before_trend(ctx, out)
-    out = _wander_before_gain(ctx, out)  # issue 48 (lab/_time.py)
+    out = _wander_before_gain(ctx, out)  # a wander read before a gain (lab/_time.py)
     out = _signal_before_level(ctx, out)
     if ctx.ident is not None and not ctx.taps and getattr(ctx.ident, "output_candidates", ()):
         out = order_map_classes(out, ctx.ident.output_candidates)

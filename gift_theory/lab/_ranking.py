@@ -97,7 +97,7 @@ def rank_candidates(session: Session, names, second, verbose: bool, ident=None, 
     law = first_refusal(unmoved_tails_rule(session, ident), unreproduced_correlations_rule(session, ident))
 
     flagged = flagged_classes(ident)
-    # issue 48: the built-in memory is fitted only where the lag test names memory (through each
+    # the built-in memory is fitted only where the lag test names memory (through each
     # input's shots a memory is a shift and an excess variance per neuron, which the held-out test
     # cannot tell from other physics; lab/_memory.py)
     quiet = ident is not None and "memory" not in flagged and "memory" in names and len(names) > 1
@@ -149,7 +149,7 @@ def rank_candidates(session: Session, names, second, verbose: bool, ident=None, 
 
 
 def with_alternatives(session: Session, ranking: list, not_fitted: list, ident, verbose: bool, progress=None):
-    """Issue 48 (reference §8): without taps, when ranking[0] passes and the output's candidate
+    """Reference §8: without taps, when ranking[0] passes and the output's candidate
     mechanisms (:mod:`._explain_output`) say the output's mean is reproduced as well by classes
     of another group, the candidates of those classes left unfitted are fitted too, so the
     verdict can say when the data cannot choose between them (:mod:`._ambiguity`). Among models

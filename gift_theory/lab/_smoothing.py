@@ -5,7 +5,7 @@ its error is a bias of the model's mean at every cell. Six-point Gauss-Hermite i
 chip's usual levels (sd = sqrt(v) << 1: error below 1e-9 at sd 0.1), is far off once the noise
 is as wide as the activation's bend: 4e-3 at sd = 1 and 0.08-0.23 at sd = 10 for tanh --
 against the mean's standard error over a layer's cells, a false "activation_mismatch" on a
-correctly specified file at s = 10 (issue 45). Here each cell takes the rule that is accurate at
+correctly specified file at s = 10. Here each cell takes the rule that is accurate at
 its own sd:
 
 * ``identity``: exact (z, 1, v);

@@ -271,23 +271,35 @@ def _mixed_signs(zs, z_min: float = 2.0) -> float:
     return 1.0 if sig.size < 3 else float(1.0 - abs(np.mean(np.sign(sig))))
 
 
-def _beyond_profiles(res: Residuals, li: int, X) -> float:
+def _half_means(res: Residuals, li: int):
+    """``(mean of A, mean of B, shots in each)`` per cell of layer ``li``: the model's halves set
+    against the measured shots' first and second halves. One-step shots (draw j of measured shot
+    k at j r + k): each data half against the model shots fed with that half's measured inputs
+    (else the halves share inputs), each half made and averaged in turn."""
+    if not res.paired:
+        MA = res.MA[li]
+        return MA.mean(1), res.MB[li].mean(1), MA.shape[1]
+    n, r, d = res.Y[li].shape
+    h = r // 2
+    M = np.concatenate([res.MA[li], res.MB[li]], axis=1).reshape(n, -1, r, d)
+    A = M[:, :, :h].reshape(n, -1, d)
+    k, ma = A.shape[1], A.mean(1)
+    del A
+    return ma, M[:, :, h:2 * h].reshape(n, -1, d).mean(1), k
+
+
+def _beyond_profiles(res: Residuals, li: int, X, means) -> float:
     """Reproducible mean residual that no per-neuron function of z explains (a linear-map
     error): the two halves of the measured shots give residual means ra, rb against disjoint
     model halves; each is projected off the neuron's profile design; sum of ra . rb over inputs
     and neurons per input, tested over inputs (zero mean under the model: the halves are
     independent; a self-normalised sum would be capped at sqrt(n) and lose to any chi-square)."""
-    Y, MA, MB, vB = res.Y[li], res.MA[li], res.MB[li], res.vB[li]
+    Y, vB = res.Y[li], res.vB[li]
     h = Y.shape[1] // 2
-    if res.paired:
-        # one-step shots: draw j of measured shot k sits at j r + k; each data half is set against
-        # the model shots fed with that half's measured inputs (else the halves share inputs)
-        n, r, d = Y.shape
-        M = np.concatenate([MA, MB], axis=1).reshape(n, -1, r, d)
-        MA, MB = M[:, :, :h].reshape(n, -1, d), M[:, :, h:2 * h].reshape(n, -1, d)
-    se = np.sqrt(vB * (1.0 / max(h, 1) + 1.0 / MA.shape[1]) + 1e-300)
-    ra = (Y[:, :h].mean(1) - MA.mean(1)) / se
-    rb = (Y[:, h:2 * h].mean(1) - MB.mean(1)) / se
+    ma, mb, k = means  # (_half_means: made once per layer, read by both of its calls here)
+    se = np.sqrt(vB * (1.0 / max(h, 1) + 1.0 / k) + 1e-300)
+    ra = (Y[:, :h].mean(1) - ma) / se
+    rb = (Y[:, h:2 * h].mean(1) - mb) / se
     T = np.zeros(Y.shape[0])
     for j in range(Y.shape[2]):
         P = X[j] @ np.linalg.pinv(X[j])
@@ -337,16 +349,17 @@ def layer_evidence(res: Residuals) -> list[dict]:
         # per neuron, the mean residual as a multiple of sigma'(z): what a bias offset does
         bias_design = res.slope[li].T[:, :, None]
         bz = _profiles(e, bias_design)[1][:, 0]
+        means = _half_means(res, li)
         row = {"layer": int(l), "neurons": int(e.shape[1]),
                "offset_z": chi_z(zs[:, 0]), "offset_mixed": _mixed_signs(zs[:, 0]),
                "bias_z": chi_z(bz), "bias_mixed": _mixed_signs(bz),
-               "bias_rest_z": _beyond_profiles(res, li, bias_design),
+               "bias_rest_z": _beyond_profiles(res, li, bias_design, means),
                "profile_z": chi_z(zs[:, 1:].ravel()),
                "slope_mixed": _mixed_signs(zs[:, 1]), "curve_mixed": _mixed_signs(zs[:, 2]),
                "common_offset_z": over_inputs(np.sum(e, axis=1)),
                "common_slope_z": over_inputs(np.sum(e * zc, axis=1)),
                "common_curve_z": over_inputs(np.sum(e * X[:, :, 2].T, axis=1)),
-               "structure_z": _beyond_profiles(res, li, X),
+               "structure_z": _beyond_profiles(res, li, X, means),
                "var_level_z": over_inputs(np.sum(v, axis=1)),
                "var_abs_z": over_inputs(np.sum(v * absz, axis=1)),
                "kurt_z": over_inputs(np.sum(k, axis=1)),

@@ -149,18 +149,21 @@ def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres, paired
     out = {k: [] for k in ("Y", "MA", "MB", "mean_resid", "var_resid", "kurt_resid", "mB", "vB", "pre", "gain_dir",
                            "slope")}
     halves = []
-    for l, M32, pre in zip(layer_ids, Ms, pres):
+    for l, M, pre in zip(layer_ids, Ms, pres):
         Y = layers[l]
-        M = np.asarray(M32, np.float64)  # this layer's shots only, widened while its statistics are made
         h = M.shape[1] // 2
-        MA, MB = M[:, :h], M[:, h:2 * h]
         halves.append((slice(0, h), slice(h, 2 * h)))
-        mA, vA = MA.mean(1), MA.var(1, ddof=1)
+        # each half widened (exactly) while its statistics are made, then given back
+        MB = np.array(M[:, h:2 * h], np.float64)
         mB, vB = MB.mean(1), MB.var(1, ddof=1)
+        MA = np.array(M[:, :h], np.float64)
+        del MB
+        mA, vA = MA.mean(1), MA.var(1, ddof=1)
         md, vd = Y.mean(1), Y.var(1, ddof=1)
         floor = 1e-12 * max(float(np.mean(vB)), 1e-300)
         groups = max(h // r, 1)
         kM = np.mean([_kurt(MA[:, g * r:(g + 1) * r]) for g in range(groups)], axis=0) if h >= r else _kurt(MA)
+        del MA
         out["Y"].append(Y)
         out["mean_resid"].append((md - mA) / np.sqrt(vB * (1.0 / r + 1.0 / h) + floor))
         out["var_resid"].append((vd - vA) / (vB + floor))
@@ -171,7 +174,6 @@ def _residuals_from(meas: Measurement, model: Model, layer_ids, Ms, pres, paired
         g, sl = _directions(model, meas, l, pre)
         out["gain_dir"].append(g)
         out["slope"].append(sl)
-        del M, MA, MB
     out["MA"] = ModelHalf(Ms, [a for a, _ in halves])
     out["MB"] = ModelHalf(Ms, [b for _, b in halves])
     return Residuals(meas, model, tuple(layer_ids), t=meas.t, paired=paired, **out)

@@ -38,7 +38,8 @@ def lab_memory() -> int:
         return LAB_MEMORY
     m = re.fullmatch(r"(\d+)\s*([KMGT]?)(?:i?B)?", env, flags=re.I)
     if m is None or int(m.group(1)) == 0:
-        raise GiftInputError(f"environment variable GIFT_LAB_MEMORY={env!r} is not a size: expected a positive number of bytes such as 512M or 2G")
+        raise GiftInputError(f"environment variable GIFT_LAB_MEMORY={env!r} is not a size: expected a positive "
+                             "number of bytes such as 512M or 2G")
     return int(m.group(1)) * _UNITS[m.group(2).upper()]
 
 

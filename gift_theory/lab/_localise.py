@@ -94,8 +94,8 @@ class Residuals:
     model: Model
     layer_ids: tuple
     Y: list
-    MA: list
-    MB: list
+    MA: collections.abc.Sequence
+    MB: collections.abc.Sequence
     mean_resid: list
     var_resid: list
     kurt_resid: list
@@ -490,7 +490,7 @@ def where_it_fails(key, model: Model, meas: Measurement, bins: int = 6, shots: i
         ys = Y - res.mB[li][:, None, :]
         ys /= sd
         ys = np.ravel(ys)
-        ms = res.MA[li]
+        ms = res.MA[li] if isinstance(res.MA, ModelHalf) else np.array(res.MA[li], np.float64)  # ours to write
         ms -= res.mB[li][:, None, :]
         ms /= sd
         ms = np.ravel(ms)

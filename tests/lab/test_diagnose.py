@@ -238,13 +238,15 @@ def test_fit_flags_the_uncalibrated_refit_null_without_taps(tmp_path, capsys, ta
     assert ("does not rule weight_error out" in render(out)) is (not taps)
 
 
-def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them():
+def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them(monkeypatch):
     """The memory budget of a diagnosis (private ``_budget``: its threads are its contract): a
     small file runs 4 candidate threads and 4 replicate threads inside each (the numbers do not
     depend on them); on a 50 MB file (16-32-16-8 with taps, 1740 inputs x 64 shots) the candidate
     threads fill the budget and the refit null's replicates inside each come out of the same budget -- every thread
     at once within it."""
     from gift_theory.lab import _budget  # private: the thread budget, its contract (see the docstring)
+
+    monkeypatch.delenv("GIFT_LAB_MEMORY", raising=False)  # the default budget
 
     def file(n, r, widths):
         return types.SimpleNamespace(n=n, r=r, layers=lambda: [np.empty((0, 0, d)) for d in widths])
@@ -265,14 +267,16 @@ def test_a_large_file_runs_fewer_threads_and_the_refit_replicates_share_them():
 def test_the_lab_s_memory_budget_is_set_by_the_environment_and_a_bad_value_is_one_line(monkeypatch):
     """``GIFT_LAB_MEMORY`` (bytes, or with K/M/G/T) sets the budget the threads share (private
     ``_budget``, as above): a small budget runs one candidate thread and the localisation after
-    them, on the same numbers; a value that is not a size is a bad input, named."""
+    them (the numbers do not depend on it: ``test_order_of_candidates_and_threads_change_no_number``);
+    a value that is not a size is a bad input, named."""
     from gift_theory.lab import _budget  # private: the thread budget, its contract (see the test above)
     from gift_theory.lab._session import default_workers
 
     big = types.SimpleNamespace(n=1740, r=64, layers=lambda: [np.empty((0, 0, d)) for d in (32, 16, 8)])
     monkeypatch.delenv("GIFT_LAB_THREADS", raising=False)
     monkeypatch.setenv("GIFT_LAB_MEMORY", "8G")
-    assert _budget.lab_memory() == 8 << 30 and _budget.candidate_threads(big) == (8 << 30) // (20 * _budget.shot_bytes(big))
+    assert _budget.lab_memory() == 8 << 30
+    assert _budget.candidate_threads(big) == (8 << 30) // (20 * _budget.shot_bytes(big))
     monkeypatch.setenv("GIFT_LAB_MEMORY", "256M")
     assert _budget.lab_memory() == 256 << 20 and _budget.candidate_threads(big) == 1
     assert default_workers(big) == 1 and not _budget.localise_beside(big, 1)
@@ -628,3 +632,11 @@ def test_the_residuals_hold_the_model_s_shots_as_drawn_and_read_them_as_float64(
                            / np.sqrt(vB * (1 / 8 + 1 / h) + 1e-12 * np.mean(vB)), rtol=1e-12, atol=0)
     assert [m.dtype for m in res.MA._shots] == [np.float32] * 3
     assert [np.array_equal(x, y) for x, y in zip(res.MA[1:], [res.MA[1], res.MA[2]])] == [True, True]
+    # the statistics read a caller's own arrays as well, and leave them as they were
+    from gift_theory.lab import where_it_fails
+
+    own = dataclasses.replace(res, MA=[res.MA[li] for li in range(3)], MB=[res.MB[li] for li in range(3)])
+    kept = [a.copy() for a in own.MA]
+    a, b = where_it_fails(key, model, meas, res=res), where_it_fails(key, model, meas, res=own)
+    assert all(np.array_equal(x, y) for x, y in zip(own.MA, kept))
+    assert all(np.array_equal(a["qq"][l]["model"], b["qq"][l]["model"]) for l in a["qq"])

@@ -5,6 +5,9 @@
 * hypothesis: a profile with a deadline that tolerates JAX compilation.
 * XLA compiles at backend optimisation level 0 with its classic emitters (:func:`_xla_flags`:
   the suite is compile-bound).
+* Each xdist worker (and every command it starts) runs OpenBLAS on one thread
+  (``OPENBLAS_NUM_THREADS=1`` unless set): two workers share two cores, and a worker's BLAS
+  threads only wait on the other worker's (:func:`_one_blas_thread_per_worker`).
 * numpy's global generator (tests that draw a fresh seed with ``np.random.randint`` each run)
   is seeded per test from one run seed, ``GIFT_TEST_SEED`` (random unless set), printed in the
   header and under a failing test: ``GIFT_TEST_SEED=N python -m pytest ...`` replays a run.
@@ -18,10 +21,22 @@ import sys
 import tempfile
 import zlib
 
-import jax
-import numpy as np
-import pytest
-from hypothesis import HealthCheck, settings
+
+def _one_blas_thread_per_worker():
+    """One OpenBLAS thread in an xdist worker: the run's workers already fill the cores, so a
+    worker's BLAS threads would only spin against the other worker (test_diagnose.py on 2 cores,
+    two workers: about a tenth less wall time). Set before numpy loads BLAS; a value the user
+    set is kept, and a run without workers is left alone."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+_one_blas_thread_per_worker()
+
+import jax  # noqa: E402  (after the BLAS setting: numpy reads it when it loads)
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from hypothesis import HealthCheck, settings  # noqa: E402
 
 settings.register_profile("gift", deadline=None, max_examples=25,
                           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])

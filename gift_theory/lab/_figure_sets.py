@@ -30,11 +30,20 @@ def save_figures(figures: dict, folder: str, data: dict | None = None) -> list[s
     other tools can redraw). The PNG paths written."""
     out = []
     for name, f in figures.items():
-        out.append(save_figure(f, os.path.join(folder, name), bbox_inches="tight"))
+        out.append(save_figure(f, os.path.join(folder, name), bbox_inches=_bbox(f)))
         ds = (data or {}).get(name)
         if ds is not None:
             save_dataset(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc"))
     return out
+
+
+def _bbox(fig):
+    """``bbox_inches`` for ``fig``: None when a constrained layout already fits every artist inside
+    the figure (saving then draws it once), else "tight" (matplotlib draws it twice: once to
+    measure what it holds)."""
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
+    return None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight"
 
 
 def save_dataset(ds, path: str) -> str:
@@ -305,4 +314,5 @@ def compare_figures(key, model, scored, where: dict, label: str, folder: str) ->
 
 def heatmaps(stats: dict, path: str, title: str = "where the model fails") -> str:
     """:func:`where_figure` written to ``path`` (atomically); the path."""
-    return save_figure(where_figure(stats, title=title), path, bbox_inches="tight")
+    fig = where_figure(stats, title=title)
+    return save_figure(fig, path, bbox_inches=_bbox(fig))

@@ -146,8 +146,9 @@ def where_figure(stats: dict, *, title: str = "where the model fails", fig=None,
         if font:
             for (i, j), v in np.ndenumerate(M):
                 if np.isfinite(v):
+                    # inside its cell: the layout need not measure it
                     ax.text(j, i, f"{v:.1f}", ha="center", va="center", fontsize=font,
-                            color="white" if abs(v) > 0.6 * lim else "black")
+                            color="white" if abs(v) > 0.6 * lim else "black", in_layout=False)
         if k == 0:
             step = max(1, int(np.ceil(nr / 60)))
             ax.set_yticks(range(0, nr, step))
@@ -530,13 +531,24 @@ def moments_figure(moments, layer: int, *, fig=None, title: str | None = None):
     a_rv.set_title(f"(d) variance ratio against the signal (band: $\\pm$ 2 sd = {2 * sd:.2f})", fontsize=9)
     for ax in (a_mean, a_rz, a_rv):
         ax.xaxis.set_major_locator(MaxNLocator(7, steps=[1, 2, 2.5, 5, 10]))
+    # the identity panels' points lie along the diagonal: their legend goes to the corner on the side
+    # fewer points are (matplotlib's "best" would test every error bar of thousands against each spot)
+    corner = {a_mean: _empty_corner(Y, [m.model_mean[li].ravel() for m in mlist]),
+              a_var: _empty_corner(V, [m.model_var[li].ravel() for m in mlist])}
     for ax in (a_mean, a_var, a_rz, a_rv):
-        ax.legend(fontsize=7, loc="best", markerscale=2)
+        ax.legend(fontsize=7, loc=corner.get(ax, "best"), markerscale=2)
         ax.grid(alpha=0.3, lw=0.5)
     kind = "output" if layer == max(mlist[0].layer_ids) else "tap"
     fig.suptitle(title or f"layer {layer} ({kind}, {d} neurons): measured against model, {n} inputs x {r} shots "
                           f"(model: {mlist[0].K} shots)", fontsize=10)
     return _root(fig)
+
+
+def _empty_corner(measured, models) -> str:
+    """Where a legend covers fewest points of a measured-against-model panel: upper left (above
+    the diagonal) when most points are below it, else lower right."""
+    above = sum(int(np.sum(measured > m)) for m in models)
+    return "upper left" if 2 * above <= len(models) * np.size(measured) else "lower right"
 
 
 def time_figure(data: dict, *, title: str = "residual against acquisition time", fig=None):

@@ -86,6 +86,23 @@ def test_moments_figure_returns_a_labelled_figure_and_uses_a_given_fig(moments, 
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.parametrize("shift, corner", [(-1.0, "lower right"), (1.0, "upper left")])
+def test_a_moments_legend_sits_on_the_side_of_the_diagonal_the_points_are_not(moments, shift, corner):
+    """Panels (a) and (b) plot measured against model: with the model's means (variances) below the
+    measured ones every point is above the diagonal, and the legend goes below it; and the reverse."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    m = moments[1]
+    moved = dataclasses.replace(m, model_mean=[a + shift for a in m.model_mean],
+                                model_var=[a * np.exp(2 * shift) for a in m.model_var])
+    fig = moments_figure(moved, 2)
+    FigureCanvasAgg(fig).draw()
+    for ax in fig.axes[:2]:
+        box, at = ax.get_legend().get_window_extent(), ax.get_window_extent()
+        right, low = (box.x0 + box.x1) / 2 > (at.x0 + at.x1) / 2, (box.y0 + box.y1) / 2 < (at.y0 + at.y1) / 2
+        assert (right and low) if corner == "lower right" else (not right and not low), (ax.get_title(), box, at)
+
+
 def test_where_figure_has_one_colour_scale_the_bin_edges_and_marks_the_significant_cells(tmp_path):
     stats = _where_stats()
     stats["edges"] = np.linspace(-2.0, 2.0, 7)

@@ -305,6 +305,7 @@ def ppc_figure(pred, layer: int, *, fig=None, max_neurons: int = 16, title: str 
                   label=f"measured ({r} shots)")
         ax.set_title(f"neuron {layer}:{j}", fontsize=8)
         ax.tick_params(labelsize=6)
+        ax.set_yticks([])  # the densities' shapes are compared, not their heights (as ArviZ's plot_ppc)
         if j % cols == 0:
             ax.set_ylabel("density over the inputs", fontsize=7)
         if j >= show - cols:

@@ -39,8 +39,8 @@ def save_figures(figures: dict, folder: str, data: dict | None = None) -> list[s
 
 def _bbox(fig):
     """``bbox_inches`` for ``fig``: None when a constrained layout already fits every artist inside
-    the figure (saving then draws it once), else "tight" (matplotlib draws it twice: once to
-    measure what it holds)."""
+    the figure, else "tight" (which makes matplotlib measure every artist's extent once more
+    before the real draw)."""
     from matplotlib.layout_engine import ConstrainedLayoutEngine
 
     return None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight"

@@ -277,10 +277,11 @@ def _half_means(res: Residuals, li: int):
     """``(mean of A, mean of B, shots in each)`` per cell of layer ``li``: the model's halves set
     against the measured shots' first and second halves. One-step shots (draw j of measured shot
     k at j r + k): each data half against the model shots fed with that half's measured inputs
-    (else the halves share inputs), each half made and averaged in turn."""
+    (else the halves share inputs), each half made and averaged in turn; otherwise half B's
+    means are ``res.mB``, made with the residuals."""
     if not res.paired:
         MA = res.MA[li]
-        return MA.mean(1), res.MB[li].mean(1), MA.shape[1]
+        return MA.mean(1), res.mB[li], MA.shape[1]
     n, r, d = res.Y[li].shape
     h = r // 2
     M = np.concatenate([res.MA[li], res.MB[li]], axis=1).reshape(n, -1, r, d)

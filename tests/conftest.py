@@ -6,8 +6,9 @@
 * XLA compiles at backend optimisation level 0 with its classic emitters (:func:`_xla_flags`:
   the suite is compile-bound).
 * Each xdist worker (and every command it starts) runs OpenBLAS on one thread
-  (``OPENBLAS_NUM_THREADS=1`` unless set): two workers share two cores, and a worker's BLAS
-  threads only wait on the other worker's (:func:`_one_blas_thread_per_worker`).
+  (``OPENBLAS_NUM_THREADS=1`` unless set) and draws figures without a helper process
+  (``GIFT_FIGURE_PROCESSES=1``): two workers share two cores, and a worker's BLAS threads or
+  drawing helper would only wait on the other worker (:func:`_one_core_per_worker`).
 * numpy's global generator (tests that draw a fresh seed with ``np.random.randint`` each run)
   is seeded per test from one run seed, ``GIFT_TEST_SEED`` (random unless set), printed in the
   header and under a failing test: ``GIFT_TEST_SEED=N python -m pytest ...`` replays a run.
@@ -22,16 +23,18 @@ import tempfile
 import zlib
 
 
-def _one_blas_thread_per_worker():
-    """One OpenBLAS thread in an xdist worker: the run's workers already fill the cores, so a
-    worker's BLAS threads would only spin against the other worker (test_diagnose.py on 2 cores,
-    two workers: about a tenth less wall time). Set before numpy loads BLAS; a value the user
+def _one_core_per_worker():
+    """One OpenBLAS thread and no drawing helper in an xdist worker: the run's workers already
+    fill the cores, so a worker's BLAS threads would only spin against the other worker
+    (test_diagnose.py on 2 cores, two workers: about a tenth less wall time), and a helper
+    process's start-up would be paid for nothing. Set before numpy loads BLAS; a value the user
     set is kept, and a run without workers is left alone."""
     if os.environ.get("PYTEST_XDIST_WORKER"):
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+        os.environ.setdefault("GIFT_FIGURE_PROCESSES", "1")
 
 
-_one_blas_thread_per_worker()
+_one_core_per_worker()
 
 import jax  # noqa: E402  (after the BLAS setting: numpy reads it when it loads)
 import numpy as np  # noqa: E402

@@ -12,7 +12,7 @@ this file's size (inputs, shots, taps or not), from the power computed on the fi
 from __future__ import annotations
 
 from .._errors import require
-from ._labargs import MIN_INPUTS_FITTED, MIN_INPUTS_SCORED, add_common, figure_dir, key, load, write_manifest
+from ._labargs import MIN_INPUTS_FITTED, MIN_INPUTS_SCORED, add_common, figure_dir, figure_processes, key, load, write_manifest
 
 
 def add_arguments(parser):
@@ -33,6 +33,7 @@ def run(args):
     from ..lab import compare_figures, power_notes, power_of
 
     folder = figure_dir(args, "compare")  # a folder of another command's: refused before any work
+    processes = figure_processes(folder)  # with 2, a helper process starts now
     meas = load(args, MIN_INPUTS_SCORED if args.effect else MIN_INPUTS_FITTED)  # plugins first: --effect may name one
     physics = None
     if args.chip_model is not None:
@@ -77,7 +78,8 @@ def run(args):
     out["power_notes"] = power_notes(out["power"], verdict_passes=c.p_value >= 0.01)
     if folder:
         out["figures"] = compare_figures(key(args), model, res["scored"], where,
-                                         " + ".join(model.effects) + (" (fitted)" if res["fitted"] else ""), folder)
+                                         " + ".join(model.effects) + (" (fitted)" if res["fitted"] else ""), folder,
+                                         processes=processes)
         write_manifest(folder, "compare", args, out["figures"])
     return out
 

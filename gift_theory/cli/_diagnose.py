@@ -10,7 +10,7 @@ import argparse
 
 from ._common import Progress
 from ._fit import no_taps_caveat
-from ._labargs import add_common, figure_dir, key, load, write_manifest
+from ._labargs import add_common, figure_dir, figure_processes, key, load, write_manifest
 
 
 def add_arguments(parser):
@@ -34,6 +34,7 @@ def run(args):
 
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
     folder = figure_dir(args, "diagnose")  # a folder of another command's: refused before any work
+    processes = figure_processes(folder)  # with 2, a helper process starts now
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
@@ -47,7 +48,7 @@ def run(args):
         out["power_notes"] = power_notes(out["power"], verdict_passes=True)
     out["model_comparison"] = diagnosis_comparison(res)
     if folder:
-        out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args))
+        out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args), processes=processes)
         write_manifest(folder, "diagnose", args, out["figures"])
     return out
 

@@ -3,7 +3,7 @@ before and after (reference §4 JSON with ``--json``; text and an error-ladder f
 
 from __future__ import annotations
 
-from ._labargs import add_common, figure_dir, key, load, write_manifest
+from ._labargs import add_common, figure_dir, figure_processes, key, load, write_manifest
 
 # without taps the offsets of all but the smallest nets are not identified, and the refit null
 # then rejects a correct weight_error model too often (docs/record/lab_record.md)
@@ -54,6 +54,7 @@ def run(args):
         parent = os.path.dirname(os.path.abspath(args.save_model))
         require(os.path.isdir(parent), f"--save-model {args.save_model}: folder {parent} does not exist")
     folder = figure_dir(args, "fit")  # a folder of another command's: refused before any work
+    processes = figure_processes(folder)  # with 2, a helper process starts now
     meas = load(args)
     res = fit_effects(key(args), meas, args.add, shots=args.shots, verbose=not args.quiet)
     out = res.as_json()
@@ -86,7 +87,8 @@ def run(args):
 
         held = meas.subset(res.held_out)
         where = where_it_fails(named_subkey(key(args), "figure_where"), res.after, held)
-        out["figures"] = fit_figures(res, folder, meas=meas, key=key(args), uncertainty=unc, where=where)
+        out["figures"] = fit_figures(res, folder, meas=meas, key=key(args), uncertainty=unc, where=where,
+                                     processes=processes)
         write_manifest(folder, "fit", args, out["figures"])
     return out
 

@@ -71,6 +71,30 @@ def key(args):
     return jax.random.PRNGKey(args.seed)
 
 
+def figure_processes(folder: str | None) -> int:
+    """The processes a command draws its figures in (:func:`gift_theory.lab.save_figures`; the
+    files are the same either way): 1 without a figure folder, else ``$GIFT_FIGURE_PROCESSES``
+    (1 or 2; another value is a bad input), default 2 when this process may use two cores or
+    more. With 2 the helper process is started now, so that its start-up overlaps the command's
+    computation."""
+    env = os.environ.get("GIFT_FIGURE_PROCESSES", "").strip()
+    require(env in ("", "1", "2"), f"GIFT_FIGURE_PROCESSES={env}: needs 1 or 2")
+    if not folder:
+        return 1
+    if env:
+        n = int(env)
+    else:
+        try:
+            n = 2 if len(os.sched_getaffinity(0)) >= 2 else 1
+        except AttributeError:
+            n = 2 if (os.cpu_count() or 1) >= 2 else 1
+    if n == 2:
+        from ..lab._drawing import start_helper
+
+        start_helper()
+    return n
+
+
 #: the file in a figure folder that says which command's figures it holds
 MANIFEST = "figures.json"
 

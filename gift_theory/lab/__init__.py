@@ -34,6 +34,8 @@ runs them::
     _design        the next measurement that would tell them apart (reference §8, ``gift design``)
     _figures       drawing each figure from numbers already computed
     _figure_sets   the figures of ``gift compare/fit/diagnose``, each written beside its numbers
+    _drawing       drawing them into files, in this process or shared with a helper process
+                   (``_draw_helper``)
 
 Public API (a notebook can do everything ``gift simulate/compare/diagnose/fit`` do)::
 

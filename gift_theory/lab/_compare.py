@@ -386,7 +386,7 @@ class PredictiveShots:
 
     @property
     def r(self) -> int:
-        return int(self.measured[0].shape[1])
+        return int(next(Y for Y in self.measured if Y is not None).shape[1])  # a figure's copy holds one layer
 
     def moments(self) -> "Moments":
         """The per-neuron means and variances of these shots (:class:`Moments`)."""

@@ -1,14 +1,18 @@
 """The figures of ``gift compare``, ``gift fit`` and ``gift diagnose`` as sets, each written beside
 its numbers: :func:`save_figures` writes PNGs atomically and, beside each, the ``xarray.Dataset``
-it draws as netCDF (the ``*_data`` functions); the drawing itself is :mod:`._figures`."""
+it draws as netCDF (the ``*_data`` functions); the drawing itself is :mod:`._figures`. A set holds
+each figure as a *drawing* (a ``functools.partial`` of its figure function with its numbers), so
+that :func:`._drawing.draw_all` can share them with a helper process (``processes=2``)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
+from functools import partial
 
 import numpy as np
 
-from .._io import save_figure
+from ._drawing import draw_all, draw_to
 from ._figures import (
     comparison_figure,
     comparison_table,
@@ -24,26 +28,39 @@ from ._figures import (
 )
 
 
-def save_figures(figures: dict, folder: str, data: dict | None = None) -> list[str]:
-    """Write ``{file name: Figure}`` into ``folder`` (created), each atomically; beside each PNG
-    whose name ``data`` holds, its numbers as netCDF (same stem, ``.nc``: an ``xarray.Dataset``
-    other tools can redraw). The PNG paths written."""
-    out = []
-    for name, f in figures.items():
-        out.append(save_figure(f, os.path.join(folder, name), bbox_inches=_bbox(f)))
-        ds = (data or {}).get(name)
-        if ds is not None:
+def save_figures(figures: dict, folder: str, data: dict | None = None, processes: int = 1) -> list[str]:
+    """Write ``{file name: figure}`` into ``folder`` (created), each atomically; a figure is a
+    matplotlib Figure or a drawing (a callable returning one). Beside each PNG whose name ``data``
+    holds, its numbers as netCDF (same stem, ``.nc``: an ``xarray.Dataset`` other tools can
+    redraw). ``processes=2`` draws them in this process and one helper process together
+    (:func:`._drawing.draw_all`: the same files, sooner on two cores). The PNG paths written, in
+    the order of ``figures``."""
+    for name, ds in (data or {}).items():
+        if name in figures and ds is not None:
             save_dataset(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc"))
-    return out
+    jobs = [(f, os.path.join(folder, name)) for name, f in figures.items()]
+    order = sorted(range(len(jobs)), key=lambda i: -_COST.get(_kind(jobs[i][1]), 1.0))
+    draw_all([jobs[i] for i in order], processes=processes)
+    return [p for _, p in jobs]
 
 
-def _bbox(fig):
-    """``bbox_inches`` for ``fig``: None when a constrained layout already fits every artist inside
-    the figure, else "tight" (which makes matplotlib measure every artist's extent once more
-    before the real draw)."""
-    from matplotlib.layout_engine import ConstrainedLayoutEngine
+#: the relative cost of drawing each kind of figure (t240's figures, where.png's 72 rows of cells
+#: the largest): the costliest are handed out first, so that the two processes end together
+_COST = {"where": 4.0, "moments": 2.0, "ppc": 2.0, "correlation": 1.0}
 
-    return None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight"
+
+def _kind(path: str) -> str:
+    return os.path.basename(path).split("_")[0].split(".")[0]
+
+
+def _layer_only(obj, layer: int):
+    """A :class:`~._compare.Moments` or :class:`~._compare.PredictiveShots` with every other
+    layer's arrays left out (None): what its figure of ``layer`` draws, and all a helper process
+    is sent."""
+    li = list(obj.layer_ids).index(layer)
+    return dataclasses.replace(obj, **{
+        f.name: [v if j == li else None for j, v in enumerate(getattr(obj, f.name))]
+        for f in dataclasses.fields(obj) if isinstance(getattr(obj, f.name), list)})
 
 
 def save_dataset(ds, path: str) -> str:
@@ -177,14 +194,14 @@ def where_figures(stats: dict, model: str) -> tuple[dict, dict]:
     :func:`~gift_theory.lab.where_it_fails` result, ``model`` its model's name in the titles:
     ``(figures, data)``."""
     title = model
-    figs = {"where.png": where_figure(stats, title=f"{model}: where it fails")}
+    figs = {"where.png": partial(where_figure, stats, title=f"{model}: where it fails")}
     data = {"where.png": where_data(stats)}
     if stats.get("pit"):
-        figs["pit.png"] = pit_figure(stats, title=f"{title}: PIT of the measured shots among the model's own")
+        figs["pit.png"] = partial(pit_figure, stats, title=f"{title}: PIT of the measured shots among the model's own")
         data["pit.png"] = pit_data(stats)
-        figs["correlation.png"] = correlation_figure(stats, title=f"{title}: correlation between neurons")
+        figs["correlation.png"] = partial(correlation_figure, stats, title=f"{title}: correlation between neurons")
         data["correlation.png"] = correlation_data(stats)
-        figs["law.png"] = law_figure(stats, title=f"{title}: quantiles of the standardised shots")
+        figs["law.png"] = partial(law_figure, stats, title=f"{title}: quantiles of the standardised shots")
         data["law.png"] = law_data(stats)
     return figs, data
 
@@ -200,14 +217,14 @@ def predictive_figures(key, models, meas) -> tuple[dict, dict]:
     mom = [p.moments() for p in preds]
     figs, data = {}, {}
     for l in meas.layer_ids():
-        figs[f"moments_layer{l}.png"] = moments_figure(mom, l)
+        figs[f"moments_layer{l}.png"] = partial(moments_figure, [_layer_only(m, l) for m in mom], l)
         data[f"moments_layer{l}.png"] = moments_data(mom, l)
-        figs[f"ppc_layer{l}.png"] = ppc_figure(preds, l)
+        figs[f"ppc_layer{l}.png"] = partial(ppc_figure, [_layer_only(p, l) for p in preds], l)
         data[f"ppc_layer{l}.png"] = ppc_data(preds, l)
     return figs, data
 
 
-def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
+def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: int = 1) -> list[str]:
     """The figures of a :class:`~gift_theory.lab.Diagnosis`, written to ``folder`` (each PNG with
     its numbers as netCDF beside it): the error ladder of the baseline and the three best
     candidates; the model comparison of the baseline and every ranked candidate (differences to
@@ -215,17 +232,17 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
     shots (PIT, correlations, quantiles); given the measurement, each measured layer's moments
     and posterior-predictive overlay under the baseline and the top-ranked model on the
     held-out inputs, and with acquisition times each layer's residual against them
-    (:func:`time_figure`)."""
+    (:func:`time_figure`). ``processes``: as in :func:`save_figures`."""
     c = diagnosis.baseline_comparison
     rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
         ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
         for cand in diagnosis.ranking[:3]]
-    figs = {"ladder.png": error_ladder(rungs, c.noise_floor, c.floor_se, title="baseline and best candidates")}
+    figs = {"ladder.png": partial(error_ladder, rungs, c.noise_floor, c.floor_se, title="baseline and best candidates")}
     data = {"ladder.png": ladder_data(rungs, c.noise_floor, c.floor_se)}
     table = diagnosis_comparison(diagnosis)
     if table:
-        figs["comparison.png"] = comparison_figure(table, c.noise_floor, c.floor_se,
-                                                   title="model comparison on the held-out inputs")
+        figs["comparison.png"] = partial(comparison_figure, table, c.noise_floor, c.floor_se,
+                                         title="model comparison on the held-out inputs")
         data["comparison.png"] = comparison_data(table, c.noise_floor, c.floor_se)
     if diagnosis.where is not None:
         f, d = where_figures(diagnosis.where, "the baseline (awgn)")
@@ -247,9 +264,9 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None) -> list[str]:
             from ._time import residual_in_time
 
             td = residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas)
-            figs["time.png"] = time_figure(td, title="baseline: residual along the signal against acquisition time")
+            figs["time.png"] = partial(time_figure, td, title="baseline: residual along the signal against acquisition time")
             data["time.png"] = time_data(td)
-    return save_figures(figs, folder, data)
+    return save_figures(figs, folder, data, processes=processes)
 
 
 def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:
@@ -265,26 +282,27 @@ def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:
 
 
 def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | None = None,
-                where: dict | None = None) -> list[str]:
+                where: dict | None = None, processes: int = 1) -> list[str]:
     """The figures of a :class:`~gift_theory.lab.FitResult`, written to ``folder`` (each PNG with its
     numbers as netCDF beside it): the error ladder and the model comparison of its rungs (each
     against the fitted model, paired standard errors); given ``uncertainty``
     (:func:`~gift_theory.lab._fit.fit_uncertainty` with a ``joint``), the pair plot of the fitted
     parameters; given ``where`` (:func:`~gift_theory.lab.where_it_fails` of the fitted model on the
     held-out inputs), where it fails and its law of the shots; given the measurement, each
-    measured layer's moments and posterior-predictive overlay before and after the fit."""
+    measured layer's moments and posterior-predictive overlay before and after the fit.
+    ``processes``: as in :func:`save_figures`."""
     a = result.comparison_after
     rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in result.ladder]
-    figs = {"ladder.png": error_ladder(rungs, a.noise_floor, a.floor_se)}
+    figs = {"ladder.png": partial(error_ladder, rungs, a.noise_floor, a.floor_se)}
     data = {"ladder.png": ladder_data(rungs, a.noise_floor, a.floor_se)}
     if len(result.ladder) > 1 and all(getattr(c, "channel_values", None) is not None for _, c in result.ladder):
         named = [(lab, c, "") for lab, c in result.ladder][::-1]  # the fitted model first
         table = comparison_table(named)
-        figs["comparison.png"] = comparison_figure(table, a.noise_floor, a.floor_se,
-                                                   title="the ladder compared on the held-out inputs")
+        figs["comparison.png"] = partial(comparison_figure, table, a.noise_floor, a.floor_se,
+                                         title="the ladder compared on the held-out inputs")
         data["comparison.png"] = comparison_data(table, a.noise_floor, a.floor_se)
     if uncertainty and uncertainty.get("joint"):
-        figs["pairs.png"] = pairs_figure(uncertainty["joint"])
+        figs["pairs.png"] = partial(pairs_figure, uncertainty["joint"])
         data["pairs.png"] = pairs_data(uncertainty["joint"])
     if where is not None:
         f, d = where_figures(where, "the fitted model")
@@ -298,21 +316,21 @@ def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | No
                                         ("after: " + " + ".join(result.after.effects), result.after)], meas)
         figs.update(f)
         data.update(d)
-    return save_figures(figs, folder, data)
+    return save_figures(figs, folder, data, processes=processes)
 
 
-def compare_figures(key, model, scored, where: dict, label: str, folder: str) -> list[str]:
+def compare_figures(key, model, scored, where: dict, label: str, folder: str, processes: int = 1) -> list[str]:
     """The figures of ``gift compare``: where ``model`` fails on the scored inputs and its law of
     the shots, each measured layer's moments and posterior-predictive overlay, written to
-    ``folder`` (each PNG with its numbers as netCDF beside it)."""
+    ``folder`` (each PNG with its numbers as netCDF beside it); ``processes``: as in
+    :func:`save_figures`."""
     figs, data = where_figures(where, " + ".join(model.effects))
     f, d = predictive_figures(key, [(label, model)], scored)
     figs.update(f)
     data.update(d)
-    return save_figures(figs, folder, data)
+    return save_figures(figs, folder, data, processes=processes)
 
 
 def heatmaps(stats: dict, path: str, title: str = "where the model fails") -> str:
     """:func:`where_figure` written to ``path`` (atomically); the path."""
-    fig = where_figure(stats, title=title)
-    return save_figure(fig, path, bbox_inches=_bbox(fig))
+    return draw_to(partial(where_figure, stats, title=title), path)

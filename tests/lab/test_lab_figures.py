@@ -168,6 +168,71 @@ def test_savers_write_atomically_where_told(meas, tmp_path):
     assert not [f for d, _, fs in os.walk(tmp_path) for f in fs if f.startswith(".tmp-")]
 
 
+def _fit_like(meas):
+    cmp = types.SimpleNamespace(discrepancy=10.0, se=2.0, p_value=0.2, noise_floor=9.0, floor_se=2.0)
+    return types.SimpleNamespace(ladder=[("awgn", cmp), ("awgn + shot", cmp)], comparison_after=cmp,
+                                 before=Model(gt.Physics.create(s=0.08)),
+                                 after=Model(gt.Physics.parse(["awgn=0.05", "shot=0.02"])))
+
+
+def test_two_processes_write_the_same_files_as_one_and_share_the_drawing(meas, tmp_path, monkeypatch):
+    """``processes=2``: a helper process draws some of the figures, and every file (PNG and netCDF)
+    is byte for byte the one a single process writes. Which figures this process drew is read
+    from the private ``_drawing.draw_to`` (the sharing is invisible in the files, by design)."""
+    from gift_theory.lab import _drawing
+
+    one = fit_figures(_fit_like(meas), str(tmp_path / "one"), meas=meas, where=_where_stats(), processes=1)
+    here = []
+    draw_to = _drawing.draw_to
+    monkeypatch.setattr(_drawing, "draw_to", lambda d, p: here.append(os.path.basename(p)) or draw_to(d, p))
+    two = fit_figures(_fit_like(meas), str(tmp_path / "two"), meas=meas, where=_where_stats(), processes=2)
+    assert [os.path.basename(p) for p in two] == [os.path.basename(p) for p in one]
+    assert sorted(os.listdir(tmp_path / "two")) == sorted(os.listdir(tmp_path / "one"))
+    for name in os.listdir(tmp_path / "one"):
+        with open(tmp_path / "one" / name, "rb") as a, open(tmp_path / "two" / name, "rb") as b:
+            assert a.read() == b.read(), name
+    assert 0 < len(here) < len(two), here  # the helper drew at least one, this process the others
+    # each layer's figure is the one its function draws from every layer's numbers (the set sends
+    # a helper one layer's; the tap's title still says tap)
+    from gift_theory._model import named_subkey
+
+    res, k = _fit_like(meas), named_subkey(jax.random.PRNGKey(0), "figure_moments")
+    mom = [predictive_moments(k, res.before, meas, label="before: awgn"),
+           predictive_moments(k, res.after, meas, label="after: " + " + ".join(res.after.effects))]
+    direct = save_figures({"moments_layer1.png": moments_figure(mom, 1)}, str(tmp_path / "direct"))[0]
+    with open(direct, "rb") as a, open(tmp_path / "two" / "moments_layer1.png", "rb") as b:
+        assert a.read() == b.read()
+
+
+def test_a_drawing_the_helper_cannot_do_is_done_here_and_its_error_raised_here(tmp_path, monkeypatch):
+    from functools import partial
+
+    good = partial(error_ladder, [("awgn", 10.0, 2.0, 0.2)], 9.0, 2.0)
+    bad = partial(error_ladder, [("awgn", 10.0)], 9.0, 2.0)  # a rung without its se: fails in any process
+    with pytest.raises(IndexError):
+        error_ladder([("awgn", 10.0)], 9.0, 2.0)
+    with pytest.raises(IndexError):  # the helper takes it first and fails it; this process draws it again, and raises
+        save_figures({"a.png": bad, "b.png": good, "c.png": good, "d.png": good}, str(tmp_path / "bad"), processes=2)
+    assert sorted(os.listdir(tmp_path / "bad")) == ["b.png", "c.png", "d.png"]
+    # a Figure drawn already does not go to a helper; neither does a drawing that does not pickle
+    out = save_figures({"a.png": good(), "b.png": good}, str(tmp_path / "figs"), processes=2)
+    out += save_figures({"c.png": lambda: good(), "d.png": good}, str(tmp_path / "figs"), processes=2)
+    # a helper that cannot start costs nothing but time
+    monkeypatch.setattr("sys.executable", str(tmp_path / "no-python"))
+    out += save_figures({"e.png": good, "f.png": good}, str(tmp_path / "figs"), processes=2)
+    assert sorted(os.listdir(tmp_path / "figs")) == [f"{c}.png" for c in "abcdef"] == [os.path.basename(p) for p in out]
+    assert not [f for d, _, fs in os.walk(tmp_path) for f in fs if f.startswith(".tmp-")]
+
+
+def test_the_figure_processes_setting_is_1_or_2(tmp_path, capsys, monkeypatch):
+    from gift_theory.cli import main
+
+    monkeypatch.setenv("GIFT_FIGURE_PROCESSES", "3")
+    code = main(["diagnose", str(tmp_path / "chip.npz")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err == "GIFT_FIGURE_PROCESSES=3: needs 1 or 2", err
+
+
 def test_the_law_panels_numbers_are_calibrated_under_the_true_model_and_see_a_wrong_spread(meas):
     from gift_theory.lab import where_it_fails
     from gift_theory.lab import correlation_figure, law_figure, pit_figure

@@ -1,0 +1,38 @@
+"""The helper process of :func:`._drawing.draw_all` (``python -m gift_theory.lab._draw_helper``).
+
+Reads drawings from stdin, each a length (8 bytes, little-endian) and a pickled ``(drawing,
+path)`` from the process that started it, draws and writes each (:func:`._drawing.draw_to`) and
+answers one byte: ``1`` written, ``0`` failed (the caller then draws it itself). Ends at the end of
+its input. Its own output goes to stderr, so that nothing but the answers reaches stdout.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import sys
+
+
+def main() -> int:
+    answers = os.fdopen(os.dup(1), "wb", buffering=0)
+    os.dup2(2, 1)  # whatever else writes to stdout, Python or C, goes to stderr
+    import matplotlib
+
+    matplotlib.use("agg")
+    from ._drawing import draw_to
+
+    source = sys.stdin.buffer
+    while True:
+        head = source.read(8)
+        if len(head) < 8:
+            return 0
+        payload = source.read(int.from_bytes(head, "little"))
+        try:
+            draw_to(*pickle.loads(payload))
+            answers.write(b"1")
+        except Exception:  # the caller draws it again, where the error is raised
+            answers.write(b"0")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -32,6 +32,7 @@ def run(args):
     from ..lab import compare_measurement, where_it_fails
     from ..lab import compare_figures, power_notes, power_of
 
+    require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
     folder = figure_dir(args, "compare")  # a folder of another command's: refused before any work
     processes = figure_processes(folder)  # with 2, a helper process starts now
     meas = load(args, MIN_INPUTS_SCORED if args.effect else MIN_INPUTS_FITTED)  # plugins first: --effect may name one
@@ -72,15 +73,20 @@ def run(args):
            "channel_z": c.as_dict()["channel_z"], "where": res["where"]}
     where = where_it_fails(key(args), model, res["scored"])
     out["worst_cells"] = where["worst"][:10]
-    require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
-    out["power"] = (power_of(named_subkey(key(args), "power"), model, res["scored"], replicates=args.power_replicates)
-                    if args.power_replicates else [])
-    out["power_notes"] = power_notes(out["power"], verdict_passes=c.p_value >= 0.01)
+
+    def power():  # the test's power needs no figure: computed while a helper draws them
+        out["power"] = (power_of(named_subkey(key(args), "power"), model, res["scored"],
+                                 replicates=args.power_replicates) if args.power_replicates else [])
+        out["power_notes"] = power_notes(out["power"], verdict_passes=c.p_value >= 0.01)
+
+    out["power"], out["power_notes"] = [], []  # their place among the keys
     if folder:
         out["figures"] = compare_figures(key(args), model, res["scored"], where,
                                          " + ".join(model.effects) + (" (fitted)" if res["fitted"] else ""), folder,
-                                         processes=processes)
+                                         processes=processes, meanwhile=power)
         write_manifest(folder, "compare", args, out["figures"])
+    else:
+        power()
     return out
 
 

@@ -40,16 +40,24 @@ def run(args):
     res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
                    progress=Progress("gift diagnose: candidates", args.quiet, after=True), design=args.design)
     out = res.as_json()
-    if not res.missing_effect_detected:
+
+    def power():  # the test's power needs no figure: computed while a helper draws them
         # "nothing missing" is only as strong as the test's power at this file's size (the
         # held-out half gift compare scores too): say which classes it could not have seen
         out["power"] = (power_of(named_subkey(key(args), "power"), res.baseline, meas.subset(res.held_out),
                                  replicates=args.power_replicates) if args.power_replicates else [])
         out["power_notes"] = power_notes(out["power"], verdict_passes=True)
+
+    if not res.missing_effect_detected:
+        out["power"], out["power_notes"] = [], []  # their place among the keys
     out["model_comparison"] = diagnosis_comparison(res)
+    later = power if not res.missing_effect_detected else None
     if folder:
-        out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args), processes=processes)
+        out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args), processes=processes,
+                                           meanwhile=later)
         write_manifest(folder, "diagnose", args, out["figures"])
+    elif later is not None:
+        later()
     return out
 
 

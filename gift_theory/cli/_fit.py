@@ -66,11 +66,15 @@ def run(args):
 
     unc = fit_uncertainty(key(args), meas, res.after, shots=args.shots, B=args.replicates, progress=progress)
     out.update(unc)
-    # the verdict on the fitted model is only as strong as its test's power at this file's size
-    # (the held-out half it was scored on): what the test could not have seen on top of it
-    out["power"] = (power_of(named_subkey(key(args), "power"), res.after, meas.subset(res.held_out),
-                             replicates=args.power_replicates) if args.power_replicates else [])
-    out["power_notes"] = power_notes(out["power"], verdict_passes=res.comparison_after.p_value >= 0.01)
+
+    def power():  # the test's power needs no figure: computed while a helper draws them
+        # the verdict on the fitted model is only as strong as its test's power at this file's size
+        # (the held-out half it was scored on): what the test could not have seen on top of it
+        out["power"] = (power_of(named_subkey(key(args), "power"), res.after, meas.subset(res.held_out),
+                                 replicates=args.power_replicates) if args.power_replicates else [])
+        out["power_notes"] = power_notes(out["power"], verdict_passes=res.comparison_after.p_value >= 0.01)
+
+    out["power"], out["power_notes"] = [], []  # their place among the keys
     from ..lab import comparison_table
 
     if all(c.channel_values is not None for _, c in res.ladder) and len(res.ladder) > 1:
@@ -88,8 +92,10 @@ def run(args):
         held = meas.subset(res.held_out)
         where = where_it_fails(named_subkey(key(args), "figure_where"), res.after, held)
         out["figures"] = fit_figures(res, folder, meas=meas, key=key(args), uncertainty=unc, where=where,
-                                     processes=processes)
+                                     processes=processes, meanwhile=power)
         write_manifest(folder, "fit", args, out["figures"])
+    else:
+        power()
     return out
 
 

@@ -43,21 +43,27 @@ def _bbox(fig):
     return None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight"
 
 
-def draw_all(jobs: list, processes: int = 1) -> list[str]:
+def draw_all(jobs: list, processes: int = 1, meanwhile=None) -> list[str]:
     """Draw ``jobs`` (``(drawing, path)`` pairs, the costliest first) and write each; the paths,
     in the order given. ``processes=2`` shares them with a helper process when there are at least
-    two and every drawing pickles (a Figure already drawn does not); else all are drawn here."""
+    two and every drawing pickles (a Figure already drawn does not); else all are drawn here.
+    ``meanwhile``: a callable this process runs first, while the helper starts on the drawings
+    (a computation that does not need them), then it draws what is left."""
     if processes < 2 or len(jobs) < 2 or not all(callable(d) for d, _ in jobs):
+        if meanwhile is not None:
+            meanwhile()
         return [draw_to(d, p) for d, p in jobs]
     try:
         payloads = [pickle.dumps((d, p), protocol=pickle.HIGHEST_PROTOCOL) for d, p in jobs]
     except Exception:  # a drawing that does not pickle (a lambda, an open figure): all drawn here
-        return [draw_to(d, p) for d, p in jobs]
+        return draw_all(jobs, 1, meanwhile)
     share = _Share(payloads)
     feeder = threading.Thread(target=share.feed_helper, daemon=True)
     feeder.start()
     longest = 0.0
     try:
+        if meanwhile is not None:
+            meanwhile()
         while (i := share.take(back=True)) is not None:
             t0 = time.perf_counter()
             draw_to(*jobs[i])

@@ -28,19 +28,21 @@ from ._figures import (
 )
 
 
-def save_figures(figures: dict, folder: str, data: dict | None = None, processes: int = 1) -> list[str]:
+def save_figures(figures: dict, folder: str, data: dict | None = None, processes: int = 1,
+                 meanwhile=None) -> list[str]:
     """Write ``{file name: figure}`` into ``folder`` (created), each atomically; a figure is a
     matplotlib Figure or a drawing (a callable returning one). Beside each PNG whose name ``data``
     holds, its numbers as netCDF (same stem, ``.nc``: an ``xarray.Dataset`` other tools can
     redraw). ``processes=2`` draws them in this process and one helper process together
-    (:func:`._drawing.draw_all`: the same files, sooner on two cores). The PNG paths written, in
-    the order of ``figures``."""
+    (:func:`._drawing.draw_all`: the same files, sooner on two cores); ``meanwhile``, a callable
+    that does not need the figures, is run in this process while the helper starts drawing. The
+    PNG paths written, in the order of ``figures``."""
     for name, ds in (data or {}).items():
         if name in figures and ds is not None:
             save_dataset(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc"))
     jobs = [(f, os.path.join(folder, name)) for name, f in figures.items()]
     order = sorted(range(len(jobs)), key=lambda i: -_COST.get(_kind(jobs[i][1]), 1.0))
-    draw_all([jobs[i] for i in order], processes=processes)
+    draw_all([jobs[i] for i in order], processes=processes, meanwhile=meanwhile)
     return [p for _, p in jobs]
 
 
@@ -224,7 +226,8 @@ def predictive_figures(key, models, meas) -> tuple[dict, dict]:
     return figs, data
 
 
-def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: int = 1) -> list[str]:
+def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: int = 1,
+                      meanwhile=None) -> list[str]:
     """The figures of a :class:`~gift_theory.lab.Diagnosis`, written to ``folder`` (each PNG with
     its numbers as netCDF beside it): the error ladder of the baseline and the three best
     candidates; the model comparison of the baseline and every ranked candidate (differences to
@@ -232,7 +235,7 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: in
     shots (PIT, correlations, quantiles); given the measurement, each measured layer's moments
     and posterior-predictive overlay under the baseline and the top-ranked model on the
     held-out inputs, and with acquisition times each layer's residual against them
-    (:func:`time_figure`). ``processes``: as in :func:`save_figures`."""
+    (:func:`time_figure`). ``processes``, ``meanwhile``: as in :func:`save_figures`."""
     c = diagnosis.baseline_comparison
     rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
         ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
@@ -266,7 +269,7 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: in
             td = residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas)
             figs["time.png"] = partial(time_figure, td, title="baseline: residual along the signal against acquisition time")
             data["time.png"] = time_data(td)
-    return save_figures(figs, folder, data, processes=processes)
+    return save_figures(figs, folder, data, processes=processes, meanwhile=meanwhile)
 
 
 def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:
@@ -282,7 +285,7 @@ def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:
 
 
 def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | None = None,
-                where: dict | None = None, processes: int = 1) -> list[str]:
+                where: dict | None = None, processes: int = 1, meanwhile=None) -> list[str]:
     """The figures of a :class:`~gift_theory.lab.FitResult`, written to ``folder`` (each PNG with its
     numbers as netCDF beside it): the error ladder and the model comparison of its rungs (each
     against the fitted model, paired standard errors); given ``uncertainty``
@@ -290,7 +293,7 @@ def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | No
     parameters; given ``where`` (:func:`~gift_theory.lab.where_it_fails` of the fitted model on the
     held-out inputs), where it fails and its law of the shots; given the measurement, each
     measured layer's moments and posterior-predictive overlay before and after the fit.
-    ``processes``: as in :func:`save_figures`."""
+    ``processes``, ``meanwhile``: as in :func:`save_figures`."""
     a = result.comparison_after
     rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in result.ladder]
     figs = {"ladder.png": partial(error_ladder, rungs, a.noise_floor, a.floor_se)}
@@ -316,19 +319,20 @@ def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | No
                                         ("after: " + " + ".join(result.after.effects), result.after)], meas)
         figs.update(f)
         data.update(d)
-    return save_figures(figs, folder, data, processes=processes)
+    return save_figures(figs, folder, data, processes=processes, meanwhile=meanwhile)
 
 
-def compare_figures(key, model, scored, where: dict, label: str, folder: str, processes: int = 1) -> list[str]:
+def compare_figures(key, model, scored, where: dict, label: str, folder: str, processes: int = 1,
+                    meanwhile=None) -> list[str]:
     """The figures of ``gift compare``: where ``model`` fails on the scored inputs and its law of
     the shots, each measured layer's moments and posterior-predictive overlay, written to
-    ``folder`` (each PNG with its numbers as netCDF beside it); ``processes``: as in
-    :func:`save_figures`."""
+    ``folder`` (each PNG with its numbers as netCDF beside it); ``processes``, ``meanwhile``: as
+    in :func:`save_figures`."""
     figs, data = where_figures(where, " + ".join(model.effects))
     f, d = predictive_figures(key, [(label, model)], scored)
     figs.update(f)
     data.update(d)
-    return save_figures(figs, folder, data, processes=processes)
+    return save_figures(figs, folder, data, processes=processes, meanwhile=meanwhile)
 
 
 def heatmaps(stats: dict, path: str, title: str = "where the model fails") -> str:

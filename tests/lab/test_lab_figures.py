@@ -217,10 +217,18 @@ def test_a_drawing_the_helper_cannot_do_is_done_here_and_its_error_raised_here(t
     # a Figure drawn already does not go to a helper; neither does a drawing that does not pickle
     out = save_figures({"a.png": good(), "b.png": good}, str(tmp_path / "figs"), processes=2)
     out += save_figures({"c.png": lambda: good(), "d.png": good}, str(tmp_path / "figs"), processes=2)
-    # a helper that cannot start costs nothing but time
-    monkeypatch.setattr("sys.executable", str(tmp_path / "no-python"))
-    out += save_figures({"e.png": good, "f.png": good}, str(tmp_path / "figs"), processes=2)
-    assert sorted(os.listdir(tmp_path / "figs")) == [f"{c}.png" for c in "abcdef"] == [os.path.basename(p) for p in out]
+    # a helper that cannot start costs nothing but time; what runs meanwhile runs once either way
+    ran = []
+    with monkeypatch.context() as m:
+        m.setattr("sys.executable", str(tmp_path / "no-python"))
+        out += save_figures({"e.png": good, "f.png": good}, str(tmp_path / "figs"), processes=2,
+                            meanwhile=lambda: ran.append(2))
+    out += save_figures({"g.png": good}, str(tmp_path / "figs"), processes=1, meanwhile=lambda: ran.append(1))
+    assert ran == [2, 1]
+    assert sorted(os.listdir(tmp_path / "figs")) == [f"{c}.png" for c in "abcdefg"] == [os.path.basename(p) for p in out]
+    with pytest.raises(KeyError):  # an error meanwhile is raised once the helper's drawing in hand is written
+        save_figures({"a.png": good, "b.png": good}, str(tmp_path / "meanwhile"), processes=2,
+                     meanwhile=lambda: {}["power"])
     assert not [f for d, _, fs in os.walk(tmp_path) for f in fs if f.startswith(".tmp-")]
 
 

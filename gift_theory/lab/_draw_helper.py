@@ -21,6 +21,7 @@ def main() -> int:
     matplotlib.use("agg")
     from ._drawing import draw_to
 
+    _warm_up()
     source = sys.stdin.buffer
     while True:
         head = source.read(8)
@@ -32,6 +33,23 @@ def main() -> int:
             answers.write(b"1")
         except Exception:  # the caller draws it again, where the error is raised
             answers.write(b"0")
+
+
+def _warm_up() -> None:
+    """Draw a small figure with what the lab's figures use (a constrained layout, mathtext, log
+    axes, a legend), while the command computes: the fonts and the parsers are then loaded
+    before the first real drawing arrives."""
+    import io
+
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(2, 2), layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot([1, 10], [1, 10], label="$\\pm$ 2 se")
+    ax.set_xscale("log")
+    ax.set_title("warm-up")
+    ax.legend()
+    fig.savefig(io.BytesIO(), format="png", dpi=30)
 
 
 if __name__ == "__main__":

@@ -5,8 +5,8 @@ A *drawing* is a figure not drawn yet: a picklable callable that returns a matpl
 single-threaded Python (the layout, the tick labels' text, the rasteriser), so a second core helps
 only through a second process. With ``processes=2`` a helper is started (``python -m
 gift_theory.lab._draw_helper``: a fresh interpreter, so no caller's ``__main__`` is run again and
-no thread of this process is forked); it takes the drawings from the front of the list, this
-process from the back, until none is left. Each file is written atomically by whichever process
+no thread of this process is forked); the two take the drawings one at a time, the costliest
+first, until none is left (so that they end together). Each file is written atomically by whichever process
 drew it, and the bytes are the same either way: Agg draws the same figure to the same pixels in
 any process. A helper that cannot start, or fails a drawing, costs time only: the drawing is done
 here, where an error in it is raised as it would be without a helper.
@@ -64,7 +64,7 @@ def draw_all(jobs: list, processes: int = 1, meanwhile=None) -> list[str]:
     try:
         if meanwhile is not None:
             meanwhile()
-        while (i := share.take(back=True)) is not None:
+        while (i := share.take()) is not None:
             t0 = time.perf_counter()
             draw_to(*jobs[i])
             longest = max(longest, time.perf_counter() - t0)
@@ -83,8 +83,8 @@ def draw_all(jobs: list, processes: int = 1, meanwhile=None) -> list[str]:
 
 
 class _Share:
-    """The drawings left (indices into the payloads): the helper takes from the front, this
-    process from the back; those the helper took but did not confirm are ``undone``."""
+    """The drawings left (indices into the payloads, the costliest first), taken by both
+    processes; those the helper took but did not confirm are ``undone``."""
 
     def __init__(self, payloads: list):
         self.payloads = payloads
@@ -93,11 +93,9 @@ class _Share:
         self.undone: list[int] = []
         self.helper: subprocess.Popen | None = None
 
-    def take(self, back: bool) -> int | None:
+    def take(self) -> int | None:
         with self.lock:
-            if not self.left:
-                return None
-            return self.left.pop() if back else self.left.popleft()
+            return self.left.popleft() if self.left else None
 
     def feed_helper(self) -> None:
         """In a thread: take the helper :func:`start_helper` started (else start one) and hand it
@@ -108,7 +106,7 @@ class _Share:
         except OSError:
             return
         try:
-            while (i := self.take(back=False)) is not None:
+            while (i := self.take()) is not None:
                 try:
                     self.helper.stdin.write(len(self.payloads[i]).to_bytes(8, "little") + self.payloads[i])
                     self.helper.stdin.flush()

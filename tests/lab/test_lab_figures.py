@@ -211,8 +211,13 @@ def test_a_drawing_the_helper_cannot_do_is_done_here_and_its_error_raised_here(t
     bad = partial(error_ladder, [("awgn", 10.0)], 9.0, 2.0)  # a rung without its se: fails in any process
     with pytest.raises(IndexError):
         error_ladder([("awgn", 10.0)], 9.0, 2.0)
-    with pytest.raises(IndexError):  # the helper takes it first and fails it; this process draws it again, and raises
-        save_figures({"a.png": bad, "b.png": good, "c.png": good, "d.png": good}, str(tmp_path / "bad"), processes=2)
+    # the helper takes the first drawing while this process waits (meanwhile) and fails it; this
+    # process draws the others, then that one again, and raises
+    import time
+
+    with pytest.raises(IndexError):
+        save_figures({"a.png": bad, "b.png": good, "c.png": good, "d.png": good}, str(tmp_path / "bad"), processes=2,
+                     meanwhile=lambda: time.sleep(1.0))
     assert sorted(os.listdir(tmp_path / "bad")) == ["b.png", "c.png", "d.png"]
     # a Figure drawn already does not go to a helper; neither does a drawing that does not pickle
     out = save_figures({"a.png": good(), "b.png": good}, str(tmp_path / "figs"), processes=2)

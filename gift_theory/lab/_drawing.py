@@ -103,7 +103,7 @@ class _Share:
         more."""
         try:
             self.helper = _take_started() or _start_helper()
-        except OSError:
+        except Exception:  # no helper (no interpreter to start, no process left): all drawn here
             return
         try:
             while (i := self.take()) is not None:
@@ -111,7 +111,7 @@ class _Share:
                     self.helper.stdin.write(len(self.payloads[i]).to_bytes(8, "little") + self.payloads[i])
                     self.helper.stdin.flush()
                     ok = self.helper.stdout.read(1) == b"1"
-                except (OSError, ValueError):
+                except Exception:  # a helper gone (a broken pipe, a closed file): this one is drawn here
                     ok = False
                 if not ok:
                     self.undone.append(i)
@@ -139,7 +139,7 @@ def start_helper() -> None:
     if not _started:
         try:
             _started.append(_start_helper())
-        except OSError:
+        except Exception:  # draw_all tries again, and draws here without one
             return
         atexit.register(_stop_unused)
 

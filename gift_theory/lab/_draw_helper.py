@@ -1,4 +1,4 @@
-"""The helper process of :func:`._drawing.draw_all` (``python -m gift_theory.lab._draw_helper``).
+"""The helper process of :class:`._drawing.Drawing` (``python -m gift_theory.lab._draw_helper``).
 
 Reads drawings from stdin, each a length (8 bytes, little-endian) and a pickled ``(drawing,
 path)`` from the process that started it, draws and writes each (:func:`._drawing.draw_to`) and

@@ -43,61 +43,100 @@ def _bbox(fig):
     return None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight"
 
 
-def draw_all(jobs: list, processes: int = 1, meanwhile=None) -> list[str]:
-    """Draw ``jobs`` (``(drawing, path)`` pairs, the costliest first) and write each; the paths,
-    in the order given. ``processes=2`` shares them with a helper process when there are at least
-    two and every drawing pickles (a Figure already drawn does not); else all are drawn here.
-    ``meanwhile``: a callable this process runs first, while the helper starts on the drawings
-    (a computation that does not need them), then it draws what is left."""
-    if processes < 2 or len(jobs) < 2 or not all(callable(d) for d, _ in jobs):
-        if meanwhile is not None:
-            meanwhile()
-        return [draw_to(d, p) for d, p in jobs]
-    try:
-        payloads = [pickle.dumps((d, p), protocol=pickle.HIGHEST_PROTOCOL) for d, p in jobs]
-    except Exception:  # a drawing that does not pickle (a lambda, an open figure): all drawn here
-        return draw_all(jobs, 1, meanwhile)
-    share = _Share(payloads)
-    feeder = threading.Thread(target=share.feed_helper, daemon=True)
-    feeder.start()
-    longest = 0.0
-    try:
-        if meanwhile is not None:
-            meanwhile()
-        while (i := share.take()) is not None:
-            t0 = time.perf_counter()
-            draw_to(*jobs[i])
-            longest = max(longest, time.perf_counter() - t0)
-    except BaseException:  # the helper gets no more; the drawing it holds is finished, then raised
-        share.clear()
-        feeder.join(timeout=60.0 + 10.0 * longest)
-        raise
-    # the helper's last drawing: as long as any of ours, ten times over, else it is stopped
-    feeder.join(timeout=60.0 + 10.0 * longest)
-    if feeder.is_alive():
-        share.stop()
-        feeder.join()
-    for i in share.undone:  # what the helper did not draw is drawn here (an error in it raised here)
-        draw_to(*jobs[i])
-    return [p for _, p in jobs]
+class Drawing:
+    """Figures drawn as they are handed over (:meth:`add`): with ``processes=2`` a helper process
+    draws from the first one on, while this process goes on computing; :meth:`finish` then draws
+    here what is left, sharing it with the helper, and waits for the helper's last. Use it as a
+    context manager: leaving it on an error stops the helper after the drawing it holds. With
+    ``processes=1``, or for a drawing that does not pickle (a Figure drawn already, a lambda),
+    everything is drawn here, by :meth:`finish`."""
 
-
-class _Share:
-    """The drawings left (indices into the payloads, the costliest first), taken by both
-    processes; those the helper took but did not confirm are ``undone``."""
-
-    def __init__(self, payloads: list):
-        self.payloads = payloads
-        self.left = collections.deque(range(len(payloads)))
-        self.lock = threading.Lock()
-        self.undone: list[int] = []
+    def __init__(self, processes: int = 1):
+        self.processes = processes
+        self.jobs: list = []  # (drawing, path), in the order handed over
+        self.here: list[int] = []  # those only this process can draw
+        self.left = collections.deque()  # those either process may take, not taken yet
+        self.payloads: dict = {}  # index -> the pickled job the helper is sent
+        self.undone: list[int] = []  # taken by the helper, not confirmed
+        self.cond = threading.Condition()
+        self.closed = False
         self.helper: subprocess.Popen | None = None
+        self.feeder: threading.Thread | None = None
+        self.longest = 0.0  # this process's longest drawing (the helper's time-out is ten of them)
 
-    def take(self) -> int | None:
-        with self.lock:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, value, tb):
+        if kind is None:
+            if not self.closed:
+                self.finish()
+            return False
+        with self.cond:  # an error: the helper gets no more; the drawing it holds is finished first
+            self.left.clear()
+            self.closed = True
+            self.cond.notify_all()
+        if self.feeder is not None:
+            self.feeder.join(timeout=60.0 + 10.0 * self.longest)
+        return False
+
+    def add(self, jobs) -> None:
+        """Hand over ``(drawing, path)`` pairs, the costliest first."""
+        for drawing, path in jobs:
+            payload = None
+            if self.processes >= 2 and callable(drawing):
+                try:
+                    payload = pickle.dumps((drawing, path), protocol=pickle.HIGHEST_PROTOCOL)
+                except Exception:  # it does not pickle: drawn here
+                    payload = None
+            with self.cond:
+                i = len(self.jobs)
+                self.jobs.append((drawing, path))
+                if payload is None:
+                    self.here.append(i)
+                else:
+                    self.payloads[i] = payload
+                    self.left.append(i)
+                    self.cond.notify_all()
+        if self.left and self.feeder is None:
+            self.feeder = threading.Thread(target=self._feed_helper, daemon=True)
+            self.feeder.start()
+
+    def finish(self) -> list[str]:
+        """Draw here what is left (with the helper), then what only this process can draw, then
+        what the helper did not; the paths, in the order handed over."""
+        with self.cond:
+            self.closed = True
+            self.cond.notify_all()
+        while (i := self._take()) is not None:
+            self._draw_here(i)
+        for i in self.here:
+            self._draw_here(i)
+        if self.feeder is not None:
+            # the helper's last drawing: as long as any of ours, ten times over, else it is stopped
+            self.feeder.join(timeout=60.0 + 10.0 * self.longest)
+            if self.feeder.is_alive():
+                if self.helper is not None:
+                    self.helper.kill()
+                self.feeder.join()
+        for i in self.undone:  # what the helper did not draw is drawn here (an error in it raised here)
+            self._draw_here(i)
+        return [p for _, p in self.jobs]
+
+    def _draw_here(self, i: int) -> None:
+        t0 = time.perf_counter()
+        draw_to(*self.jobs[i])
+        self.longest = max(self.longest, time.perf_counter() - t0)
+
+    def _take(self, wait: bool = False) -> int | None:
+        """The costliest drawing left (None when none is); ``wait``: until one is handed over or
+        :meth:`finish` is called."""
+        with self.cond:
+            while wait and not self.left and not self.closed:
+                self.cond.wait()
             return self.left.popleft() if self.left else None
 
-    def feed_helper(self) -> None:
+    def _feed_helper(self) -> None:
         """In a thread: take the helper :func:`start_helper` started (else start one) and hand it
         one drawing at a time until none is left; after a drawing it does not confirm it gets no
         more."""
@@ -106,7 +145,7 @@ class _Share:
         except Exception:  # no helper (no interpreter to start, no process left): all drawn here
             return
         try:
-            while (i := self.take()) is not None:
+            while (i := self._take(wait=True)) is not None:
                 try:
                     self.helper.stdin.write(len(self.payloads[i]).to_bytes(8, "little") + self.payloads[i])
                     self.helper.stdin.flush()
@@ -119,27 +158,19 @@ class _Share:
         finally:
             _stop_helper(self.helper)
 
-    def clear(self) -> None:
-        with self.lock:
-            self.left.clear()
 
-    def stop(self) -> None:
-        """Kill a helper that does not answer (its drawing is then ``undone``)."""
-        if self.helper is not None:
-            self.helper.kill()
-
-
-_started: list = []  # a helper started ahead of its drawings (at most one), until draw_all takes it
+_started: list = []  # a helper started ahead of its drawings (at most one), until a Drawing takes it
 
 
 def start_helper() -> None:
     """Start the helper process now, so that it is ready (its imports done, on a core this
-    process leaves idle) when :func:`draw_all` is given ``processes=2``; the command line calls
-    it before its computation when it will draw figures. Ended at exit if never used."""
+    process leaves idle) when a :class:`Drawing` with ``processes=2`` gets its first drawing; the
+    command line calls it before its computation when it will draw figures. Ended at exit if
+    never used."""
     if not _started:
         try:
             _started.append(_start_helper())
-        except Exception:  # draw_all tries again, and draws here without one
+        except Exception:  # the Drawing tries again, and draws here without one
             return
         atexit.register(_stop_unused)
 

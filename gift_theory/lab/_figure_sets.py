@@ -2,7 +2,8 @@
 its numbers: :func:`save_figures` writes PNGs atomically and, beside each, the ``xarray.Dataset``
 it draws as netCDF (the ``*_data`` functions); the drawing itself is :mod:`._figures`. A set holds
 each figure as a *drawing* (a ``functools.partial`` of its figure function with its numbers), so
-that :func:`._drawing.draw_all` can share them with a helper process (``processes=2``)."""
+that :class:`._drawing.Drawing` can share them with a helper process (``processes=2``), which
+starts on the first of a set while this process computes the numbers of the rest."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from functools import partial
 
 import numpy as np
 
-from ._drawing import draw_all, draw_to
+from ._drawing import Drawing, draw_to
 from ._figures import (
     comparison_figure,
     comparison_table,
@@ -34,15 +35,25 @@ def save_figures(figures: dict, folder: str, data: dict | None = None, processes
     matplotlib Figure or a drawing (a callable returning one). Beside each PNG whose name ``data``
     holds, its numbers as netCDF (same stem, ``.nc``: an ``xarray.Dataset`` other tools can
     redraw). ``processes=2`` draws them in this process and one helper process together
-    (:func:`._drawing.draw_all`: the same files, sooner on two cores); ``meanwhile``, a callable
+    (:class:`._drawing.Drawing`: the same files, sooner on two cores); ``meanwhile``, a callable
     that does not need the figures, is run in this process while the helper starts drawing. The
     PNG paths written, in the order of ``figures``."""
+    with Drawing(processes) as drawing:
+        paths = _hand_over(drawing, figures, folder, data)
+        if meanwhile is not None:
+            meanwhile()
+        drawing.finish()
+    return paths
+
+
+def _hand_over(drawing, figures: dict, folder: str, data: dict | None) -> list[str]:
+    """Write the numbers (``data``) of ``figures`` into ``folder`` and hand their drawings to
+    ``drawing``, the costliest first; their PNG paths, in the order of ``figures``."""
     for name, ds in (data or {}).items():
         if name in figures and ds is not None:
             save_dataset(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc"))
     jobs = [(f, os.path.join(folder, name)) for name, f in figures.items()]
-    order = sorted(range(len(jobs)), key=lambda i: -_COST.get(_kind(jobs[i][1]), 1.0))
-    draw_all([jobs[i] for i in order], processes=processes, meanwhile=meanwhile)
+    drawing.add(sorted(jobs, key=lambda job: -_COST.get(_kind(job[1]), 1.0)))
     return [p for _, p in jobs]
 
 
@@ -251,25 +262,30 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: in
         f, d = where_figures(diagnosis.where, "the baseline (awgn)")
         figs.update(f)
         data.update(d)
-    if meas is not None:
-        import jax
+    with Drawing(processes) as drawing:
+        paths = _hand_over(drawing, figs, folder, data)  # drawn while the model's shots below are drawn
+        if meas is not None:
+            import jax
 
-        key = jax.random.PRNGKey(0) if key is None else key
-        models = [("before: " + " + ".join(diagnosis.baseline.effects), diagnosis.baseline)]
-        if diagnosis.ranking:
-            top = diagnosis.ranking[0]
-            models.append(("first ranked: " + " + ".join(top.model.effects), top.model))
-        f, d = predictive_figures(key, models, meas.subset(diagnosis.held_out))
-        figs.update(f)
-        data.update(d)
-        if meas.t is not None:  # the residual against acquisition time, per layer (reference §8)
-            from .._model import named_subkey
-            from ._time import residual_in_time
+            key = jax.random.PRNGKey(0) if key is None else key
+            models = [("before: " + " + ".join(diagnosis.baseline.effects), diagnosis.baseline)]
+            if diagnosis.ranking:
+                top = diagnosis.ranking[0]
+                models.append(("first ranked: " + " + ".join(top.model.effects), top.model))
+            figs, data = predictive_figures(key, models, meas.subset(diagnosis.held_out))
+            if meas.t is not None:  # the residual against acquisition time, per layer (reference §8)
+                from .._model import named_subkey
+                from ._time import residual_in_time
 
-            td = residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas)
-            figs["time.png"] = partial(time_figure, td, title="baseline: residual along the signal against acquisition time")
-            data["time.png"] = time_data(td)
-    return save_figures(figs, folder, data, processes=processes, meanwhile=meanwhile)
+                td = residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas)
+                figs["time.png"] = partial(time_figure, td,
+                                           title="baseline: residual along the signal against acquisition time")
+                data["time.png"] = time_data(td)
+            paths += _hand_over(drawing, figs, folder, data)
+        if meanwhile is not None:
+            meanwhile()
+        drawing.finish()
+    return paths
 
 
 def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:
@@ -311,15 +327,19 @@ def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | No
         f, d = where_figures(where, "the fitted model")
         figs.update(f)
         data.update(d)
-    if meas is not None:
-        import jax
+    with Drawing(processes) as drawing:
+        paths = _hand_over(drawing, figs, folder, data)  # drawn while the model's shots below are drawn
+        if meas is not None:
+            import jax
 
-        key = jax.random.PRNGKey(0) if key is None else key
-        f, d = predictive_figures(key, [("before: " + " + ".join(result.before.effects), result.before),
-                                        ("after: " + " + ".join(result.after.effects), result.after)], meas)
-        figs.update(f)
-        data.update(d)
-    return save_figures(figs, folder, data, processes=processes, meanwhile=meanwhile)
+            key = jax.random.PRNGKey(0) if key is None else key
+            figs, data = predictive_figures(key, [("before: " + " + ".join(result.before.effects), result.before),
+                                                  ("after: " + " + ".join(result.after.effects), result.after)], meas)
+            paths += _hand_over(drawing, figs, folder, data)
+        if meanwhile is not None:
+            meanwhile()
+        drawing.finish()
+    return paths
 
 
 def compare_figures(key, model, scored, where: dict, label: str, folder: str, processes: int = 1,
@@ -329,10 +349,14 @@ def compare_figures(key, model, scored, where: dict, label: str, folder: str, pr
     ``folder`` (each PNG with its numbers as netCDF beside it); ``processes``, ``meanwhile``: as
     in :func:`save_figures`."""
     figs, data = where_figures(where, " + ".join(model.effects))
-    f, d = predictive_figures(key, [(label, model)], scored)
-    figs.update(f)
-    data.update(d)
-    return save_figures(figs, folder, data, processes=processes, meanwhile=meanwhile)
+    with Drawing(processes) as drawing:
+        paths = _hand_over(drawing, figs, folder, data)  # drawn while the model's shots below are drawn
+        figs, data = predictive_figures(key, [(label, model)], scored)
+        paths += _hand_over(drawing, figs, folder, data)
+        if meanwhile is not None:
+            meanwhile()
+        drawing.finish()
+    return paths
 
 
 def heatmaps(stats: dict, path: str, title: str = "where the model fails") -> str:

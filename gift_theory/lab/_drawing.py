@@ -3,13 +3,15 @@
 A *drawing* is a figure not drawn yet: a picklable callable that returns a matplotlib Figure (a
 ``functools.partial`` of a figure function of :mod:`._figures` with its numbers). Drawing is
 single-threaded Python (the layout, the tick labels' text, the rasteriser), so a second core helps
-only through a second process. With ``processes=2`` a helper is started (``python -m
-gift_theory.lab._draw_helper``: a fresh interpreter, so no caller's ``__main__`` is run again and
-no thread of this process is forked); the two take the drawings one at a time, the costliest
-first, until none is left (so that they end together). Each file is written atomically by whichever process
-drew it, and the bytes are the same either way: Agg draws the same figure to the same pixels in
-any process. A helper that cannot start, or fails a drawing, costs time only: the drawing is done
-here, where an error in it is raised as it would be without a helper.
+only through a second process. A :class:`Drawing` with ``processes=2`` hands each drawing, as
+soon as it is given one, to a helper process (``python -m gift_theory.lab._draw_helper``: a fresh
+interpreter, so no caller's ``__main__`` is run again and no thread of this process is forked),
+while this process goes on computing the numbers of the next; at :meth:`Drawing.finish` both take
+what is left one at a time, the costliest first, so that they end together. Each file is written
+atomically by whichever process drew it, and the bytes are the same either way: Agg draws the
+same figure to the same pixels in any process. A helper that cannot start, or fails a drawing,
+costs time only: the drawing is done here, where an error in it is raised as it would be without
+a helper.
 """
 
 from __future__ import annotations
@@ -48,16 +50,15 @@ class Drawing:
     draws from the first one on, while this process goes on computing; :meth:`finish` then draws
     here what is left, sharing it with the helper, and waits for the helper's last. Use it as a
     context manager: leaving it on an error stops the helper after the drawing it holds. With
-    ``processes=1``, or for a drawing that does not pickle (a Figure drawn already, a lambda),
-    everything is drawn here, by :meth:`finish`."""
+    ``processes=1``, and for a Figure drawn already or a drawing that does not pickle (a lambda),
+    the drawing is done here, by :meth:`finish`."""
 
     def __init__(self, processes: int = 1):
         self.processes = processes
         self.jobs: list = []  # (drawing, path), in the order handed over
         self.here: list[int] = []  # those only this process can draw
         self.left = collections.deque()  # those either process may take, not taken yet
-        self.payloads: dict = {}  # index -> the pickled job the helper is sent
-        self.undone: list[int] = []  # taken by the helper, not confirmed
+        self.undone: list[int] = []  # taken by the helper, not drawn by it
         self.cond = threading.Condition()
         self.closed = False
         self.helper: subprocess.Popen | None = None
@@ -82,22 +83,12 @@ class Drawing:
 
     def add(self, jobs) -> None:
         """Hand over ``(drawing, path)`` pairs, the costliest first."""
-        for drawing, path in jobs:
-            payload = None
-            if self.processes >= 2 and callable(drawing):
-                try:
-                    payload = pickle.dumps((drawing, path), protocol=pickle.HIGHEST_PROTOCOL)
-                except Exception:  # it does not pickle: drawn here
-                    payload = None
-            with self.cond:
+        with self.cond:
+            for drawing, path in jobs:
                 i = len(self.jobs)
                 self.jobs.append((drawing, path))
-                if payload is None:
-                    self.here.append(i)
-                else:
-                    self.payloads[i] = payload
-                    self.left.append(i)
-                    self.cond.notify_all()
+                (self.left if self.processes >= 2 and callable(drawing) else self.here).append(i)
+            self.cond.notify_all()
         if self.left and self.feeder is None:
             self.feeder = threading.Thread(target=self._feed_helper, daemon=True)
             self.feeder.start()
@@ -146,8 +137,13 @@ class Drawing:
             return
         try:
             while (i := self._take(wait=True)) is not None:
+                try:  # pickled only now: one drawing's numbers copied at a time
+                    payload = pickle.dumps(self.jobs[i], protocol=pickle.HIGHEST_PROTOCOL)
+                except Exception:  # it does not pickle (a lambda): drawn here, the helper goes on
+                    self.undone.append(i)
+                    continue
                 try:
-                    self.helper.stdin.write(len(self.payloads[i]).to_bytes(8, "little") + self.payloads[i])
+                    self.helper.stdin.write(len(payload).to_bytes(8, "little") + payload)
                     self.helper.stdin.flush()
                     ok = self.helper.stdout.read(1) == b"1"
                 except Exception:  # a helper gone (a broken pipe, a closed file): this one is drawn here

@@ -161,8 +161,9 @@ _started: list = []  # a helper started ahead of its drawings (at most one), unt
 def start_helper() -> None:
     """Start the helper process now, so that it is ready (its imports done, on a core this
     process leaves idle) when a :class:`Drawing` with ``processes=2`` gets its first drawing; the
-    command line calls it before its computation when it will draw figures. Ended at exit if
-    never used."""
+    command line calls it before its computation when it will draw figures. One never used is
+    killed at exit, or -- after ``os._exit``, as the ``gift`` command leaves -- ends at the end of
+    its input, once its imports are done."""
     if not _started:
         try:
             _started.append(_start_helper())

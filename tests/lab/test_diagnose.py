@@ -8,6 +8,7 @@ rates over many seeds and the without-taps case are measured by
 
 import dataclasses
 import json
+import os
 import types
 
 import jax
@@ -154,9 +155,12 @@ def test_null_reports_nothing_missing(tmp_path, capsys):
     meas = _chip({})
     path = tmp_path / "null.npz"
     save_measurement(path, meas)
-    assert main(["diagnose", str(path), "--json", "--quiet", "--power-replicates", "8"]) == 0
+    # with its figures: the power is computed while they are drawn
+    assert main(["diagnose", str(path), "--json", "--quiet", "--power-replicates", "8",
+                 "--figures", str(tmp_path / "figs")]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["missing_effect_detected"] is False and out["baseline"]["p_value"] >= 0.01
+    assert "ladder.png" in os.listdir(tmp_path / "figs")
     # "nothing missing" comes with the test's power at this size: a note for each class it is weak on
     assert [p["mechanism"] for p in out["power"]] == ["noise_law", "input_dependent_noise"]
     assert all(p["replicates"] == 8 and 0 <= p["power"] <= 1 for p in out["power"])

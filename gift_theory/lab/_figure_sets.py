@@ -39,14 +39,14 @@ def save_figures(figures: dict, folder: str, data: dict | None = None, processes
     that does not need the figures, is run in this process while the helper starts drawing. The
     PNG paths written, in the order of ``figures``."""
     with Drawing(processes) as drawing:
-        paths = _hand_over(drawing, figures, folder, data)
+        paths = _hand_over(drawing, figures, data, folder=folder)
         if meanwhile is not None:
             meanwhile()
         drawing.finish()
     return paths
 
 
-def _hand_over(drawing, figures: dict, folder: str, data: dict | None) -> list[str]:
+def _hand_over(drawing, figures: dict, data: dict | None = None, *, folder: str) -> list[str]:
     """Write the numbers (``data``) of ``figures`` into ``folder`` and hand their drawings to
     ``drawing``, the costliest first; their PNG paths, in the order of ``figures``."""
     for name, ds in (data or {}).items():
@@ -263,7 +263,7 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: in
         figs.update(f)
         data.update(d)
     with Drawing(processes) as drawing:
-        paths = _hand_over(drawing, figs, folder, data)  # drawn while the model's shots below are drawn
+        paths = _hand_over(drawing, figs, data, folder=folder)  # drawn while the model's shots below are drawn
         if meas is not None:
             import jax
 
@@ -272,16 +272,16 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: in
             if diagnosis.ranking:
                 top = diagnosis.ranking[0]
                 models.append(("first ranked: " + " + ".join(top.model.effects), top.model))
-            figs, data = predictive_figures(key, models, meas.subset(diagnosis.held_out))
+            paths += _hand_over(drawing, *predictive_figures(key, models, meas.subset(diagnosis.held_out)),
+                                folder=folder)
             if meas.t is not None:  # the residual against acquisition time, per layer (reference §8)
                 from .._model import named_subkey
                 from ._time import residual_in_time
 
                 td = residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas)
-                figs["time.png"] = partial(time_figure, td,
-                                           title="baseline: residual along the signal against acquisition time")
-                data["time.png"] = time_data(td)
-            paths += _hand_over(drawing, figs, folder, data)
+                paths += _hand_over(drawing, {"time.png": partial(
+                    time_figure, td, title="baseline: residual along the signal against acquisition time")},
+                    {"time.png": time_data(td)}, folder=folder)
         if meanwhile is not None:
             meanwhile()
         drawing.finish()
@@ -328,14 +328,14 @@ def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | No
         figs.update(f)
         data.update(d)
     with Drawing(processes) as drawing:
-        paths = _hand_over(drawing, figs, folder, data)  # drawn while the model's shots below are drawn
+        paths = _hand_over(drawing, figs, data, folder=folder)  # drawn while the model's shots below are drawn
         if meas is not None:
             import jax
 
             key = jax.random.PRNGKey(0) if key is None else key
             figs, data = predictive_figures(key, [("before: " + " + ".join(result.before.effects), result.before),
                                                   ("after: " + " + ".join(result.after.effects), result.after)], meas)
-            paths += _hand_over(drawing, figs, folder, data)
+            paths += _hand_over(drawing, figs, data, folder=folder)
         if meanwhile is not None:
             meanwhile()
         drawing.finish()
@@ -350,9 +350,9 @@ def compare_figures(key, model, scored, where: dict, label: str, folder: str, pr
     in :func:`save_figures`."""
     figs, data = where_figures(where, " + ".join(model.effects))
     with Drawing(processes) as drawing:
-        paths = _hand_over(drawing, figs, folder, data)  # drawn while the model's shots below are drawn
+        paths = _hand_over(drawing, figs, data, folder=folder)  # drawn while the model's shots below are drawn
         figs, data = predictive_figures(key, [(label, model)], scored)
-        paths += _hand_over(drawing, figs, folder, data)
+        paths += _hand_over(drawing, figs, data, folder=folder)
         if meanwhile is not None:
             meanwhile()
         drawing.finish()

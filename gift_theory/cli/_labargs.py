@@ -84,10 +84,9 @@ def figure_processes(folder: str | None) -> int:
     if env:
         n = int(env)
     else:
-        try:
-            n = 2 if len(os.sched_getaffinity(0)) >= 2 else 1
-        except AttributeError:
-            n = 2 if (os.cpu_count() or 1) >= 2 else 1
+        from ..lab._budget import usable_cores
+
+        n = 2 if usable_cores() >= 2 else 1
     if n == 2:
         from ..lab._drawing import start_helper
 

@@ -29,6 +29,15 @@ PER_THREAD = 20
 _UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
 
+def usable_cores() -> int:
+    """The cores this process may run on: its CPU affinity where the system reports one, else the
+    machine's count."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
 def lab_memory() -> int:
     """The budget in bytes: ``$GIFT_LAB_MEMORY`` (a whole number of bytes, or with a suffix K, M,
     G or T: binary units, e.g. ``512M``), else :data:`LAB_MEMORY`. A value that is not one of

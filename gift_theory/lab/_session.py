@@ -22,7 +22,7 @@ from .._measurement import Measurement
 from .._model import named_subkey
 from .._process import release_freed_memory
 from ..effects import REGISTRY
-from ._budget import candidate_threads, replicate_threads
+from ._budget import candidate_threads, replicate_threads, usable_cores
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, one_step_check
 from ._fit import fit_model
@@ -108,11 +108,7 @@ def default_workers(meas: Measurement | None = None) -> int:
     env = os.environ.get("GIFT_LAB_THREADS", "").strip()
     if env.isdigit() and int(env) >= 1:
         return int(env)
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cores = os.cpu_count() or 1
-    return max(1, min(4, cores, candidate_threads(meas) if meas is not None else 4))
+    return max(1, min(4, usable_cores(), candidate_threads(meas) if meas is not None else 4))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

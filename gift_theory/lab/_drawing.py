@@ -73,13 +73,18 @@ class Drawing:
             if not self.closed:
                 self.finish()
             return False
-        with self.cond:  # an error: the helper gets no more; the drawing it holds is finished first
-            self.left.clear()
-            self.closed = True
-            self.cond.notify_all()
+        self._close(drop_left=True)  # an error: the helper gets no more; the drawing it holds is finished first
         if self.feeder is not None:
             self.feeder.join(timeout=60.0 + 10.0 * self.longest)
         return False
+
+    def _close(self, drop_left: bool = False) -> None:
+        """No more drawings are handed over (``drop_left``: and those not taken are dropped)."""
+        with self.cond:
+            if drop_left:
+                self.left.clear()
+            self.closed = True
+            self.cond.notify_all()
 
     def add(self, jobs) -> None:
         """Hand over ``(drawing, path)`` pairs, the costliest first."""
@@ -93,12 +98,13 @@ class Drawing:
             self.feeder = threading.Thread(target=self._feed_helper, daemon=True)
             self.feeder.start()
 
-    def finish(self) -> list[str]:
-        """Draw here what is left (with the helper), then what only this process can draw, then
-        what the helper did not; the paths, in the order handed over."""
-        with self.cond:
-            self.closed = True
-            self.cond.notify_all()
+    def finish(self, meanwhile=None) -> list[str]:
+        """Run ``meanwhile`` (a computation that needs no figure) while the helper draws, then draw
+        here what is left (with the helper), what only this process can draw, and what the helper
+        did not; the paths, in the order handed over."""
+        if meanwhile is not None:
+            meanwhile()
+        self._close()
         while (i := self._take()) is not None:
             self._draw_here(i)
         for i in self.here:

@@ -40,9 +40,7 @@ def save_figures(figures: dict, folder: str, data: dict | None = None, processes
     PNG paths written, in the order of ``figures``."""
     with Drawing(processes) as drawing:
         paths = _hand_over(drawing, figures, data, folder=folder)
-        if meanwhile is not None:
-            meanwhile()
-        drawing.finish()
+        drawing.finish(meanwhile)
     return paths
 
 
@@ -282,9 +280,7 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: in
                 paths += _hand_over(drawing, {"time.png": partial(
                     time_figure, td, title="baseline: residual along the signal against acquisition time")},
                     {"time.png": time_data(td)}, folder=folder)
-        if meanwhile is not None:
-            meanwhile()
-        drawing.finish()
+        drawing.finish(meanwhile)
     return paths
 
 
@@ -336,9 +332,7 @@ def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | No
             figs, data = predictive_figures(key, [("before: " + " + ".join(result.before.effects), result.before),
                                                   ("after: " + " + ".join(result.after.effects), result.after)], meas)
             paths += _hand_over(drawing, figs, data, folder=folder)
-        if meanwhile is not None:
-            meanwhile()
-        drawing.finish()
+        drawing.finish(meanwhile)
     return paths
 
 
@@ -353,9 +347,7 @@ def compare_figures(key, model, scored, where: dict, label: str, folder: str, pr
         paths = _hand_over(drawing, figs, data, folder=folder)  # drawn while the model's shots below are drawn
         figs, data = predictive_figures(key, [(label, model)], scored)
         paths += _hand_over(drawing, figs, data, folder=folder)
-        if meanwhile is not None:
-            meanwhile()
-        drawing.finish()
+        drawing.finish(meanwhile)
     return paths
 
 

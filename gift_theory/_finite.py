@@ -25,12 +25,10 @@ class NotFinite(ArithmeticError):
 def first_bad(a) -> tuple | None:
     """The index of the first non-finite entry of ``a``, or None when every entry is finite."""
     a = np.asarray(a)
-    if a.dtype.kind not in "fc":
+    if a.dtype.kind not in "fc" or a.size == 0:
         return None
-    if a.dtype.kind == "f" and a.dtype.itemsize <= 4:
-        with np.errstate(invalid="ignore"):  # inf - inf: NaN, found below
-            if np.isfinite(np.sum(a, dtype=np.float64)):
-                return None  # float32 values summed in float64 cannot overflow: finite without a mask as large as a
+    if a.dtype.kind == "f" and np.isfinite(np.max(a)) and np.isfinite(np.min(a)):
+        return None  # (the extremes propagate NaN and hold any inf: finite without a mask as large as a)
     bad = ~np.isfinite(a)
     if not bad.any():
         return None

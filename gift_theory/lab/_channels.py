@@ -103,6 +103,8 @@ def energy_cells(M, Y, paired: bool = False):
     # inputs x 256 model shots held 0.5 GB of them at once); each chunk the same shape, the last
     # padded, so one compiled program serves them all
     c = _input_chunk(n, K, r, d)
+    # JAX's arrays read as numpy (no copy on the CPU): a slice of a JAX array is a program of its own
+    M, Y = (np.asarray(A) if isinstance(A, jax.Array) else A for A in (M, Y))
     E, wy = np.empty(n), np.empty(n)
     E1, wy1 = np.empty((n, d)), np.empty((n, d))
     for c0 in range(0, n, c):

@@ -158,15 +158,29 @@ def lag_test(layer: int, E, Y, t, row_of, g=None, A=None) -> Lag:
     for lag, idx in before.items():
         idx[order[lag:]] = order[:-lag]
 
+    # the deals reuse these buffers (no fresh pages per deal) and precomputed index rules
+    invalid = {lag: idx >= N for lag, idx in before.items()}
+    clipped = {lag: np.minimum(idx, N - 1) for lag, idx in before.items()}
+    first_rows = np.flatnonzero(first)
+    ep_buf, src_buf = np.empty_like(es), np.empty(N, np.intp)
+    x_bufs = {lag: np.empty((n, r, d)) for lag in before}
+    mean_buf = np.empty((n, 1, d))
+
     def stat_of(perm):
         """_partial of the deal ``perm`` (slot s holds record perm[s]; None: the campaign as taken)."""
-        ep = es if perm is None else es[perm]
+        ep = es if perm is None else np.take(es, perm, axis=0, out=ep_buf, mode="clip")
         xs = []
         for lag in (1, CONTROL):
-            src = before[lag] if perm is None else np.where(before[lag] < N, perm[np.minimum(before[lag], N - 1)], N)
-            x = Ys[src].reshape(n, r, d)
-            x = (x - x.mean(1, keepdims=True)).reshape(N, d)
-            x[first] = 0.0
+            if perm is None:
+                src = before[lag]
+            else:  # the record dealt to the slot acquired ``lag`` before (N: none)
+                src = np.take(perm, clipped[lag], out=src_buf, mode="clip")
+                np.copyto(src, N, where=invalid[lag])
+            x = x_bufs[lag]
+            np.take(Ys, src, axis=0, out=x.reshape(N, d), mode="clip")
+            np.subtract(x, x.mean(1, keepdims=True, out=mean_buf), out=x)
+            x = x.reshape(N, d)
+            x[first_rows] = 0.0
             xs.append(x)
         x1, xL = xs
         return _coefficient(float(np.vdot(ep, x1)), float(np.vdot(ep, xL)), float(np.vdot(x1, x1)),

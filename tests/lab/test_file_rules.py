@@ -98,9 +98,9 @@ def test_a_statistic_never_drops_a_non_finite_term():
 
 
 def test_the_finite_check_of_float32_shots_finds_every_bad_value_and_passes_the_largest_good_ones():
-    """float32 values are checked by their float64 sum first (no mask as large as the shots):
-    NaN, +inf, -inf and a +inf beside a -inf are found at their index; float32's largest values,
-    whose float32 sum overflows, are finite."""
+    """Shots are checked by their extremes first (no mask as large as the shots): NaN, +inf,
+    -inf and a +inf beside a -inf are found at their index; float32's largest values, whose
+    float32 sum overflows, are finite; an empty array has nothing to find."""
     # private: the float32 scan's index of the first bad value, exact for sums that overflow
     from gift_theory._finite import first_bad
 
@@ -113,6 +113,7 @@ def test_the_finite_check_of_float32_shots_finds_every_bad_value_and_passes_the_
         a.flat[[37, 90][:len(bad)]] = bad
         assert first_bad(a) == (1, 4, 1)
     assert first_bad(np.ones(5, np.float64)) is None and first_bad(np.r_[1.0, np.nan]) == (1,)
+    assert first_bad(np.ones((0, 3), np.float32)) is None and first_bad(np.r_[2.0, -np.inf]) == (1,)
 
 
 # ---- the long CSV ------------------------------------------------------------------------------

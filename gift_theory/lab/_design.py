@@ -267,6 +267,28 @@ def _factor(pairs) -> float:
     return k
 
 
+def _base_powers(key, hyps, meas: Measurement, base, replicates: int) -> list:
+    """:func:`_power` of each design of ``base`` (None where a hypothesis cannot be simulated on
+    it), the designs in threads (:func:`~._session.default_workers`): each is keyed by its kind
+    alone, so the numbers do not depend on the threads."""
+    import concurrent.futures
+    import contextvars
+
+    from ._session import default_workers
+
+    def one(dz):
+        try:
+            return _power(named_subkey(key, dz.kind), hyps, meas, dz, replicates)
+        except Exception:
+            return None
+
+    threads = min(len(base), default_workers(meas))
+    if threads <= 1:
+        return [one(dz) for dz in base]
+    with concurrent.futures.ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(lambda dz: contextvars.copy_context().run(one, dz), base))
+
+
 def next_measurement(key, meas: Measurement, ranking, mechs, others, base_cmp=None, replicates: int = REPLICATES):
     """The cheapest design that separates the hypotheses left standing with power >= :data:`POWER`
     at :data:`ALPHA` (see the module), as reference §8's object, or None when fewer than two
@@ -276,11 +298,10 @@ def next_measurement(key, meas: Measurement, ranking, mechs, others, base_cmp=No
         return None
     base = designs(meas)
     scored = []
-    for i, dz in enumerate(base):
-        try:
-            pw, pairs = _power(named_subkey(key, dz.kind), hyps, meas, dz, replicates)
-        except Exception:  # a hypothesis that cannot be simulated on this design (e.g. times it needs)
+    for i, (dz, powered) in enumerate(zip(base, _base_powers(key, hyps, meas, base, replicates))):
+        if powered is None:  # a hypothesis that cannot be simulated on this design (e.g. times it needs)
             continue
+        pw, pairs = powered
         k = _factor(pairs)
         if pw >= POWER:
             k = 1.0

@@ -285,10 +285,11 @@ def test_the_shots_needed_grow_as_the_square_of_the_gap_s_inverse():
 
 
 @pytest.mark.slow
-def test_the_next_measurement_separates_shot_from_multiplicative_noise():
+def test_the_next_measurement_separates_shot_from_multiplicative_noise(monkeypatch):
     """Two fitted hypotheses that differ in how the noise grows with the signal: a design is found
     whose simulated power reaches 0.8 at 0.01, and the statistic's power is computed, not assumed
-    (the same two models can never be told apart on a campaign without signal)."""
+    (the same two models can never be told apart on a campaign without signal). The designs are
+    simulated in threads: one thread gives the same design and power to the last digit."""
     import gift_theory as gt
     from gift_theory.lab import Model, simulate_measurement
     from gift_theory.lab import designs, next_measurement
@@ -304,9 +305,14 @@ def test_the_next_measurement_separates_shot_from_multiplicative_noise():
             types.SimpleNamespace(effects=("multiplicative",),
                                   model=Model(gt.Physics.create(s=0.05, multiplicative=0.15)), status="passes",
                                   score=1.5)]
+    monkeypatch.setenv("GIFT_LAB_THREADS", "2")
     nxt = next_measurement(jax.random.PRNGKey(0), meas, hyps, [], hyps[1:])
     assert nxt is not None and nxt["power"] >= 0.8 and nxt["separates"] == ["shot", "multiplicative"]
     assert nxt["shots"] == nxt["inputs"] * nxt["r"]
+    monkeypatch.setenv("GIFT_LAB_THREADS", "1")
+    one = next_measurement(jax.random.PRNGKey(0), meas, hyps, [], hyps[1:])
+    assert {k: v for k, v in one.items() if k != "_x"} == {k: v for k, v in nxt.items() if k != "_x"}
+    np.testing.assert_array_equal(one["_x"], nxt["_x"])
     quiet = Measurement(np.zeros_like(x), meas.y, meas.params, None, None)
     pw, _ = _power(jax.random.PRNGKey(0), [hyps[0], hyps[0]], quiet, designs(quiet)[0], 8)
     assert pw < 0.2  # one model against itself: nothing to separate

@@ -101,7 +101,7 @@ def test_the_finite_check_of_float32_shots_finds_every_bad_value_and_passes_the_
     """Shots are checked by their extremes first (no mask as large as the shots): NaN, +inf,
     -inf and a +inf beside a -inf are found at their index; float32's largest values, whose
     float32 sum overflows, are finite; an empty array has nothing to find."""
-    # private: the float32 scan's index of the first bad value, exact for sums that overflow
+    # private: the scan's index of the first bad value, exact where a float32 sum would overflow
     from gift_theory._finite import first_bad
 
     big = np.full((4, 8, 3), np.finfo(np.float32).max, np.float32)

@@ -459,7 +459,9 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
         when the model has shot noise already.
 
     For a file without taps, each figure is also computed as if the hidden layers were tapped
-    (``power_with_taps``: the same simulated files, hidden layers kept).
+    (``power_with_taps``: the same simulated files, hidden layers kept). The probes run in the
+    lab's threads (:func:`~._session.default_workers`), each keyed by its name alone: the same
+    numbers for any number of threads.
 
     Returns
     -------
@@ -495,8 +497,8 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
     # file's 20 replicates at once were 1 GB of shots, its batches of 4 some 0.8 GB)
     per_file = 8 * meas.n * meas.r * (sum(meas.arch.widths[1:]) + meas.arch.widths[0])
     batch = int(max(1, min(replicates, POWER_BYTES // max(per_file, 1))))
-    out = []
-    for mech, name, phys in probes:
+
+    def probe(mech, name, phys):
         k = named_subkey(key, f"power_{name}")
         ps, pts = [], []
         for b0 in range(0, replicates, batch):
@@ -514,9 +516,20 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
             release_freed_memory()  # the batch's files and their scoring, not kept for the next
         p, se = _rate(np.concatenate(ps), alpha)
         pt = _rate(np.concatenate(pts), alpha)[0] if pts else None
-        out.append({"mechanism": mech, "probe": name, "power": p, "se": se, "power_with_taps": pt,
-                    "probe_params": phys.params_json(), **common})
-    return out
+        return {"mechanism": mech, "probe": name, "power": p, "se": se, "power_with_taps": pt,
+                "probe_params": phys.params_json(), **common}
+
+    # the probes in the lab's threads (each keyed by its name alone: the same numbers for any number)
+    from ._session import default_workers
+
+    threads = min(len(probes), default_workers(meas))
+    if threads <= 1:
+        return [probe(*pr) for pr in probes]
+    import concurrent.futures
+    import contextvars
+
+    with concurrent.futures.ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(lambda pr: contextvars.copy_context().run(probe, *pr), probes))
 
 
 #: bytes of simulated replicate files :func:`power_of` holds at once (their scoring holds some six

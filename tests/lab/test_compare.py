@@ -362,10 +362,11 @@ def deep_setup():
 
 
 @pytest.mark.slow
-def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup):
+def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup, monkeypatch):
     """The rate is the real test's on simulated files: at the model itself it is the level; shot
     noise is seen; a law change at equal variance on 40 inputs x 16 shots is not, with or
-    without taps; an outputs-only file gets the with-taps figure of the same simulated files."""
+    without taps; an outputs-only file gets the with-taps figure of the same simulated files.
+    The probes run in threads: one thread gives the same rows."""
     from gift_theory.lab import power_of
     # private: the rejection rate recomputed file by file, against power_of's batched one
     from gift_theory.lab._compare import _power_p, _rate
@@ -377,7 +378,11 @@ def test_power_of_is_the_test_s_rejection_rate_on_files_of_this_size(deep_setup)
     null = simulate_measurement(jax.random.PRNGKey(10), params, np.tile(x, (B, 1)), model.physics, shots=16, taps=True)
     rate, se = _rate(_power_p(jax.random.PRNGKey(11), model, null, meas.n), 0.01)
     assert rate <= 0.2  # P(>= 3 of 10 false alarms at level 0.01) = 1e-4
-    with_taps = {p["mechanism"]: p for p in power_of(jax.random.PRNGKey(1), model, meas, replicates=B)}
+    monkeypatch.setenv("GIFT_LAB_THREADS", "2")
+    rows = power_of(jax.random.PRNGKey(1), model, meas, replicates=B)
+    monkeypatch.setenv("GIFT_LAB_THREADS", "1")
+    assert power_of(jax.random.PRNGKey(1), model, meas, replicates=B) == rows
+    with_taps = {p["mechanism"]: p for p in rows}
     without = {p["mechanism"]: p for p in power_of(jax.random.PRNGKey(1), model,
                                                    dataclasses.replace(meas, taps=None), replicates=B)}
     assert with_taps["noise_law"]["taps"] and with_taps["noise_law"]["power_with_taps"] is None

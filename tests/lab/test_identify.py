@@ -627,3 +627,19 @@ def test_the_activation_s_shape_is_read_on_the_neurons_whose_z_the_data_resolve(
     low = simulate_measurement(jax.random.PRNGKey(3011), params, x, gt.Physics.create(s=0.1), shots=32, taps=True)
     shape = [r for r in identify(low).rows() if r["test"] == "shape"]
     assert len(shape) == 3 and not any("left out" in r["evidence"] or "not read" in r["evidence"] for r in shape)
+
+
+def test_the_layers_are_read_in_threads_and_one_thread_reads_the_same(monkeypatch):
+    """With taps each layer's identification reads only its own inputs and shots, so the layers
+    run in the lab's threads: one thread gives every row, map and level to the last digit (an
+    interleaved timed campaign, so the time and memory tests run too, and a gain on layer 2)."""
+    meas = sim(31, n=60, r=16, gains={2: 0.8}, interleaved=True)
+    monkeypatch.setenv("GIFT_LAB_THREADS", "3")
+    many = identify(meas)
+    monkeypatch.setenv("GIFT_LAB_THREADS", "1")
+    one = identify(meas)
+    assert len(many.layers) == 3 and many.rows() == one.rows()
+    for a, b in zip(many.layers, one.layers):
+        np.testing.assert_array_equal(a.W_eff, b.W_eff)
+        assert (a.s, a.choice) == (b.s, b.choice)
+    assert any(r["class"] == "gain_error" and r["layer"] == 2 and r["p"] < 0.01 for r in many.rows())

@@ -125,12 +125,13 @@ def _levels_row(out: list) -> dict | None:
     return levels
 
 
-def _each_layer(f, lays) -> list:
-    """``[f(lay) for lay in lays]``, the layers in threads when there are several (each layer's
-    identification reads only its own inputs and shots: the same numbers in any order)."""
+def _each_layer(f, lays, meas: Measurement) -> list:
+    """``[f(lay) for lay in lays]``, the layers in as many threads as the lab's memory budget
+    allows for ``meas`` (:func:`~.._session.default_workers`; each layer's identification reads
+    only its own inputs and shots: the same numbers in any order)."""
     from .._session import default_workers
 
-    threads = min(len(lays), default_workers())
+    threads = min(len(lays), default_workers(meas))
     if threads <= 1:
         return [f(lay) for lay in lays]
     import concurrent.futures
@@ -148,7 +149,7 @@ def _identify(meas: Measurement, s: float | None) -> Identification:
         # relative to the data, not a fixed floor: a constant layer still gets a level > 0
         s = max(s, 1e-7 * float(np.sqrt(np.mean(Y0 ** 2))), np.finfo(np.float32).tiny)
     lays = layer_inputs(meas, s)
-    out = _each_layer(lambda lay: identify_layer(lay, act, s, meas.t, meas.arch.depth, meas.has_taps), lays)
+    out = _each_layer(lambda lay: identify_layer(lay, act, s, meas.t, meas.arch.depth, meas.has_taps), lays, meas)
     if not meas.has_taps and meas.arch.depth > 1:
         # the output's regressor and noise are propagated at the level s: again at the level found,
         # to its fixed point (the regressor's mean moves with s at second order, and at 160 x 48

@@ -10,7 +10,9 @@ threads of its own (:func:`replicate_threads`): they come out of the same budget
 two candidates with two replicate threads each raised the peak by 1.1 GB within seconds). The
 localisation (the baseline's residuals, one-step residuals and signatures) holds about as much
 as a candidate: it runs beside the candidates only when the budget has a thread left for it
-(:func:`localise_beside`), after them otherwise.
+(:func:`localise_beside`), after them otherwise. The same threads (:func:`default_workers`) run
+the other loops of independent, keyed work (:func:`map_in_threads`): a tapped file's layers in the
+identification, the next measurement's candidate designs, the test's power probes.
 """
 
 from __future__ import annotations
@@ -73,3 +75,29 @@ def localise_beside(meas, candidates: int) -> bool:
     """Whether the localisation runs beside ``candidates`` candidate threads: only when the
     budget holds one thread more than they and their replicates may use at once."""
     return candidate_threads(meas) > candidates * replicate_threads(meas, candidates)
+
+
+def default_workers(meas=None) -> int:
+    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``),
+    and -- given ``meas`` -- no more than :func:`candidate_threads` allows for its size (each
+    thread holds a candidate's model shots and statistics; the numbers do not depend on it)."""
+    env = os.environ.get("GIFT_LAB_THREADS", "").strip()
+    if env.isdigit() and int(env) >= 1:
+        return int(env)
+    return max(1, min(4, usable_cores(), candidate_threads(meas) if meas is not None else 4))
+
+
+def map_in_threads(f, items, meas) -> list:
+    """``[f(item) for item in items]``, in up to :func:`default_workers` ``(meas)`` threads, in the
+    order of ``items``. For work that is a function of its item alone (its own data, its own named
+    subkey): the results are the same for any number of threads. Each call runs in a copy of the
+    caller's context, so a phase clock still sees its compiles."""
+    items = list(items)
+    threads = min(len(items), default_workers(meas))
+    if threads <= 1:
+        return [f(item) for item in items]
+    import concurrent.futures
+    import contextvars
+
+    with concurrent.futures.ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(lambda item: contextvars.copy_context().run(f, item), items))

@@ -460,7 +460,7 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
 
     For a file without taps, each figure is also computed as if the hidden layers were tapped
     (``power_with_taps``: the same simulated files, hidden layers kept). The probes run in the
-    lab's threads (:func:`~._session.default_workers`), each keyed by its name alone: the same
+    lab's threads (:func:`~._budget.map_in_threads`), each keyed by its name alone: the same
     numbers for any number of threads.
 
     Returns
@@ -520,16 +520,9 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
                 "probe_params": phys.params_json(), **common}
 
     # the probes in the lab's threads (each keyed by its name alone: the same numbers for any number)
-    from ._session import default_workers
+    from ._budget import map_in_threads
 
-    threads = min(len(probes), default_workers(meas))
-    if threads <= 1:
-        return [probe(*pr) for pr in probes]
-    import concurrent.futures
-    import contextvars
-
-    with concurrent.futures.ThreadPoolExecutor(max_workers=threads) as pool:
-        return list(pool.map(lambda pr: contextvars.copy_context().run(probe, *pr), probes))
+    return map_in_threads(lambda pr: probe(*pr), probes, meas)
 
 
 #: bytes of simulated replicate files :func:`power_of` holds at once (their scoring holds some six

@@ -269,12 +269,9 @@ def _factor(pairs) -> float:
 
 def _base_powers(key, hyps, meas: Measurement, base, replicates: int) -> list:
     """:func:`_power` of each design of ``base`` (None where a hypothesis cannot be simulated on
-    it), the designs in threads (:func:`~._session.default_workers`): each is keyed by its kind
-    alone, so the numbers do not depend on the threads."""
-    import concurrent.futures
-    import contextvars
-
-    from ._session import default_workers
+    it), the designs in the lab's threads (:func:`~._budget.map_in_threads`): each is keyed by its
+    kind alone."""
+    from ._budget import map_in_threads
 
     def one(dz):
         try:
@@ -282,11 +279,7 @@ def _base_powers(key, hyps, meas: Measurement, base, replicates: int) -> list:
         except Exception:
             return None
 
-    threads = min(len(base), default_workers(meas))
-    if threads <= 1:
-        return [one(dz) for dz in base]
-    with concurrent.futures.ThreadPoolExecutor(max_workers=threads) as pool:
-        return list(pool.map(lambda dz: contextvars.copy_context().run(one, dz), base))
+    return map_in_threads(one, base, meas)
 
 
 def next_measurement(key, meas: Measurement, ranking, mechs, others, base_cmp=None, replicates: int = REPLICATES):

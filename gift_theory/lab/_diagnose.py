@@ -59,7 +59,7 @@ from .._process import release_freed_memory
 from ..effects import BUILTIN, REGISTRY
 from ..effects._physics import scope_error
 from . import _ambiguity
-from ._budget import localise_beside
+from ._budget import default_workers, localise_beside
 from ._channels import reference
 from ._compare import compare, failing_layers, one_step_check
 from ._explain_output import also_explaining, summary
@@ -68,7 +68,7 @@ from ._localise import layer_evidence, one_step_residuals, residuals, signatures
 from ._mechanisms import Context, fit_gains, lead_with_explanation, mechanisms, named_classes
 from ._ranking import SECOND, _log, rank_candidates, with_alternatives
 from ._results import Diagnosis, FitResult
-from ._session import Session, default_workers
+from ._session import Session
 from ._shots import Model
 from ._verdict import mechanism_classes, verdict
 from .identification import identify

@@ -9,7 +9,6 @@ import concurrent.futures
 import contextvars
 import dataclasses
 import hashlib
-import os
 import threading
 import time
 import zlib
@@ -22,7 +21,7 @@ from .._measurement import Measurement
 from .._model import named_subkey
 from .._process import release_freed_memory
 from ..effects import REGISTRY
-from ._budget import candidate_threads, replicate_threads, usable_cores
+from ._budget import default_workers, replicate_threads
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, one_step_check
 from ._fit import fit_model
@@ -99,16 +98,6 @@ class Memo:
             with self._lock:
                 self._done[key] = value
         return value
-
-
-def default_workers(meas: Measurement | None = None) -> int:
-    """Threads for the candidates: the cores this process may use, at most 4 (``$GIFT_LAB_THREADS``),
-    and -- given ``meas`` -- no more than :func:`~._budget.candidate_threads` allows for its size
-    (each thread holds a candidate's model shots and statistics; the numbers do not depend on it)."""
-    env = os.environ.get("GIFT_LAB_THREADS", "").strip()
-    if env.isdigit() and int(env) >= 1:
-        return int(env)
-    return max(1, min(4, usable_cores(), candidate_threads(meas) if meas is not None else 4))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -274,7 +274,6 @@ def test_the_lab_s_memory_budget_is_set_by_the_environment_and_a_bad_value_is_on
     them (the numbers do not depend on it: ``test_order_of_candidates_and_threads_change_no_number``);
     a value that is not a size is a bad input, named."""
     from gift_theory.lab import _budget  # private: the thread budget, its contract (see the test above)
-    from gift_theory.lab._session import default_workers
 
     big = types.SimpleNamespace(n=1740, r=64, layers=lambda: [np.empty((0, 0, d)) for d in (32, 16, 8)])
     monkeypatch.delenv("GIFT_LAB_THREADS", raising=False)
@@ -283,7 +282,7 @@ def test_the_lab_s_memory_budget_is_set_by_the_environment_and_a_bad_value_is_on
     assert _budget.candidate_threads(big) == (8 << 30) // (20 * _budget.shot_bytes(big))
     monkeypatch.setenv("GIFT_LAB_MEMORY", "256M")
     assert _budget.lab_memory() == 256 << 20 and _budget.candidate_threads(big) == 1
-    assert default_workers(big) == 1 and not _budget.localise_beside(big, 1)
+    assert _budget.default_workers(big) == 1 and not _budget.localise_beside(big, 1)
     monkeypatch.setenv("GIFT_LAB_MEMORY", str(3 << 30))
     assert _budget.lab_memory() == 3 << 30
     for bad in ("lots", "2.5G", "0", "-1G", "12X"):

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..._arch import NUMPY_ACTIVATIONS as _ACT
 from ..._measurement import Measurement
+from .._budget import map_in_threads
 from .._discrete import lattice_row
 from .._level import ALPHA
 from ._layer import identify_layer
@@ -125,22 +126,6 @@ def _levels_row(out: list) -> dict | None:
     return levels
 
 
-def _each_layer(f, lays, meas: Measurement) -> list:
-    """``[f(lay) for lay in lays]``, the layers in as many threads as the lab's memory budget
-    allows for ``meas`` (:func:`~.._session.default_workers`; each layer's identification reads
-    only its own inputs and shots: the same numbers in any order)."""
-    from .._session import default_workers
-
-    threads = min(len(lays), default_workers(meas))
-    if threads <= 1:
-        return [f(lay) for lay in lays]
-    import concurrent.futures
-    import contextvars
-
-    with concurrent.futures.ThreadPoolExecutor(max_workers=threads) as pool:
-        return list(pool.map(lambda lay: contextvars.copy_context().run(f, lay), lays))
-
-
 def _identify(meas: Measurement, s: float | None) -> Identification:
     act = meas.activation if meas.activation in _ACT else "tanh"
     if s is None:
@@ -149,7 +134,8 @@ def _identify(meas: Measurement, s: float | None) -> Identification:
         # relative to the data, not a fixed floor: a constant layer still gets a level > 0
         s = max(s, 1e-7 * float(np.sqrt(np.mean(Y0 ** 2))), np.finfo(np.float32).tiny)
     lays = layer_inputs(meas, s)
-    out = _each_layer(lambda lay: identify_layer(lay, act, s, meas.t, meas.arch.depth, meas.has_taps), lays, meas)
+    # each layer reads only its own inputs and shots: the layers in the lab's threads
+    out = map_in_threads(lambda lay: identify_layer(lay, act, s, meas.t, meas.arch.depth, meas.has_taps), lays, meas)
     if not meas.has_taps and meas.arch.depth > 1:
         # the output's regressor and noise are propagated at the level s: again at the level found,
         # to its fixed point (the regressor's mean moves with s at second order, and at 160 x 48

@@ -29,6 +29,8 @@ runs them::
     _localise      where a model fails; each effect's signature
     _mechanisms    the mechanism classes named from the evidence
     _diagnose      the pipeline: the stages above, in order
+    _budget        how many threads the lab runs for a file's size (its memory budget), and
+                   map_in_threads: the loops of independent keyed work run in them
     _neurons       per-neuron values identified neuron by neuron: an explanation
     _ambiguity     the models the data cannot tell apart (reference §8)
     _design        the next measurement that would tell them apart (reference §8, ``gift design``)

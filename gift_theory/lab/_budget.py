@@ -11,8 +11,9 @@ two candidates with two replicate threads each raised the peak by 1.1 GB within 
 localisation (the baseline's residuals, one-step residuals and signatures) holds about as much
 as a candidate: it runs beside the candidates only when the budget has a thread left for it
 (:func:`localise_beside`), after them otherwise. The same threads (:func:`default_workers`) run
-the other loops of independent, keyed work (:func:`map_in_threads`): a tapped file's layers in the
-identification, the next measurement's candidate designs, the test's power probes.
+the other loops of independent, keyed work (:func:`map_in_threads`, which the candidates and the
+refit null's replicates also run in): a tapped file's layers in the identification, the next
+measurement's candidate designs, the test's power probes.
 """
 
 from __future__ import annotations
@@ -87,17 +88,17 @@ def default_workers(meas=None) -> int:
     return max(1, min(4, usable_cores(), candidate_threads(meas) if meas is not None else 4))
 
 
-def map_in_threads(f, items, meas) -> list:
-    """``[f(item) for item in items]``, in up to :func:`default_workers` ``(meas)`` threads, in the
-    order of ``items``. For work that is a function of its item alone (its own data, its own named
-    subkey): the results are the same for any number of threads. Each call runs in a copy of the
-    caller's context, so a phase clock still sees its compiles."""
+def map_in_threads(f, items, threads: int) -> list:
+    """``[f(item) for item in items]``, in up to ``threads`` threads (the lab's are
+    :func:`default_workers`), in the order of ``items``. For work that is a function of its item
+    alone (its own data, its own named subkey): the results are the same for any number of
+    threads. Each call runs in a copy of the caller's context, so a phase clock still sees its
+    compiles."""
     items = list(items)
-    threads = min(len(items), default_workers(meas))
-    if threads <= 1:
+    if min(len(items), int(threads)) <= 1:
         return [f(item) for item in items]
     import concurrent.futures
     import contextvars
 
-    with concurrent.futures.ThreadPoolExecutor(max_workers=threads) as pool:
+    with concurrent.futures.ThreadPoolExecutor(max_workers=min(len(items), int(threads))) as pool:
         return list(pool.map(lambda item: contextvars.copy_context().run(f, item), items))

@@ -520,9 +520,9 @@ def power_of(key, model: Model, meas: Measurement, *, alpha: float = 0.01, repli
                 "probe_params": phys.params_json(), **common}
 
     # the probes in the lab's threads (each keyed by its name alone: the same numbers for any number)
-    from ._budget import map_in_threads
+    from ._budget import default_workers, map_in_threads
 
-    return map_in_threads(lambda pr: probe(*pr), probes, meas)
+    return map_in_threads(lambda pr: probe(*pr), probes, default_workers(meas))
 
 
 #: bytes of simulated replicate files :func:`power_of` holds at once (their scoring holds some six

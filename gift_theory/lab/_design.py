@@ -271,7 +271,7 @@ def _base_powers(key, hyps, meas: Measurement, base, replicates: int) -> list:
     """:func:`_power` of each design of ``base`` (None where a hypothesis cannot be simulated on
     it), the designs in the lab's threads (:func:`~._budget.map_in_threads`): each is keyed by its
     kind alone."""
-    from ._budget import map_in_threads
+    from ._budget import default_workers, map_in_threads
 
     def one(dz):
         try:
@@ -279,7 +279,7 @@ def _base_powers(key, hyps, meas: Measurement, base, replicates: int) -> list:
         except Exception:
             return None
 
-    return map_in_threads(one, base, meas)
+    return map_in_threads(one, base, default_workers(meas))
 
 
 def next_measurement(key, meas: Measurement, ranking, mechs, others, base_cmp=None, replicates: int = REPLICATES):

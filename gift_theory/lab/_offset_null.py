@@ -14,8 +14,6 @@ scored on simulated held-out data.
 
 from __future__ import annotations
 
-import concurrent.futures
-import contextvars
 import dataclasses
 import functools
 
@@ -31,6 +29,7 @@ from .._model import (
     simulate,
 )
 from .._process import release_freed_memory
+from ._budget import map_in_threads
 from ._shots import Model, params32, to32
 from ._offset_kinds import (
     _initial_scale,
@@ -276,9 +275,4 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
         return out
 
     # the replicates are independent (each from its own subkey): ``workers`` threads make them at once
-    if workers > 1 and B > 1:
-        with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
-            out = [f.result() for f in [pool.submit(contextvars.copy_context().run, replicate, b) for b in range(B)]]
-    else:
-        out = [replicate(b) for b in range(B)]
-    return np.stack(out)
+    return np.stack(map_in_threads(replicate, range(B), workers))

@@ -5,8 +5,6 @@ cache (:class:`Memo`)."""
 
 from __future__ import annotations
 
-import concurrent.futures
-import contextvars
 import dataclasses
 import hashlib
 import threading
@@ -21,7 +19,7 @@ from .._measurement import Measurement
 from .._model import named_subkey
 from .._process import release_freed_memory
 from ..effects import REGISTRY
-from ._budget import default_workers, replicate_threads
+from ._budget import default_workers, map_in_threads, replicate_threads
 from ._channels import Reference, channel_values, reference
 from ._compare import Comparison, compare, one_step_check
 from ._fit import fit_model
@@ -258,9 +256,4 @@ class Session:
                              seconds, float(n_free), int(nominal))
             return report(self.checks(cand))
 
-        if self.workers > 1 and len(requests) > 1:
-            with concurrent.futures.ThreadPoolExecutor(max_workers=self.workers) as pool:
-                # each task in a copy of this context, so a PhaseClock still sees its compiles
-                futs = [pool.submit(contextvars.copy_context().run, one, r) for r in requests]
-                return [f.result() for f in futs]
-        return [one(r) for r in requests]
+        return map_in_threads(one, requests, self.workers)

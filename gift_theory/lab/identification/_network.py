@@ -10,7 +10,7 @@ import numpy as np
 
 from ..._arch import NUMPY_ACTIVATIONS as _ACT
 from ..._measurement import Measurement
-from .._budget import map_in_threads
+from .._budget import default_workers, map_in_threads
 from .._discrete import lattice_row
 from .._level import ALPHA
 from ._layer import identify_layer
@@ -135,7 +135,8 @@ def _identify(meas: Measurement, s: float | None) -> Identification:
         s = max(s, 1e-7 * float(np.sqrt(np.mean(Y0 ** 2))), np.finfo(np.float32).tiny)
     lays = layer_inputs(meas, s)
     # each layer reads only its own inputs and shots: the layers in the lab's threads
-    out = map_in_threads(lambda lay: identify_layer(lay, act, s, meas.t, meas.arch.depth, meas.has_taps), lays, meas)
+    out = map_in_threads(lambda lay: identify_layer(lay, act, s, meas.t, meas.arch.depth, meas.has_taps), lays,
+                         default_workers(meas))
     if not meas.has_taps and meas.arch.depth > 1:
         # the output's regressor and noise are propagated at the level s: again at the level found,
         # to its fixed point (the regressor's mean moves with s at second order, and at 160 x 48

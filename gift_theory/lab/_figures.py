@@ -91,6 +91,52 @@ def _outline(ax, mask, color="k", lw=1.6):
 UNMARKED = ("excess_kurtosis",)
 
 
+def _cell_values_artist():
+    from matplotlib.artist import Artist
+    from matplotlib.text import Text
+
+    class CellValues(Artist):
+        """Each finite cell's value of a heatmap (row i, column j at data (j, i)), written in its
+        cell: what a Text per cell draws, pixel for pixel, drawn by one Text moved from cell to
+        cell. A heatmap of a few hundred rows holds thousands of values; as one artist they
+        cost no artist each to make, and nothing in the layout pass of a constrained layout
+        (they sit inside their cells, so the layout need not measure them)."""
+
+        zorder = 3  # a Text's
+
+        def __init__(self, M, lim: float, fontsize: float):
+            super().__init__()
+            i, j = np.nonzero(np.isfinite(M))
+            v = M[i, j]
+            self.cells = np.column_stack([j, i]).astype(float)
+            self.labels = [f"{x:.1f}" for x in v]
+            self.colors = np.where(np.abs(v) > 0.6 * lim, "white", "black")
+            self.text = Text(0, 0, "", ha="center", va="center", fontsize=fontsize)
+            self.set_in_layout(False)
+
+        def draw(self, renderer):
+            if not self.get_visible() or "draw_text" in vars(renderer):
+                return  # hidden, or a layout pass (matplotlib's renderer with its drawing turned off)
+            t = self.text
+            t.set_figure(self.get_figure(root=False))
+            t.axes = self.axes
+            t.set_transform(self.axes.transData)
+            t.set_clip_path(self.get_clip_path())
+            for xy, label, color in zip(self.cells, self.labels, self.colors):
+                t.set_position(xy)
+                t.set_text(label)
+                t.set_color(color)
+                t.draw(renderer)
+            self.stale = False
+
+    return CellValues
+
+
+def _CellValues(M, lim: float, fontsize: float):
+    """The values of a heatmap's cells as one artist (:func:`_cell_values_artist`)."""
+    return _cell_values_artist()(M, lim, fontsize)
+
+
 def where_figure(stats: dict, *, title: str = "where the model fails", fig=None, alpha: float = 0.01):
     """Per-cell standardised statistics over (layer:neuron) x bins of the model's pre-activation,
     one heatmap per statistic, each bin's value written in it.
@@ -144,11 +190,7 @@ def where_figure(stats: dict, *, title: str = "where the model fails", fig=None,
         if name not in UNMARKED:
             _outline(ax, np.nan_to_num(np.abs(M)) > zc)
         if font:
-            for (i, j), v in np.ndenumerate(M):
-                if np.isfinite(v):
-                    # inside its cell: the layout need not measure it
-                    ax.text(j, i, f"{v:.1f}", ha="center", va="center", fontsize=font,
-                            color="white" if abs(v) > 0.6 * lim else "black", in_layout=False)
+            ax.add_artist(_CellValues(M, lim, font))
         if k == 0:
             step = max(1, int(np.ceil(nr / 60)))
             ax.set_yticks(range(0, nr, step))

@@ -127,12 +127,44 @@ def test_where_figure_has_one_colour_scale_the_bin_edges_and_marks_the_significa
         want = 0 if name == "excess_kurtosis" else int(np.sum(np.nan_to_num(np.abs(stats["maps"][name])) > zc))
         assert len(p.patches) == want, name
     assert len(panels[1].patches) == 1 and f"{zc:.2f}" in fig._suptitle.get_text()
-    texts = [t.get_text() for t in panels[1].texts]
+    texts = [label for a in panels[1].artists for label in getattr(a, "labels", ())]  # each cell's value, in it
     assert len(texts) == 7 * 6 and f"{stats['maps']['log_var_ratio'][0, 1]:.1f}" in texts
+    assert len([label for a in panels[0].artists for label in getattr(a, "labels", ())]) == 7 * 6 - 1  # not the empty bin
     assert fig.get_layout_engine() is not None
     given = Figure()
     assert where_figure(stats, fig=given) is given
     assert os.listdir(tmp_path) == []
+
+
+def test_the_where_figure_s_cell_values_are_the_pixels_a_text_per_cell_draws():
+    # the cell values are one artist (thousands of Texts cost seconds to make, lay out and draw):
+    # its pixels must be those of a Text per cell -- white on the strong colours, none in an empty bin
+    import io
+
+    stats = _where_stats()
+    stats["maps"]["mean_z"][2, 3] = 6.0
+    stats["maps"]["mean_z"][6, 5] = np.nan
+
+    def pixels(values):  # a fresh figure drawn once (a constrained layout moves on a second draw)
+        fig = where_figure(stats)
+        panels = [a for a in fig.axes if a.get_label() != "<colorbar>"]
+        lim = panels[0].images[0].get_clim()[1]
+        for ax, name in zip(panels, stats["maps"]):
+            if values == "one artist":
+                continue
+            (artist,) = [a for a in ax.artists if hasattr(a, "labels")]
+            artist.remove()
+            for (i, j), v in np.ndenumerate(np.asarray(stats["maps"][name], float)):
+                if values == "a Text per cell" and np.isfinite(v):
+                    ax.text(j, i, f"{v:.1f}", ha="center", va="center", fontsize=7,
+                            color="white" if abs(v) > 0.6 * lim else "black", in_layout=False)
+        png = io.BytesIO()  # savefig: a layout pass with drawing turned off, then the drawing
+        fig.savefig(png, format="png")
+        return png.getvalue()
+
+    fast, slow, blank = pixels("one artist"), pixels("a Text per cell"), pixels("none")
+    assert fast == slow
+    assert fast != blank  # the values are drawn
 
 
 def test_error_ladder_draws_into_a_given_ax(tmp_path):

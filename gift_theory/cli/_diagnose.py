@@ -7,6 +7,7 @@ other half (reference §4 JSON with ``--json``; a text report and a figure folde
 from __future__ import annotations
 
 import argparse
+import contextlib
 
 from ._common import Progress
 from ._fit import no_taps_caveat
@@ -28,17 +29,26 @@ def add_arguments(parser):
 
 def run(args):
     from .._errors import require
-    from .._model import named_subkey
-    from ..lab import diagnose
-    from ..lab import diagnosis_comparison, diagnosis_figures, power_notes, power_of
+    from ..lab import DiagnosisFigures, diagnose
 
     require(args.power_replicates >= 0, f"--power-replicates {args.power_replicates}: needs 0 or more")
     folder = figure_dir(args, "diagnose")  # a folder of another command's: refused before any work
     processes = figure_processes(folder)  # with 2, a helper process starts now
     meas = load(args)
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
-    res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
-                   progress=Progress("gift diagnose: candidates", args.quiet, after=True), design=args.design)
+    # the figures that need only the ranking are drawn while the diagnosis localises
+    with DiagnosisFigures(folder, meas=meas, key=key(args), processes=processes) if folder \
+            else contextlib.nullcontext() as figures:
+        res = diagnose(key(args), meas, candidates=cands, shots=args.shots, verbose=not args.quiet,
+                       progress=Progress("gift diagnose: candidates", args.quiet, after=True), design=args.design,
+                       ranked=figures.ranked if figures else None)
+        return _output(args, meas, res, folder, figures)
+
+
+def _output(args, meas, res, folder, figures):
+    from .._model import named_subkey
+    from ..lab import diagnosis_comparison, power_notes, power_of
+
     out = res.as_json()
 
     def power():  # the test's power needs no figure: computed while a helper draws them
@@ -53,8 +63,7 @@ def run(args):
     out["model_comparison"] = diagnosis_comparison(res)
     later = power if not res.missing_effect_detected else None
     if folder:
-        out["figures"] = diagnosis_figures(res, folder, meas=meas, key=key(args), processes=processes,
-                                           meanwhile=later)
+        out["figures"] = figures.finish(res, meanwhile=later)
         write_manifest(folder, "diagnose", args, out["figures"])
     elif later is not None:
         later()

@@ -92,6 +92,7 @@ from ._design import public as design_json
 from ._figure_sets import compare_figures as compare_figures
 from ._figure_sets import diagnosis_comparison as diagnosis_comparison
 from ._figure_sets import diagnosis_figures as diagnosis_figures
+from ._figure_sets import DiagnosisFigures as DiagnosisFigures
 from ._figure_sets import fit_figures as fit_figures
 from ._figure_sets import save_figures as save_figures
 from ._io import NETCDF_EXTENSIONS as NETCDF_EXTENSIONS

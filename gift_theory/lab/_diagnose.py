@@ -118,7 +118,8 @@ def _localise(session: Session, base: Model, meas: Measurement, shots):
 
 
 def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = None, second: int | None = SECOND,
-             verbose: bool = False, workers: int | None = None, progress=None, design: bool = False) -> Diagnosis:
+             verbose: bool = False, workers: int | None = None, progress=None, design: bool = False,
+             ranked=None) -> Diagnosis:
     """Fit the baseline and every candidate effect; rank them on held-out inputs.
 
     Parameters
@@ -141,6 +142,10 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     design : whether to design the next measurement (:mod:`._design`) when the data do not choose
         between models, or nothing explains them (``gift diagnose`` does; it simulates a few
         hundred campaigns, so it is asked for here); without it ``next_measurement`` is None
+    ranked : ``ranked(baseline, baseline_comparison, ranking, held_out)``, called once the
+        ranking is final, while the localisation may still run (``gift diagnose`` draws the
+        figures that need no more then: :class:`~gift_theory.lab.DiagnosisFigures`); it must not
+        change what it is given. No number of the diagnosis depends on it
 
     Returns
     -------
@@ -165,6 +170,8 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
                  if threads > 1 and localise_beside(meas, threads) else None)
         ranking, not_fitted = rank_candidates(session, names, second, verbose, ident, progress)
         ranking, not_fitted = with_alternatives(session, ranking, not_fitted, ident, verbose, progress)
+        if ranked is not None:
+            ranked(base, base_cmp, tuple(ranking), session.test)
         steps, failing, evidence, sigs, where = (local.result() if local is not None
                                                  else _localise(session, base, meas, shots))
     taps = meas.has_taps

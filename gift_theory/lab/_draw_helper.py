@@ -3,7 +3,7 @@
 Reads drawings from stdin, each a length (8 bytes, little-endian) and a pickled ``(drawing,
 path)`` from the process that started it, draws and writes each (:func:`._drawing.draw_to`) and
 answers one byte: ``1`` written, ``0`` failed (the caller then draws it itself). Ends at the end of
-its input. Its own output goes to stderr, so that nothing but the answers reaches stdout.
+its input, at once. Its own output goes to stderr, so that nothing but the answers reaches stdout.
 """
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ def main() -> int:
     source = sys.stdin.buffer
     while True:
         head = source.read(8)
-        if len(head) < 8:
-            return 0
+        if len(head) < 8:  # every file is written (and synced): end without the interpreter's tear-down
+            sys.stderr.flush()  # (half a second with JAX loaded, which the caller would wait for)
+            os._exit(0)
         payload = source.read(int.from_bytes(head, "little"))
         try:
             draw_to(*pickle.loads(payload))
@@ -37,9 +38,12 @@ def main() -> int:
 
 def _warm_up() -> None:
     """Draw a small figure with what the lab's figures use (a constrained layout, mathtext, log
-    axes, a legend), while the command computes: the fonts and the parsers are then loaded
-    before the first real drawing arrives."""
+    axes, a legend), and import the netCDF writer, while the command computes: the fonts, the
+    parsers and xarray are then loaded before the first real drawing or numbers arrive."""
     import io
+
+    import h5netcdf  # noqa: F401
+    import xarray  # noqa: F401
 
     from matplotlib.figure import Figure
 

@@ -17,7 +17,6 @@ a helper.
 from __future__ import annotations
 
 import atexit
-import collections
 import os
 import pickle
 import subprocess
@@ -29,11 +28,23 @@ import time
 def draw_to(drawing, path: str) -> str:
     """Draw ``drawing`` (a Figure, or a callable returning one) and write it to ``path``
     atomically: a constrained-layout figure as it is (its layout already fits every artist), any
-    other with the tight box."""
+    other with the tight box. A ``.nc`` path takes a figure's numbers instead (an
+    ``xarray.Dataset`` or a callable returning one: :func:`save_dataset`)."""
     from .._io import save_figure
 
+    if os.fspath(path).endswith(".nc"):
+        return save_dataset(drawing() if callable(drawing) else drawing, path)
     fig = drawing() if callable(drawing) else drawing
     return save_figure(fig, path, bbox_inches=_bbox(fig))
+
+
+def save_dataset(ds, path: str) -> str:
+    """An ``xarray.Dataset`` written atomically as netCDF (h5netcdf)."""
+    from .._io import atomic_path
+
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="h5netcdf")
+    return path
 
 
 def _bbox(fig):
@@ -57,7 +68,7 @@ class Drawing:
         self.processes = processes
         self.jobs: list = []  # (drawing, path), in the order handed over
         self.here: list[int] = []  # those only this process can draw
-        self.left = collections.deque()  # those either process may take, not taken yet
+        self.left: list = []  # (-cost, i) of those either process may take, not taken yet
         self.undone: list[int] = []  # taken by the helper, not drawn by it
         self.cond = threading.Condition()
         self.closed = False
@@ -86,13 +97,19 @@ class Drawing:
             self.closed = True
             self.cond.notify_all()
 
-    def add(self, jobs) -> None:
-        """Hand over ``(drawing, path)`` pairs, the costliest first."""
+    def add(self, jobs, costs=None) -> None:
+        """Hand over ``(drawing, path)`` pairs; ``costs``: each one's relative drawing time (default
+        1). The costliest left is drawn first, whenever it was handed over, so that the two
+        processes end together."""
+        costs = [1.0] * len(jobs) if costs is None else list(costs)
         with self.cond:
-            for drawing, path in jobs:
+            for (drawing, path), cost in zip(jobs, costs):
                 i = len(self.jobs)
                 self.jobs.append((drawing, path))
-                (self.left if self.processes >= 2 and callable(drawing) else self.here).append(i)
+                if self.processes >= 2 and callable(drawing):
+                    self.left.append((-float(cost), i))
+                else:
+                    self.here.append(i)
             self.cond.notify_all()
         if self.left and self.feeder is None:
             self.feeder = threading.Thread(target=self._feed_helper, daemon=True)
@@ -100,12 +117,13 @@ class Drawing:
 
     def finish(self, meanwhile=None) -> list[str]:
         """Run ``meanwhile`` (a computation that needs no figure) while the helper draws, then draw
-        here what is left (with the helper), what only this process can draw, and what the helper
-        did not; the paths, in the order handed over."""
+        here what is left (with the helper; the numbers files, ``.nc``, are the helper's while it
+        runs: this process need not import their writer), what only this process can draw, and
+        what the helper did not; the paths, in the order handed over."""
         if meanwhile is not None:
             meanwhile()
         self._close()
-        while (i := self._take()) is not None:
+        while (i := self._take(here=True)) is not None:
             self._draw_here(i)
         for i in self.here:
             self._draw_here(i)
@@ -118,6 +136,8 @@ class Drawing:
                 self.feeder.join()
         for i in self.undone:  # what the helper did not draw is drawn here (an error in it raised here)
             self._draw_here(i)
+        while (i := self._take()) is not None:  # what a helper that stopped left
+            self._draw_here(i)
         return [p for _, p in self.jobs]
 
     def _draw_here(self, i: int) -> None:
@@ -125,13 +145,25 @@ class Drawing:
         draw_to(*self.jobs[i])
         self.longest = max(self.longest, time.perf_counter() - t0)
 
-    def _take(self, wait: bool = False) -> int | None:
-        """The costliest drawing left (None when none is); ``wait``: until one is handed over or
-        :meth:`finish` is called."""
+    def _take(self, wait: bool = False, here: bool = False) -> int | None:
+        """The costliest drawing left, the first handed over among equals (None when none is);
+        ``wait``: until one is handed over or :meth:`finish` is called; ``here``: for this
+        process, which leaves the numbers files (``.nc``) to a running helper -- and the helper
+        takes them first, as they come, while this process still computes."""
         with self.cond:
             while wait and not self.left and not self.closed:
                 self.cond.wait()
-            return self.left.popleft() if self.left else None
+            numbers = [job for job in self.left if self.jobs[job[1]][1].endswith(".nc")]
+            pool = self.left
+            if here and self.feeder is not None and self.feeder.is_alive():
+                pool = [job for job in self.left if job not in numbers]
+            elif not here and numbers:  # the helper writes them first, while this process is busy elsewhere
+                pool = numbers[:1]
+            if not pool:
+                return None
+            best = min(pool)
+            self.left.remove(best)
+            return best[1]
 
     def _feed_helper(self) -> None:
         """In a thread: take the helper :func:`start_helper` started (else start one) and hand it

@@ -45,23 +45,24 @@ def save_figures(figures: dict, folder: str, data: dict | None = None, processes
 
 
 def _hand_over(drawing, figures: dict, data: dict | None = None, *, folder: str) -> list[str]:
-    """Write the numbers (``data``) of ``figures`` into ``folder`` and hand their drawings to
-    ``drawing``, the costliest first; their PNG paths, in the order of ``figures``."""
-    for name, ds in (data or {}).items():
-        if name in figures and ds is not None:
-            save_dataset(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc"))
+    """Hand ``drawing`` the drawings of ``figures`` and the writing of their numbers (``data``:
+    each an ``xarray.Dataset`` or a callable returning one, written as netCDF beside its PNG) into
+    ``folder``, the costliest first; their PNG paths, in the order of ``figures``."""
     jobs = [(f, os.path.join(folder, name)) for name, f in figures.items()]
-    drawing.add(sorted(jobs, key=lambda job: -_COST.get(_kind(job[1]), 1.0)))
-    return [p for _, p in jobs]
+    jobs += [(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc")) for name, ds in (data or {}).items()
+             if name in figures and ds is not None]
+    drawing.add(jobs, [_COST.get(_kind(p), 1.0) for _, p in jobs])
+    return [p for _, p in jobs if p.endswith(".png")]
 
 
 #: the relative cost of drawing each kind of figure (t240's figures, where.png's 72 rows of cells
-#: the largest): the costliest are handed out first, so that the two processes end together
-_COST = {"where": 4.0, "moments": 2.0, "ppc": 2.0, "correlation": 1.0}
+#: the largest) and of writing a figure's numbers (``nc``): the costliest are taken first, so that
+#: the two processes end together
+_COST = {"where": 3.0, "moments": 2.0, "ppc": 2.0, "correlation": 1.0, "nc": 0.1}
 
 
 def _kind(path: str) -> str:
-    return os.path.basename(path).split("_")[0].split(".")[0]
+    return "nc" if path.endswith(".nc") else os.path.basename(path).split("_")[0].split(".")[0]
 
 
 def _layer_only(obj, layer: int):
@@ -72,15 +73,6 @@ def _layer_only(obj, layer: int):
     return dataclasses.replace(obj, **{
         f.name: [v if j == li else None for j, v in enumerate(getattr(obj, f.name))]
         for f in dataclasses.fields(obj) if isinstance(getattr(obj, f.name), list)})
-
-
-def save_dataset(ds, path: str) -> str:
-    """An ``xarray.Dataset`` written atomically as netCDF (h5netcdf)."""
-    from .._io import atomic_path
-
-    with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, engine="h5netcdf")
-    return path
 
 
 # ---- the numbers behind each figure, as xarray Datasets ----------------------------------------
@@ -206,14 +198,14 @@ def where_figures(stats: dict, model: str) -> tuple[dict, dict]:
     ``(figures, data)``."""
     title = model
     figs = {"where.png": partial(where_figure, stats, title=f"{model}: where it fails")}
-    data = {"where.png": where_data(stats)}
+    data = {"where.png": partial(where_data, stats)}
     if stats.get("pit"):
         figs["pit.png"] = partial(pit_figure, stats, title=f"{title}: PIT of the measured shots among the model's own")
-        data["pit.png"] = pit_data(stats)
+        data["pit.png"] = partial(pit_data, stats)
         figs["correlation.png"] = partial(correlation_figure, stats, title=f"{title}: correlation between neurons")
-        data["correlation.png"] = correlation_data(stats)
+        data["correlation.png"] = partial(correlation_data, stats)
         figs["law.png"] = partial(law_figure, stats, title=f"{title}: quantiles of the standardised shots")
-        data["law.png"] = law_data(stats)
+        data["law.png"] = partial(law_data, stats)
     return figs, data
 
 
@@ -229,9 +221,9 @@ def predictive_figures(key, models, meas) -> tuple[dict, dict]:
     figs, data = {}, {}
     for l in meas.layer_ids():
         figs[f"moments_layer{l}.png"] = partial(moments_figure, [_layer_only(m, l) for m in mom], l)
-        data[f"moments_layer{l}.png"] = moments_data(mom, l)
+        data[f"moments_layer{l}.png"] = partial(moments_data, [_layer_only(m, l) for m in mom], l)
         figs[f"ppc_layer{l}.png"] = partial(ppc_figure, [_layer_only(p, l) for p in preds], l)
-        data[f"ppc_layer{l}.png"] = ppc_data(preds, l)
+        data[f"ppc_layer{l}.png"] = partial(ppc_data, [_layer_only(p, l) for p in preds], l)
     return figs, data
 
 
@@ -244,44 +236,116 @@ def diagnosis_figures(diagnosis, folder: str, meas=None, key=None, processes: in
     shots (PIT, correlations, quantiles); given the measurement, each measured layer's moments
     and posterior-predictive overlay under the baseline and the top-ranked model on the
     held-out inputs, and with acquisition times each layer's residual against them
-    (:func:`time_figure`). ``processes``, ``meanwhile``: as in :func:`save_figures`."""
-    c = diagnosis.baseline_comparison
-    rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
-        ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se, cand.comparison.p_value)
-        for cand in diagnosis.ranking[:3]]
-    figs = {"ladder.png": partial(error_ladder, rungs, c.noise_floor, c.floor_se, title="baseline and best candidates")}
-    data = {"ladder.png": ladder_data(rungs, c.noise_floor, c.floor_se)}
-    table = diagnosis_comparison(diagnosis)
-    if table:
-        figs["comparison.png"] = partial(comparison_figure, table, c.noise_floor, c.floor_se,
-                                         title="model comparison on the held-out inputs")
-        data["comparison.png"] = comparison_data(table, c.noise_floor, c.floor_se)
-    if diagnosis.where is not None:
-        f, d = where_figures(diagnosis.where, "the baseline (awgn)")
-        figs.update(f)
-        data.update(d)
-    with Drawing(processes) as drawing:
-        paths = _hand_over(drawing, figs, data, folder=folder)  # drawn while the model's shots below are drawn
-        if meas is not None:
-            import jax
+    (:func:`time_figure`). ``processes``, ``meanwhile``: as in :func:`save_figures`.
+    :class:`DiagnosisFigures` draws the same files while the diagnosis runs."""
+    with DiagnosisFigures(folder, meas=meas, key=key, processes=processes) as figures:
+        return figures.finish(diagnosis, meanwhile)
 
-            key = jax.random.PRNGKey(0) if key is None else key
-            models = [("before: " + " + ".join(diagnosis.baseline.effects), diagnosis.baseline)]
-            if diagnosis.ranking:
-                top = diagnosis.ranking[0]
-                models.append(("first ranked: " + " + ".join(top.model.effects), top.model))
-            paths += _hand_over(drawing, *predictive_figures(key, models, meas.subset(diagnosis.held_out)),
-                                folder=folder)
-            if meas.t is not None:  # the residual against acquisition time, per layer (reference §8)
-                from .._model import named_subkey
-                from ._time import residual_in_time
 
-                td = residual_in_time(named_subkey(key, "figure_time"), diagnosis.baseline, meas)
-                paths += _hand_over(drawing, {"time.png": partial(
-                    time_figure, td, title="baseline: residual along the signal against acquisition time")},
-                    {"time.png": time_data(td)}, folder=folder)
-        drawing.finish(meanwhile)
-    return paths
+class DiagnosisFigures:
+    """The files of :func:`diagnosis_figures`, drawn as their numbers are ready: those that need
+    only the baseline and the final ranking (the error ladder, the moments and
+    posterior-predictive overlays, the residual in time) when :meth:`ranked` is called -- by
+    :func:`~gift_theory.lab.diagnose`, while its localisation still runs, so that a helper
+    process (``processes=2``) draws them on the core the diagnosis leaves idle -- and the rest
+    (the model comparison, where the baseline fails and its law of the shots) in :meth:`finish`.
+
+    The files are written into a hidden folder inside ``folder`` and moved into ``folder`` only
+    when every one of them is drawn, so ``folder`` never holds a mix of two runs' figures: leaving
+    the context on an error (a diagnosis that fails after its ranking) removes them. Use::
+
+        with DiagnosisFigures(folder, meas=meas, key=key, processes=2) as figures:
+            diagnosis = diagnose(key, meas, ranked=figures.ranked)
+            paths = figures.finish(diagnosis)
+    """
+
+    #: the files' order in :meth:`finish`'s list (then the layers' moments and ppc, then time)
+    ORDER = ("ladder.png", "comparison.png", "where.png", "pit.png", "correlation.png", "law.png")
+
+    def __init__(self, folder: str, meas=None, key=None, processes: int = 1):
+        self.folder, self.meas, self.key, self.processes = folder, meas, key, processes
+        self.drawing: Drawing | None = None
+        self.stage: str | None = None  # the hidden folder the files are drawn into
+        self.names: list[str] = []  # the files' names, as handed over
+        self.early = False
+
+    def __enter__(self):
+        import tempfile
+
+        os.makedirs(self.folder, exist_ok=True)
+        self.stage = tempfile.mkdtemp(prefix=".drawing-", dir=self.folder)
+        self.drawing = Drawing(self.processes).__enter__()
+        return self
+
+    def __exit__(self, kind, value, tb):
+        import shutil
+
+        try:
+            self.drawing.__exit__(kind, value, tb)
+        finally:
+            shutil.rmtree(self.stage, ignore_errors=True)  # after finish: empty; after an error: this run's files
+        return False
+
+    def _hand_over(self, figs: dict, data: dict) -> None:
+        self.names += list(figs)
+        _hand_over(self.drawing, figs, data, folder=self.stage)
+
+    def ranked(self, baseline, baseline_comparison, ranking, held_out) -> None:
+        """Hand over the figures of the baseline (a Model), its held-out comparison, the final
+        ranking and the held-out inputs (indices into the measurement): the error ladder and,
+        given the measurement, the moments, posterior-predictive and time figures."""
+        c = baseline_comparison
+        rungs = [("awgn", c.discrepancy, c.se, c.p_value)] + [
+            ("awgn + " + " + ".join(cand.effects), cand.comparison.discrepancy, cand.comparison.se,
+             cand.comparison.p_value) for cand in ranking[:3]]
+        self._hand_over({"ladder.png": partial(error_ladder, rungs, c.noise_floor, c.floor_se,
+                                               title="baseline and best candidates")},
+                        {"ladder.png": partial(ladder_data, rungs, c.noise_floor, c.floor_se)})
+        self.early = True
+        meas = self.meas
+        if meas is None:
+            return
+        import jax
+
+        key = jax.random.PRNGKey(0) if self.key is None else self.key
+        models = [("before: " + " + ".join(baseline.effects), baseline)]
+        if ranking:
+            models.append(("first ranked: " + " + ".join(ranking[0].model.effects), ranking[0].model))
+        self._hand_over(*predictive_figures(key, models, meas.subset(held_out)))
+        if meas.t is not None:  # the residual against acquisition time, per layer (reference §8)
+            from .._model import named_subkey
+            from ._time import residual_in_time
+
+            td = residual_in_time(named_subkey(key, "figure_time"), baseline, meas)
+            self._hand_over({"time.png": partial(time_figure, td, title="baseline: residual along the signal "
+                                                                        "against acquisition time")},
+                            {"time.png": partial(time_data, td)})
+
+    def finish(self, diagnosis, meanwhile=None) -> list[str]:
+        """Hand over the rest of ``diagnosis``'s figures (all of them if :meth:`ranked` was not
+        called), run ``meanwhile`` while they are drawn (as :func:`save_figures`), and move the
+        files into the folder; their paths, in the order of :data:`ORDER`, then each layer's
+        moments and ppc, then time."""
+        if not self.early:
+            self.ranked(diagnosis.baseline, diagnosis.baseline_comparison, diagnosis.ranking, diagnosis.held_out)
+        c = diagnosis.baseline_comparison
+        figs, data = {}, {}
+        table = diagnosis_comparison(diagnosis)
+        if table:
+            figs["comparison.png"] = partial(comparison_figure, table, c.noise_floor, c.floor_se,
+                                             title="model comparison on the held-out inputs")
+            data["comparison.png"] = partial(comparison_data, table, c.noise_floor, c.floor_se)
+        if diagnosis.where is not None:
+            f, d = where_figures(diagnosis.where, "the baseline (awgn)")
+            figs.update(f)
+            data.update(d)
+        self._hand_over(figs, data)
+        self.drawing.finish(meanwhile)
+        for name in sorted(os.listdir(self.stage)):  # every file drawn: into the folder
+            os.replace(os.path.join(self.stage, name), os.path.join(self.folder, name))
+        rank = {name: i for i, name in enumerate(self.ORDER)}
+        names = sorted(self.names, key=lambda n: (rank.get(n, len(rank) + (n == "time.png")), self.names.index(n)))
+        return [os.path.join(self.folder, n) for n in names]
 
 
 def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:
@@ -309,16 +373,16 @@ def fit_figures(result, folder: str, meas=None, key=None, uncertainty: dict | No
     a = result.comparison_after
     rungs = [(lab, c.discrepancy, c.se, c.p_value) for lab, c in result.ladder]
     figs = {"ladder.png": partial(error_ladder, rungs, a.noise_floor, a.floor_se)}
-    data = {"ladder.png": ladder_data(rungs, a.noise_floor, a.floor_se)}
+    data = {"ladder.png": partial(ladder_data, rungs, a.noise_floor, a.floor_se)}
     if len(result.ladder) > 1 and all(getattr(c, "channel_values", None) is not None for _, c in result.ladder):
         named = [(lab, c, "") for lab, c in result.ladder][::-1]  # the fitted model first
         table = comparison_table(named)
         figs["comparison.png"] = partial(comparison_figure, table, a.noise_floor, a.floor_se,
                                          title="the ladder compared on the held-out inputs")
-        data["comparison.png"] = comparison_data(table, a.noise_floor, a.floor_se)
+        data["comparison.png"] = partial(comparison_data, table, a.noise_floor, a.floor_se)
     if uncertainty and uncertainty.get("joint"):
         figs["pairs.png"] = partial(pairs_figure, uncertainty["joint"])
-        data["pairs.png"] = pairs_data(uncertainty["joint"])
+        data["pairs.png"] = partial(pairs_data, uncertainty["joint"])
     if where is not None:
         f, d = where_figures(where, "the fitted model")
         figs.update(f)

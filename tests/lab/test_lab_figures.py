@@ -208,8 +208,8 @@ def _fit_like(meas):
 
 
 def test_two_processes_write_the_same_files_as_one_and_share_the_drawing(meas, tmp_path, monkeypatch):
-    """``processes=2``: a helper process draws some of the figures, and every file (PNG and netCDF)
-    is byte for byte the one a single process writes. Which figures this process drew is read
+    """``processes=2``: a helper process writes some of the files (every netCDF, as it is handed
+    over), and every file (PNG and netCDF) is byte for byte the one a single process writes. Which figures this process drew is read
     from the private ``_drawing.draw_to`` (the sharing is invisible in the files, by design)."""
     from gift_theory.lab import _drawing
 
@@ -223,7 +223,8 @@ def test_two_processes_write_the_same_files_as_one_and_share_the_drawing(meas, t
     for name in os.listdir(tmp_path / "one"):
         with open(tmp_path / "one" / name, "rb") as a, open(tmp_path / "two" / name, "rb") as b:
             assert a.read() == b.read(), name
-    assert 0 < len(here) < len(two), here  # the helper drew at least one, this process the others
+    # the helper wrote at least one file (the numbers files first, while this process draws), this process the others
+    assert 0 < len(here) < len(os.listdir(tmp_path / "two")) and not [n for n in here if n.endswith(".nc")], here
     # each layer's figure is the one its function draws from every layer's numbers (the set sends
     # a helper one layer's; the tap's title still says tap)
     from gift_theory._model import named_subkey
@@ -234,6 +235,45 @@ def test_two_processes_write_the_same_files_as_one_and_share_the_drawing(meas, t
     direct = save_figures({"moments_layer1.png": moments_figure(mom, 1)}, str(tmp_path / "direct"))[0]
     with open(direct, "rb") as a, open(tmp_path / "two" / "moments_layer1.png", "rb") as b:
         assert a.read() == b.read()
+
+
+def test_a_diagnosis_s_figures_drawn_while_it_runs_are_the_files_drawn_after_it(meas, tmp_path, monkeypatch):
+    """``DiagnosisFigures``: the figures that need only the ranking handed over before the rest (as
+    ``gift diagnose`` does while it localises), a helper drawing them and writing every netCDF:
+    the same files, byte for byte, in the same order, as :func:`diagnosis_figures` after the
+    diagnosis in one process; and a diagnosis that fails after its ranking leaves the folder as it
+    was (the files are drawn out of sight and moved in at the end)."""
+    from gift_theory.lab import DiagnosisFigures, _drawing
+
+    res = _fit_like(meas)
+    cand = types.SimpleNamespace(effects=("shot",), comparison=res.comparison_after, model=res.after)
+    diag = types.SimpleNamespace(baseline_comparison=res.comparison_after, ranking=[cand], where=_where_stats(),
+                                 baseline=res.before, held_out=np.arange(40))
+    after = diagnosis_figures(diag, str(tmp_path / "after"), meas=meas)
+    here = []
+    draw_to = _drawing.draw_to
+    monkeypatch.setattr(_drawing, "draw_to", lambda d, p: here.append(os.path.basename(p)) or draw_to(d, p))
+    with DiagnosisFigures(str(tmp_path / "during"), meas=meas, processes=2) as figures:
+        figures.ranked(diag.baseline, diag.baseline_comparison, tuple(diag.ranking), diag.held_out)
+        assert os.listdir(tmp_path / "during") and not [f for f in os.listdir(tmp_path / "during")
+                                                         if not f.startswith(".")]  # nothing in sight yet
+        during = figures.finish(diag)
+    assert [os.path.basename(p) for p in during] == [os.path.basename(p) for p in after]
+    assert [os.path.basename(p) for p in after][:3] == ["ladder.png", "comparison.png", "where.png"]
+    assert sorted(os.listdir(tmp_path / "during")) == sorted(os.listdir(tmp_path / "after"))
+    for name in os.listdir(tmp_path / "after"):
+        with open(tmp_path / "after" / name, "rb") as a, open(tmp_path / "during" / name, "rb") as b:
+            assert a.read() == b.read(), name
+    assert not [n for n in here if n.endswith(".nc")] and len(here) < len(os.listdir(tmp_path / "during")), here
+
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "where.png").write_bytes(b"an earlier run's")
+    with pytest.raises(RuntimeError, match="after the ranking"):
+        with DiagnosisFigures(str(old), meas=meas, processes=2) as figures:
+            figures.ranked(diag.baseline, diag.baseline_comparison, tuple(diag.ranking), diag.held_out)
+            raise RuntimeError("the diagnosis failed after the ranking")
+    assert os.listdir(old) == ["where.png"] and (old / "where.png").read_bytes() == b"an earlier run's"
 
 
 def test_a_drawing_the_helper_cannot_do_is_done_here_and_its_error_raised_here(tmp_path, monkeypatch):

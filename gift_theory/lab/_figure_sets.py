@@ -252,7 +252,8 @@ class DiagnosisFigures:
 
     The files are written into a hidden folder inside ``folder`` and moved into ``folder`` only
     when every one of them is drawn, so ``folder`` never holds a mix of two runs' figures: leaving
-    the context on an error (a diagnosis that fails after its ranking) removes them. Use::
+    the context on an error (a diagnosis that fails after its ranking) removes them, and the
+    folders this run made. Use::
 
         with DiagnosisFigures(folder, meas=meas, key=key, processes=2) as figures:
             diagnosis = diagnose(key, meas, ranked=figures.ranked)
@@ -268,10 +269,15 @@ class DiagnosisFigures:
         self.stage: str | None = None  # the hidden folder the files are drawn into
         self.names: list[str] = []  # the files' names, as handed over
         self.early = False
+        self.made: list[str] = []  # the folders this run made
 
     def __enter__(self):
         import tempfile
 
+        here = os.path.abspath(self.folder)
+        while not os.path.isdir(here):  # the folders this run makes, the innermost first
+            self.made.append(here)
+            here = os.path.dirname(here)
         os.makedirs(self.folder, exist_ok=True)
         self.stage = tempfile.mkdtemp(prefix=".drawing-", dir=self.folder)
         self.drawing = Drawing(self.processes).__enter__()
@@ -284,6 +290,9 @@ class DiagnosisFigures:
             self.drawing.__exit__(kind, value, tb)
         finally:
             shutil.rmtree(self.stage, ignore_errors=True)  # after finish: empty; after an error: this run's files
+            for made in self.made if kind is not None else ():  # folders made for a run that failed
+                if os.path.isdir(made) and not os.listdir(made):
+                    os.rmdir(made)
         return False
 
     def _hand_over(self, figs: dict, data: dict) -> None:

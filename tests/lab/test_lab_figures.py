@@ -274,6 +274,11 @@ def test_a_diagnosis_s_figures_drawn_while_it_runs_are_the_files_drawn_after_it(
             figures.ranked(diag.baseline, diag.baseline_comparison, tuple(diag.ranking), diag.held_out)
             raise RuntimeError("the diagnosis failed after the ranking")
     assert os.listdir(old) == ["where.png"] and (old / "where.png").read_bytes() == b"an earlier run's"
+    with pytest.raises(RuntimeError):  # a folder made for a run that failed is not left behind
+        with DiagnosisFigures(str(tmp_path / "new" / "diagnose"), meas=meas, processes=1) as figures:
+            figures.ranked(diag.baseline, diag.baseline_comparison, tuple(diag.ranking), diag.held_out)
+            raise RuntimeError("the diagnosis failed after the ranking")
+    assert not (tmp_path / "new").exists()
 
 
 def test_a_drawing_the_helper_cannot_do_is_done_here_and_its_error_raised_here(tmp_path, monkeypatch):

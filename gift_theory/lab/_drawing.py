@@ -32,10 +32,15 @@ def draw_to(drawing, path: str) -> str:
     ``xarray.Dataset`` or a callable returning one: :func:`save_dataset`)."""
     from .._io import save_figure
 
-    if os.fspath(path).endswith(".nc"):
+    if is_numbers(path):
         return save_dataset(drawing() if callable(drawing) else drawing, path)
     fig = drawing() if callable(drawing) else drawing
     return save_figure(fig, path, bbox_inches=_bbox(fig))
+
+
+def is_numbers(path: str) -> bool:
+    """Whether ``path`` is a figure's numbers file (netCDF), not its picture."""
+    return os.fspath(path).endswith(".nc")
 
 
 def save_dataset(ds, path: str) -> str:
@@ -153,7 +158,7 @@ class Drawing:
         with self.cond:
             while wait and not self.left and not self.closed:
                 self.cond.wait()
-            numbers = [job for job in self.left if self.jobs[job[1]][1].endswith(".nc")]
+            numbers = [job for job in self.left if is_numbers(self.jobs[job[1]][1])]
             pool = self.left
             if here and self.feeder is not None and self.feeder.is_alive():
                 pool = [job for job in self.left if job not in numbers]

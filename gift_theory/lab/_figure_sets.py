@@ -13,7 +13,7 @@ from functools import partial
 
 import numpy as np
 
-from ._drawing import Drawing, draw_to
+from ._drawing import Drawing, draw_to, is_numbers
 from ._figures import (
     comparison_figure,
     comparison_table,
@@ -52,7 +52,7 @@ def _hand_over(drawing, figures: dict, data: dict | None = None, *, folder: str)
     jobs += [(ds, os.path.join(folder, os.path.splitext(name)[0] + ".nc")) for name, ds in (data or {}).items()
              if name in figures and ds is not None]
     drawing.add(jobs, [_COST.get(_kind(p), 1.0) for _, p in jobs])
-    return [p for _, p in jobs if p.endswith(".png")]
+    return [p for _, p in jobs if not is_numbers(p)]
 
 
 #: the relative cost of drawing each kind of figure (t240's figures, where.png's 72 rows of cells
@@ -62,7 +62,7 @@ _COST = {"where": 3.0, "moments": 2.0, "ppc": 2.0, "correlation": 1.0, "nc": 0.1
 
 
 def _kind(path: str) -> str:
-    return "nc" if path.endswith(".nc") else os.path.basename(path).split("_")[0].split(".")[0]
+    return "nc" if is_numbers(path) else os.path.basename(path).split("_")[0].split(".")[0]
 
 
 def _layer_only(obj, layer: int):
@@ -352,9 +352,8 @@ class DiagnosisFigures:
         self.drawing.finish(meanwhile)
         for name in sorted(os.listdir(self.stage)):  # every file drawn: into the folder
             os.replace(os.path.join(self.stage, name), os.path.join(self.folder, name))
-        rank = {name: i for i, name in enumerate(self.ORDER)}
-        names = sorted(self.names, key=lambda n: (rank.get(n, len(rank) + (n == "time.png")), self.names.index(n)))
-        return [os.path.join(self.folder, n) for n in names]
+        last = [n for n in self.names if n not in self.ORDER and n != "time.png"] + ["time.png"]
+        return [os.path.join(self.folder, n) for n in list(self.ORDER) + last if n in self.names]
 
 
 def diagnosis_comparison(diagnosis, limit: int = 10) -> list[dict]:

@@ -14,6 +14,8 @@ the matplotlib Figure, never selects a backend and never writes a file;
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 #: the where-figure's statistics: panel title and colour-bar label (each is N(0, 1) under the model)
@@ -91,7 +93,10 @@ def _outline(ax, mask, color="k", lw=1.6):
 UNMARKED = ("excess_kurtosis",)
 
 
+@functools.cache
 def _cell_values_artist():
+    """The artist class of a heatmap's cell values (made once, on first use: matplotlib is
+    imported only when a figure is drawn)."""
     from matplotlib.artist import Artist
     from matplotlib.text import Text
 
@@ -130,11 +135,6 @@ def _cell_values_artist():
             self.stale = False
 
     return CellValues
-
-
-def _CellValues(M, lim: float, fontsize: float):
-    """The values of a heatmap's cells as one artist (:func:`_cell_values_artist`)."""
-    return _cell_values_artist()(M, lim, fontsize)
 
 
 def where_figure(stats: dict, *, title: str = "where the model fails", fig=None, alpha: float = 0.01):
@@ -190,7 +190,7 @@ def where_figure(stats: dict, *, title: str = "where the model fails", fig=None,
         if name not in UNMARKED:
             _outline(ax, np.nan_to_num(np.abs(M)) > zc)
         if font:
-            ax.add_artist(_CellValues(M, lim, font))
+            ax.add_artist(_cell_values_artist()(M, lim, font))
         if k == 0:
             step = max(1, int(np.ceil(nr / 60)))
             ax.set_yticks(range(0, nr, step))

@@ -32,6 +32,7 @@ cipher key (an ``rbg`` key made by tiling a Threefry key therefore draws the sam
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -186,3 +187,53 @@ def uniform_law(key, shape, dtype=jnp.float32) -> jax.Array:
 
 
 normal.__doc__, laplace.__doc__, uniform_law.__doc__ = _normal.__doc__, _laplace.__doc__, _uniform_law.__doc__
+
+
+# ---- a block of rows of a draw ------------------------------------------------------------------
+#: the float32 laws whose draws a block of rows can be made of alone (:func:`rows`)
+ROW_LAWS = ("normal", "laplace", "uniform_law")
+
+
+def _row_words(key, n: int, start, size: int):
+    """Words ``start .. start + size - 1`` of the ``n``-word stream of ``key`` (uint32, (size,)):
+    word w is the first output word of counter w below ceil(n/2), else the second output word of
+    counter w - ceil(n/2) (the layout of :func:`bits`). Words past the stream's end are defined
+    (a block's padding) but belong to no draw."""
+    k0, k1 = key_words(key)
+    half = jnp.uint32((n + 1) // 2)
+    w = jnp.asarray(start, jnp.uint32) + jax.lax.iota(jnp.uint32, size)
+    first = w < half
+    y0, y1 = threefry2x32(k0, k1, jnp.where(first, w, w - half), jnp.zeros_like(w))
+    return jnp.where(first, y0, y1)
+
+
+def _uniform32(words):
+    """The float32 uniform of :func:`uniform` on (-1, 1) from its words."""
+    m = words >> jnp.uint32(9)
+    return (m.astype(jnp.float32) + 0.5) * (2.0 ** -22) - 1.0
+
+
+@functools.partial(jax.jit, static_argnames=("law", "shape", "rows"))
+def _rows(key, start, *, law: str, shape: tuple, rows: int):
+    per_row = math.prod(shape[1:])
+    words = _row_words(key, math.prod(shape), start * jnp.uint32(per_row), rows * per_row)
+    if law == "normal":
+        v = _normal32(words)
+    else:
+        u = _uniform32(words)
+        v = -jnp.sign(u) * jnp.log1p(-jnp.abs(u)) * np.sqrt(0.5) if law == "laplace" else np.sqrt(3.0) * u
+    return v.astype(jnp.float32).reshape((rows,) + tuple(shape[1:]))
+
+
+def rows(law: str, key, shape, start: int, size: int) -> jax.Array:
+    """Rows ``start .. start + size - 1`` (along the first axis) of the float32 draw
+    ``normal(key, shape)`` (``law`` "normal"), ``laplace(...)`` or ``uniform_law(...)``, bit for
+    bit, without drawing the rest: a large draw made a block of rows at a time. Rows past
+    ``shape[0]`` are padding (defined, not part of the draw). ``start`` is traced: one compiled
+    program per (law, shape, size) serves every block."""
+    shape = tuple(int(d) for d in shape)
+    if law not in ROW_LAWS:
+        raise ValueError(f"rows: law {law!r} is not one of {ROW_LAWS}")
+    if math.prod(shape[1:]) * (int(start) + int(size)) >= 2 ** 32:
+        raise ValueError(f"rows: a draw of {shape} words exceeds the 2^32 word indices of a block")
+    return _rows(key, np.uint32(start), law=law, shape=shape, rows=int(size))

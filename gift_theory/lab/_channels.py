@@ -46,7 +46,7 @@ from .._finite import check_finite
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._qtest import q_test
-from ._shots import Model, model_shots, to32
+from ._shots import Model, default_model_shots, model_shots, shot_blocks, to32
 
 
 def _pair_dist(A, B):
@@ -81,7 +81,7 @@ def _vector_energy(M, Y, paired: bool):
     return 2.0 * cross - wm - wy, wy
 
 
-def energy_cells(M, Y, paired: bool = False):
+def energy_cells(M, Y, paired: bool = False, chunk: int | None = None):
     """Unbiased energy distances per cell: of the vector over neurons and of each neuron.
 
     Parameters
@@ -96,13 +96,18 @@ def energy_cells(M, Y, paired: bool = False):
     wy : (n,) mean_{b != b'} |Y_b - Y_b'|
     E1 : (n, d) U-statistic energy distance of each neuron's marginal (1-D, sharper on shape)
     wy1 : (n, d) its within-data spread
+
+    ``chunk``: the inputs per compiled call, every call padded to it (a block of a larger
+    array's inputs passes the whole array's chunk: the compiled program's shape is then the
+    whole's, and so are the numbers); default :func:`_input_chunk`.
     """
     n, K, d = np.shape(M)
     r = np.shape(Y)[1]
     # inputs in chunks: the pair distances are (K + r)^2 floats per input (a 50 MB file's 1740
     # inputs x 256 model shots held 0.5 GB of them at once); each chunk the same shape, the last
     # padded, so one compiled program serves them all
-    c = _input_chunk(n, K, r, d)
+    pad_all = chunk is not None
+    c = _input_chunk(n, K, r, d) if chunk is None else int(chunk)
     # JAX's arrays read as numpy (no copy on the CPU): a slice of a JAX array is a program of its own
     M, Y = (np.asarray(A) if isinstance(A, jax.Array) else A for A in (M, Y))
     E, wy = np.empty(n), np.empty(n)
@@ -111,7 +116,7 @@ def energy_cells(M, Y, paired: bool = False):
         sl = slice(c0, min(c0 + c, n))
         m_, y_ = np.asarray(M[sl]), np.asarray(Y[sl])
         k = m_.shape[0]
-        if k < c and n > c:  # pad the last chunk to the common shape
+        if k < c and (n > c or pad_all):  # pad the last chunk to the common shape
             m_ = np.concatenate([m_, np.repeat(m_[-1:], c - k, axis=0)])
             y_ = np.concatenate([y_, np.repeat(y_[-1:], c - k, axis=0)])
         e, w = _vector_energy(m_, y_, paired)  # numpy in: jnp.asarray would compile a copy program per shape
@@ -148,14 +153,15 @@ def _marginal_energy(M, Y, paired: bool):
     return 2.0 * c1 - wm1 - wy1, wy1
 
 
-def cell_statistic(M, Y, paired: bool = False, scales=None):
+def cell_statistic(M, Y, paired: bool = False, scales=None, chunk: int | None = None):
     """The two normalised channels of a cell, shape (n, 2): the vector energy distance over
     the layer's pooled spread, and the mean over neurons of each neuron's energy distance
     over its pooled spread.
 
     ``scales`` (from :func:`layer_scales`) fixes the normalisation; default: from ``Y``.
+    ``chunk``: see :func:`energy_cells`.
     """
-    E, wy, E1, wy1 = energy_cells(M, Y, paired)
+    E, wy, E1, wy1 = energy_cells(M, Y, paired, chunk)
     E, wy, E1, wy1 = (np.asarray(a, np.float64) for a in (E, wy, E1, wy1))
     if scales is None:
         scales = (wy.mean(), wy1.mean(0))
@@ -284,14 +290,28 @@ def moment_channels(M, Y, split, rng):
     rng : numpy Generator for the model's disjoint sets of h shots
     """
     Y = np.asarray(Y, np.float64)
+    K = M.shape[1]
+    _check_moment_shots(K, Y.shape[1])
+    return _moment_rows(M, Y, split, _model_sets(rng, Y.shape[0], K), _variance_floor(Y))
+
+
+def _check_moment_shots(K: int, r: int) -> None:
+    if K < 2 * (r // 2):
+        raise GiftInputError(f"compare: {K} model shots per input; the moment channels need at least {2 * (r // 2)}")
+
+
+def _model_sets(rng, n: int, K: int):
+    """(n, K): each input's model shots in a random order (sets of h in a row), from ``rng``."""
+    return rng.permuted(np.tile(np.arange(K), (n, 1)), axis=1)
+
+
+def _moment_rows(M, Y, split, perm, eps):
+    """:func:`moment_channels` of the inputs of ``M`` and ``Y`` (float64), their model sets
+    ``perm`` and the layer's variance floor ``eps``: a function of each input's rows alone."""
     n, r, d = Y.shape
     h = r // 2
     K = M.shape[1]
-    if K < 2 * h:
-        raise GiftInputError(f"compare: {K} model shots per input; the moment channels need at least {2 * h}")
-    eps = _variance_floor(Y)
     reps = K // (2 * h)
-    perm = rng.permuted(np.tile(np.arange(K), (n, 1)), axis=1)
     out = np.empty((n, 3))
     c = _input_chunk(n, K, r, d)  # the model's shots in float64, a chunk of inputs at a time
     for c0 in range(0, n, c):
@@ -392,14 +412,27 @@ def noise_floor(key, meas: Measurement, splits: int = 2):
 
 
 def channel_values(key, model: Model, meas: Measurement, ref: Reference, shots: int | None = None) -> np.ndarray:
-    """The channels of every cell, (n, L', C): input x measured layer x channel of ``ref``."""
+    """The channels of every cell, (n, L', C): input x measured layer x channel of ``ref``.
+
+    Each input's channels are a function of its own shots, so the model's shots are made and
+    read a block of inputs at a time (:func:`~._shots.shot_blocks`): the numbers are those of the
+    whole array, and a large file's model shots are never held at once."""
     if shots is not None and int(shots) < meas.r:
         raise GiftInputError(f"compare: --shots {shots} model shots per input; at least the measured {meas.r} needed")
-    Ms = model_shots(named_subkey(key, "shots"), model, meas, shots)
-    rng = np.random.default_rng(np.asarray(jax.random.key_data(named_subkey(key, "model_sets"))).ravel())
-    C = np.zeros((meas.n, len(Ms), len(ref.channels)))
-    for li, (M, Y, sc) in enumerate(zip(Ms, meas.layers(), ref.scales)):
-        C[:, li, :2] = cell_statistic(M, to32(Y), scales=sc)
-        if len(ref.channels) > 2:
-            C[:, li, 2:] = moment_channels(M, Y, ref.split, rng)
+    K = default_model_shots(meas.r) if shots is None else int(shots)
+    moments = len(ref.channels) > 2
+    layers = meas.layers()
+    if moments:
+        _check_moment_shots(K, meas.r)
+        rng = np.random.default_rng(np.asarray(jax.random.key_data(named_subkey(key, "model_sets"))).ravel())
+        sets = [_model_sets(rng, meas.n, K) for _ in layers]  # drawn in the order the layers read them
+        Y64 = [np.asarray(Y, np.float64) for Y in layers]
+        eps = [_variance_floor(Y) for Y in Y64]
+    C = np.zeros((meas.n, len(layers), len(ref.channels)))
+    chunks = [_input_chunk(meas.n, K, meas.r, Y.shape[2]) for Y in layers]  # the whole array's
+    for sl, Ms in shot_blocks(named_subkey(key, "shots"), model, meas, shots):
+        for li, (M, Y, sc) in enumerate(zip(Ms, layers, ref.scales)):
+            C[sl, li, :2] = cell_statistic(M, to32(Y[sl]), scales=sc, chunk=chunks[li])
+            if moments:
+                C[sl, li, 2:] = _moment_rows(M, Y64[li][sl], ref.split[sl], sets[li][sl], eps[li])
     return C

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _random
 from .._finite import check_all_finite, check_finite
 from .._measurement import Measurement
 from .._model import (
@@ -171,6 +172,84 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
             o[:, c * chunk:(c + 1) * chunk] = np.asarray(part[l - 1])
         del part, noise
     return tuple(outs)
+
+
+#: the built-in noise laws whose draws :func:`gift_theory._random.rows` makes a block of rows of
+_ROW_LAW = {None: "normal", "laplace": "laplace", "uniform": "uniform_law"}
+
+
+def _site_rows(key, name: str, full: tuple, site_law, start: int, size: int):
+    """Rows ``start .. start + size - 1`` of one site's draws of shape ``full`` (the draws of
+    :func:`draws`, bit for bit), or None where they cannot be made alone (a plugin's law)."""
+    from ..effects._base import _is_builtin
+
+    if site_law is not None and not (_is_builtin(type(site_law)) and site_law.name in _ROW_LAW):
+        return None
+    law = _ROW_LAW[None if site_law is None else site_law.name]
+    return _random.rows(law, jax.random.fold_in(key, np.uint32(name_tag(name))), full, start, size)
+
+
+def draw_rows(key, physics, meas: Measurement, K: int, start: int, size: int) -> dict:
+    """Inputs ``start .. start + size - 1`` of :func:`draws` (key, physics, meas, K), bit for bit,
+    made without the other inputs' draws; rows past the last input are padding. A law with
+    parameters or from a plugin is drawn whole and sliced (the same numbers, no memory saved)."""
+    law = noise_law(physics)
+    whole = law is not None and law.param_dict()
+    out = {}
+    for name, (event, site_law) in site_laws(meas.arch, physics).items():
+        v = None if whole else _site_rows(key, name, (meas.n, int(K)) + tuple(event), site_law, start, size)
+        if v is None:
+            w = draws(key, physics, meas, K)[name][start:start + size]
+            v = w if w.shape[0] == size else jnp.concatenate([w, jnp.repeat(w[-1:], size - w.shape[0], 0)])
+        out[name] = v
+    return out
+
+
+#: bytes of a block of model shots (every measured layer, float32) that :func:`shot_blocks` makes
+#: at a time: a larger draw is made and used a block of inputs at a time
+SHOT_BLOCK_BYTES = 16 << 20
+
+
+def block_inputs(meas: Measurement, K: int) -> int:
+    """Inputs per block of :func:`shot_blocks` for K model shots per input: all of them when
+    their shots fit in :data:`SHOT_BLOCK_BYTES`."""
+    per_input = 4 * int(K) * sum(meas.arch.widths[l] for l in meas.layer_ids())
+    return int(max(1, min(meas.n, SHOT_BLOCK_BYTES // max(per_input, 1))))
+
+
+def shot_blocks(key, model: Model, meas: Measurement, shots: int | None = None):
+    """:func:`model_shots` a block of inputs at a time: yields ``(slice, shots)`` with ``shots``
+    the block's rows of every measured layer's (n, K, d_l) model shots, bit for bit (each
+    input's draws are made alone, :func:`draw_rows`, and the forward pass acts input by input),
+    so a statistic computed input by input needs :func:`block_inputs` inputs' shots at once, not
+    the whole array. One block when they fit (then the shots are :func:`model_shots`' own)."""
+    K = default_model_shots(meas.r) if shots is None else int(shots)
+    B = block_inputs(meas, K)
+    if B >= meas.n:
+        yield slice(0, meas.n), model_shots(key, model, meas, shots)
+        return
+    params = params32(model.weights(meas))
+    chunk = 2 * meas.r if K % (2 * meas.r) == 0 else K
+    x_all = to32(meas.x)
+    t_all = tiled_times(meas, chunk)
+    physics = strong32(model.physics)
+    ids = meas.layer_ids()
+    pad = lambda a, k: a if a.shape[0] == B else np.concatenate([a, np.repeat(a[-1:], B - k, 0)])  # noqa: E731
+    for i0 in range(0, meas.n, B):
+        k = min(B, meas.n - i0)
+        x = pad(x_all[i0:i0 + k], k)  # the last block padded: one compiled program serves every block
+        t = None if t_all is None else pad(t_all[i0:i0 + k], k)
+        outs = [np.empty((k, K, meas.arch.widths[l]), np.float32) for l in ids]
+        for c in range(K // chunk):
+            noise = draw_rows(jax.random.fold_in(key, c), model.physics, meas, chunk, i0, B)
+            part = tuple(a[:k] for a in layer_outputs(params, x, noise, physics, meas.arch, t))
+            check_all_finite(part, [lambda l=l: f"the model's shots of layer {l} ({model.describe()})"
+                                    for l in range(1, len(part) + 1)],
+                             lambda kk, i: eager_forward_at(params, x, noise, physics, meas.arch, t, i))
+            for o, l in zip(outs, ids):
+                o[:, c * chunk:(c + 1) * chunk] = np.asarray(part[l - 1])
+            del part, noise
+        yield slice(i0, i0 + k), tuple(outs)
 
 
 def eager_forward_at(params, x, noise, physics, arch, t, at=None):

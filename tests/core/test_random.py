@@ -106,3 +106,22 @@ def test_float32_normal_is_the_inverse_cdf_to_a_few_ulps_everywhere():
     assert ulps.max() <= 8.0
     assert np.all(np.diff(z) >= 0)
     assert np.array_equal(z, -z[::-1])  # exactly symmetric
+
+
+@pytest.mark.parametrize("law", R.ROW_LAWS)
+@pytest.mark.parametrize("shape", [(13, 7, 3), (8, 5), (1, 1), (6, 1, 4, 2)])
+def test_a_block_of_rows_is_the_whole_draw_s_rows_bit_for_bit(law, shape):
+    """The lab makes a large file's model shots a block of inputs at a time; each block of a draw
+    must be the whole draw's rows bit for bit, found from the stream's layout alone (word w is
+    the first output of counter w in the first half, the second output of counter w - ceil(n/2)
+    after it; an odd word count straddles the two). Rows past the end are padding. Private: the
+    block sampler's only caller is the lab's shot blocks, whose own test cannot isolate it."""
+    key = jax.random.fold_in(jax.random.key(7), 3)
+    whole = np.asarray(getattr(R, law)(key, shape))
+    for size in (1, 3, shape[0]):
+        for start in range(0, shape[0], size):
+            got = np.asarray(R.rows(law, key, shape, start, size))
+            assert got.shape == (size,) + shape[1:] and np.all(np.isfinite(got))
+            np.testing.assert_array_equal(got[:shape[0] - start], whole[start:start + size])
+    with pytest.raises(ValueError, match="law"):
+        R.rows("cauchy", key, shape, 0, 1)

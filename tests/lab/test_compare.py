@@ -555,3 +555,48 @@ def test_the_chunks_of_inputs_do_not_change_the_numbers(setup, monkeypatch):
     np.testing.assert_allclose(chunked, whole, rtol=1e-5, atol=1e-6)
     (Qw, pw, *_), (Qc, pc, *_) = (q_test(C.reshape(n, -1)) for C in (whole, chunked))
     assert Qw > 0 and Qc == pytest.approx(Qw, rel=1e-5) and pc == pytest.approx(pw, rel=1e-3, abs=1e-4)
+
+
+_T_LAW = '''
+import jax
+from gift_theory.effects import Effect, register
+
+@register
+class StudentTBlocks(Effect):
+    name = "student_t_blocks"
+    stage = "law"
+    mechanism = "noise_law"
+    description = "Student-t noise (5 dof), a plugin's law"
+
+    @staticmethod
+    def standard(key, shape, dtype):
+        return jax.random.t(key, 5.0, shape, dtype) * (3.0 / 5.0) ** 0.5
+'''
+
+
+@pytest.mark.parametrize("spec", [{"shot": 0.05, "crosstalk": 0.2}, {"laplace": True, "drift": 0.1},
+                                  {"uniform": True, "weight_error": 0.05}, {"student_t_blocks": True}])
+def test_a_file_s_model_shots_made_a_block_of_inputs_at_a_time_give_the_whole_array_s_numbers(spec, monkeypatch):
+    """A large file's model shots are made and scored a block of inputs at a time, so they are
+    never held whole; every channel is a function of its input's shots, so compare's numbers must
+    be those of the whole array bit for bit -- with times, each built-in law, weight draws and a
+    plugin's law (drawn whole and sliced). The block size is the private SHOT_BLOCK_BYTES, shrunk
+    so that this small file is made in blocks of 3 inputs and a last, padded one of 2."""
+    from gift_theory.lab import _shots  # private: the block size, shrunk to reach blocks on a small file
+
+    if "student_t_blocks" not in gt.EFFECT_NAMES:
+        exec(compile(_T_LAW, "student_t_blocks.py", "exec"), {})
+    phys = gt.Physics.create(s=0.1, **spec)
+    arch = gt.Architecture((4, 8, 6, 3))
+    params = gt.init_params(jax.random.PRNGKey(0), arch)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(1), (11, 4)))
+    meas = simulate_measurement(jax.random.PRNGKey(2), params, x, phys, shots=8, taps=True, times="drift" in spec)
+    model = Model(phys.replace(s=np.float64(0.11)))
+    whole = compare(jax.random.PRNGKey(5), model, meas)
+    monkeypatch.setattr(_shots, "SHOT_BLOCK_BYTES", 3 * 4 * 32 * (8 + 6 + 3))
+    assert _shots.block_inputs(meas, 32) == 3
+    blocks = [sl for sl, _ in _shots.shot_blocks(jax.random.PRNGKey(0), model, meas)]
+    assert [(sl.start, sl.stop) for sl in blocks] == [(0, 3), (3, 6), (6, 9), (9, 11)]
+    blocked = compare(jax.random.PRNGKey(5), model, meas)
+    for f in ("discrepancy", "p_value", "noise_floor", "per_input", "cells", "channel_z"):
+        np.testing.assert_array_equal(getattr(blocked, f), getattr(whole, f), err_msg=f)

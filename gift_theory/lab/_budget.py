@@ -1,19 +1,20 @@
 """The lab's memory budget: how many threads a diagnosis runs for the size of its file.
 
-A candidate's fit and held-out score hold its model shots (4 r per input of every measured layer,
-float32), the channels' pair distances in chunks of inputs (:data:`~._channels.CHUNK_BYTES`) and
-the moment fit's draws: measured on a 50 MB file (16-32-16-8 with taps, 1740 inputs x 64 shots),
-some 20 times the file's float32 shots per thread. The candidates run in up to 4 threads; for a
-large file fewer, so that all of them together stay within :func:`lab_memory` (the numbers do not
-depend on the thread count). A candidate with fitted offsets makes its refit null's replicates in
-threads of its own (:func:`replicate_threads`): they come out of the same budget (on that file
-two candidates with two replicate threads each raised the peak by 1.1 GB within seconds). The
-localisation (the baseline's residuals, one-step residuals and signatures) holds about as much
-as a candidate: it runs beside the candidates only when the budget has a thread left for it
-(:func:`localise_beside`), after them otherwise. The same threads (:func:`default_workers`) run
-the other loops of independent, keyed work (:func:`map_in_threads`, which the candidates and the
-refit null's replicates also run in): a tapped file's layers in the identification, the next
-measurement's candidate designs, the test's power probes.
+A candidate's fit holds the moment fit's draws and shots (2 r per input of every measured layer,
+float32) and its offset fits' tangents; its held-out score makes and reads its model shots (4 r per
+input) a block of inputs at a time (:data:`~._shots.SHOT_BLOCK_BYTES`) and the channels' pair
+distances in chunks of inputs (:data:`~._channels.CHUNK_BYTES`): measured on a 50 MB file
+(16-32-16-8 with taps, 1740 inputs x 64 shots), some 20 times the file's float32 shots per thread.
+The candidates run in up to 4 threads; for a large file fewer, so that all of them together stay
+within :func:`lab_memory` (the numbers do not depend on the thread count). A candidate with fitted
+offsets makes its refit null's replicates in threads of its own (:func:`replicate_threads`): they
+come out of the same budget (on that file two candidates with two replicate threads each raised the
+peak by 1.1 GB within seconds). The localisation (the baseline's residuals, one-step residuals and
+signatures) holds about as much as a candidate: it runs beside the candidates only when the budget
+has a thread left for it (:func:`localise_beside`), after them otherwise. The same threads
+(:func:`default_workers`) run the other loops of independent, keyed work (:func:`map_in_threads`,
+which the candidates and the refit null's replicates also run in): a tapped file's layers in the
+identification, the next measurement's candidate designs, the test's power probes.
 """
 
 from __future__ import annotations

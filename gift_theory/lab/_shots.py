@@ -195,11 +195,12 @@ def draw_rows(key, physics, meas: Measurement, K: int, start: int, size: int) ->
     parameters or from a plugin is drawn whole and sliced (the same numbers, no memory saved)."""
     law = noise_law(physics)
     whole = law is not None and law.param_dict()
-    out = {}
+    out, every = {}, None
     for name, (event, site_law) in site_laws(meas.arch, physics).items():
         v = None if whole else _site_rows(key, name, (meas.n, int(K)) + tuple(event), site_law, start, size)
         if v is None:
-            w = draws(key, physics, meas, K)[name][start:start + size]
+            every = draws(key, physics, meas, K) if every is None else every
+            w = every[name][start:start + size]
             v = w if w.shape[0] == size else jnp.concatenate([w, jnp.repeat(w[-1:], size - w.shape[0], 0)])
         out[name] = v
     return out

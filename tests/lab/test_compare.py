@@ -584,8 +584,20 @@ def test_a_file_s_model_shots_made_a_block_of_inputs_at_a_time_give_the_whole_ar
     so that this small file is made in blocks of 3 inputs and a last, padded one of 2."""
     from gift_theory.lab import _shots  # private: the block size, shrunk to reach blocks on a small file
 
-    if "student_t_blocks" not in gt.EFFECT_NAMES:
+    if "student_t_blocks" in spec:  # registered for this test only: a diagnosis tries every registered effect
         exec(compile(_T_LAW, "student_t_blocks.py", "exec"), {})
+        try:
+            _blocks_give_the_whole_array_s_numbers(spec, monkeypatch, _shots)
+        finally:
+            from gift_theory.effects._base import unregister  # private: leaves the process-wide registry as found
+
+            unregister("student_t_blocks")
+    else:
+        _blocks_give_the_whole_array_s_numbers(spec, monkeypatch, _shots)
+    assert "student_t_blocks" not in gt.effects.REGISTRY
+
+
+def _blocks_give_the_whole_array_s_numbers(spec, monkeypatch, _shots):
     phys = gt.Physics.create(s=0.1, **spec)
     arch = gt.Architecture((4, 8, 6, 3))
     params = gt.init_params(jax.random.PRNGKey(0), arch)

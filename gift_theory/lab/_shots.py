@@ -12,6 +12,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import functools
+import math
 import threading
 
 import jax
@@ -180,10 +181,13 @@ _ROW_LAW = {None: "normal", "laplace": "laplace", "uniform": "uniform_law"}
 
 def _site_rows(key, name: str, full: tuple, site_law, start: int, size: int):
     """Rows ``start .. start + size - 1`` of one site's draws of shape ``full`` (the draws of
-    :func:`draws`, bit for bit), or None where they cannot be made alone (a plugin's law)."""
+    :func:`draws`, bit for bit), or None where they cannot be made alone: a plugin's law, or a
+    draw whose words (with the block's padding) pass the 2^32 a block's word index can count."""
     from ..effects._base import _is_builtin
 
     if site_law is not None and not (_is_builtin(type(site_law)) and site_law.name in _ROW_LAW):
+        return None
+    if math.prod(full[1:]) * (int(start) + int(size)) >= 2 ** 32 or math.prod(full) >= 2 ** 32:
         return None
     law = _ROW_LAW[None if site_law is None else site_law.name]
     return _random.rows(law, jax.random.fold_in(key, np.uint32(name_tag(name))), full, start, size)

@@ -612,3 +612,17 @@ def _blocks_give_the_whole_array_s_numbers(spec, monkeypatch, _shots):
     blocked = compare(jax.random.PRNGKey(5), model, meas)
     for f in ("discrepancy", "p_value", "noise_floor", "per_input", "cells", "channel_z"):
         np.testing.assert_array_equal(getattr(blocked, f), getattr(whole, f), err_msg=f)
+
+
+def test_a_draw_past_a_block_s_word_index_is_drawn_whole_and_sliced():
+    """A block's draws are found by a 32-bit word index, where the whole-array sampler counts to
+    2^33 words: a site of 2^32 words or more (or whose last block's padding reaches it) is drawn
+    whole and sliced instead. Private: the choice is made before any draw, and a test through the
+    public API would need a draw of 2^32 numbers."""
+    from gift_theory.lab._shots import _site_rows  # private: the block sampler's bound
+
+    key = jax.random.PRNGKey(0)
+    assert _site_rows(key, "a1", (2 ** 20, 128, 32), None, 0, 8) is None  # 2^32 words
+    assert _site_rows(key, "a1", (2 ** 20 - 1, 128, 32), None, 2 ** 20 - 8, 8) is None  # the padding passes 2^32
+    rows = _site_rows(key, "a1", (2 ** 10, 128, 32), None, 8, 8)
+    assert rows is not None and rows.shape == (8, 128, 32)

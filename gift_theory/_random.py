@@ -225,6 +225,12 @@ def _rows(key, start, *, law: str, shape: tuple, rows: int):
     return v.astype(jnp.float32).reshape((rows,) + tuple(shape[1:]))
 
 
+def rows_fit(shape, start: int, size: int) -> bool:
+    """Whether :func:`rows` can make rows ``start .. start + size - 1`` of a draw of ``shape``:
+    their word indices (padding included) below 2^32."""
+    return math.prod(int(d) for d in shape[1:]) * (int(start) + int(size)) < 2 ** 32
+
+
 def rows(law: str, key, shape, start: int, size: int) -> jax.Array:
     """Rows ``start .. start + size - 1`` (along the first axis) of the float32 draw
     ``normal(key, shape)`` (``law`` "normal"), ``laplace(...)`` or ``uniform_law(...)``, bit for
@@ -234,6 +240,6 @@ def rows(law: str, key, shape, start: int, size: int) -> jax.Array:
     shape = tuple(int(d) for d in shape)
     if law not in ROW_LAWS:
         raise ValueError(f"rows: law {law!r} is not one of {ROW_LAWS}")
-    if math.prod(shape[1:]) * (int(start) + int(size)) >= 2 ** 32:
+    if not rows_fit(shape, start, size):
         raise ValueError(f"rows: a draw of {shape} words exceeds the 2^32 word indices of a block")
     return _rows(key, np.uint32(start), law=law, shape=shape, rows=int(size))

@@ -84,10 +84,12 @@ def default_model_shots(r: int) -> int:
 
 def tiled_times(meas: Measurement, K: int):
     """The measured acquisition times tiled to K model shots per input (n, K), or None."""
-    if meas.t is None:
-        return None
-    reps = -(-K // meas.r)
-    return to32(np.tile(meas.t, (1, reps))[:, :K])
+    return None if meas.t is None else to32(_tiled(meas, K))
+
+
+def _tiled(meas: Measurement, K: int) -> np.ndarray:
+    """:func:`tiled_times` on the host, in the file's precision."""
+    return np.tile(meas.t, (1, -(-K // meas.r)))[:, :K]
 
 
 #: bytes of standard draws kept between calls (least recently used first out)
@@ -152,23 +154,40 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
     ones, tiled when K exceeds r. Drawn in chunks of 2 r shots (the fit's shape: one
     compiled program serves both), chunk c from ``fold_in(key, c)``."""
     K = default_model_shots(meas.r) if shots is None else int(shots)
+    return _shots_of_rows(key, model, meas, K, 0, meas.n,
+                          lambda k, chunk: draws(k, model.physics, meas, chunk))
+
+
+def _host_rows(a, start: int, k: int, size: int):
+    """Rows ``start .. start + k - 1`` of the host array ``a`` as float32 on the device, the last
+    row repeated up to ``size`` rows (a block's padding)."""
+    a = np.asarray(a)[start:start + k]
+    return to32(a if k == size else np.concatenate([a, np.repeat(a[-1:], size - k, 0)]))
+
+
+def _shots_of_rows(key, model: Model, meas: Measurement, K: int, start: int, size: int, noise_of):
+    """:func:`model_shots` of inputs ``start .. start + size - 1``, shot chunk c drawn by
+    ``noise_of(fold_in(key, c), chunk)`` for those rows; rows past the last input are padding
+    (computed in the block's compiled shape, not returned)."""
     params = params32(model.weights(meas))
     chunk = 2 * meas.r if K % (2 * meas.r) == 0 else K
-    x = to32(meas.x)
-    t = tiled_times(meas, chunk)
+    k = min(size, meas.n - start)
+    x = _host_rows(meas.x, start, k, size)
+    t = None if meas.t is None else _host_rows(_tiled(meas, chunk), start, k, size)
     physics = strong32(model.physics)  # the fit's leaf types: its compiled forward serves here
     ids = meas.layer_ids()
     outs = None
     for c in range(K // chunk):
-        noise = draws(jax.random.fold_in(key, c), model.physics, meas, chunk)
+        noise = noise_of(jax.random.fold_in(key, c), chunk)
         part = layer_outputs(params, x, noise, physics, meas.arch, t)
+        part = part if k == size else tuple(a[:k] for a in part)
         check_all_finite(part, [lambda l=l: f"the model's shots of layer {l} ({model.describe()})"
                                 for l in range(1, len(part) + 1)],
-                         lambda k, i: eager_forward_at(params, x, noise, physics, meas.arch, t, i))
+                         lambda kk, i: eager_forward_at(params, x, noise, physics, meas.arch, t, i))
         if K == chunk:
             return tuple(part[l - 1] for l in ids)
         if outs is None:  # filled part by part: a concatenation held every part and the whole at once
-            outs = [np.empty((meas.n, K, part[l - 1].shape[-1]), np.float32) for l in ids]
+            outs = [np.empty((k, K, part[l - 1].shape[-1]), np.float32) for l in ids]
         for o, l in zip(outs, ids):
             o[:, c * chunk:(c + 1) * chunk] = np.asarray(part[l - 1])
         del part, noise
@@ -187,7 +206,7 @@ def _site_rows(key, name: str, full: tuple, site_law, start: int, size: int):
 
     if site_law is not None and not (_is_builtin(type(site_law)) and site_law.name in _ROW_LAW):
         return None
-    if math.prod(full[1:]) * (int(start) + int(size)) >= 2 ** 32 or math.prod(full) >= 2 ** 32:
+    if not _random.rows_fit(full, start, size) or math.prod(full) >= 2 ** 32:
         return None
     law = _ROW_LAW[None if site_law is None else site_law.name]
     return _random.rows(law, jax.random.fold_in(key, np.uint32(name_tag(name))), full, start, size)
@@ -233,28 +252,9 @@ def shot_blocks(key, model: Model, meas: Measurement, shots: int | None = None):
     if B >= meas.n:
         yield slice(0, meas.n), model_shots(key, model, meas, shots)
         return
-    params = params32(model.weights(meas))
-    chunk = 2 * meas.r if K % (2 * meas.r) == 0 else K
-    x_all = to32(meas.x)
-    t_all = tiled_times(meas, chunk)
-    physics = strong32(model.physics)
-    ids = meas.layer_ids()
-    pad = lambda a, k: a if a.shape[0] == B else np.concatenate([a, np.repeat(a[-1:], B - k, 0)])  # noqa: E731
-    for i0 in range(0, meas.n, B):
-        k = min(B, meas.n - i0)
-        x = pad(x_all[i0:i0 + k], k)  # the last block padded: one compiled program serves every block
-        t = None if t_all is None else pad(t_all[i0:i0 + k], k)
-        outs = [np.empty((k, K, meas.arch.widths[l]), np.float32) for l in ids]
-        for c in range(K // chunk):
-            noise = draw_rows(jax.random.fold_in(key, c), model.physics, meas, chunk, i0, B)
-            part = tuple(a[:k] for a in layer_outputs(params, x, noise, physics, meas.arch, t))
-            check_all_finite(part, [lambda l=l: f"the model's shots of layer {l} ({model.describe()})"
-                                    for l in range(1, len(part) + 1)],
-                             lambda kk, i: eager_forward_at(params, x, noise, physics, meas.arch, t, i))
-            for o, l in zip(outs, ids):
-                o[:, c * chunk:(c + 1) * chunk] = np.asarray(part[l - 1])
-            del part, noise
-        yield slice(i0, i0 + k), tuple(outs)
+    for i0 in range(0, meas.n, B):  # the last block padded: one compiled program serves every block
+        yield slice(i0, min(i0 + B, meas.n)), _shots_of_rows(
+            key, model, meas, K, i0, B, lambda k, chunk: draw_rows(k, model.physics, meas, chunk, i0, B))
 
 
 def eager_forward_at(params, x, noise, physics, arch, t, at=None):

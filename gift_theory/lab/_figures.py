@@ -160,7 +160,9 @@ def where_figure(stats: dict, *, title: str = "where the model fails", fig=None,
     edges = stats.get("edges")
     if fig is None:
         fig = _new_figure((2.6 + 2.7 * len(names), 2.0 + 0.22 * nr))
-    axes = np.atleast_1d(fig.subplots(1, len(names), sharey=True))
+    # not shared: every panel's image spans the same rows, and only the first names them (a shared
+    # axis would make and lay out every row's tick in every panel)
+    axes = np.atleast_1d(fig.subplots(1, len(names)))
     font = 7 if nr <= 40 else 5 if nr <= 80 else 0  # values on the bins while they stay legible
     layer_of = [r.split(":")[0] for r in rows]
     breaks = [i - 0.5 for i in range(1, nr) if layer_of[i] != layer_of[i - 1]]
@@ -196,6 +198,8 @@ def where_figure(stats: dict, *, title: str = "where the model fails", fig=None,
             ax.set_yticks(range(0, nr, step))
             ax.set_yticklabels(rows[::step], fontsize=7 if nr <= 40 else 5)
             ax.set_ylabel("layer:neuron (neurons from 0)", fontsize=8)
+        else:
+            ax.set_yticks([])
     cb = fig.colorbar(im, ax=list(axes), shrink=0.9, aspect=40)
     cb.set_label("z (N(0, 1) under the model), one scale for every panel", fontsize=8)
     cb.ax.tick_params(labelsize=7)
@@ -534,9 +538,8 @@ def moments_figure(moments, layer: int, *, fig=None, title: str | None = None):
     n, d = mlist[0].mean[li].shape
     for c, m in zip(colors, mlist):
         mu, v = m.model_mean[li].ravel(), m.model_var[li].ravel()
-        kw = dict(fmt="o", ms=2.5, color=c, ecolor=c, elinewidth=0.4, alpha=0.5)
-        a_mean.errorbar(mu, Y, yerr=2 * np.sqrt(V / r), label=m.label, **kw)
-        a_var.errorbar(v, V, yerr=2 * V * np.sqrt(2.0 / (r - 1)), label=m.label, **kw)
+        _points_with_bars(a_mean, mu, Y, 2 * np.sqrt(V / r), c, m.label)
+        _points_with_bars(a_var, v, V, 2 * V * np.sqrt(2.0 / (r - 1)), c, m.label)
         z = m.mean_z(li).ravel()
         lr, sd = m.log_var_ratio(li)
         a_rz.plot(mu, z, "o", ms=2.5, color=c, alpha=0.6,
@@ -585,6 +588,17 @@ def moments_figure(moments, layer: int, *, fig=None, title: str | None = None):
     fig.suptitle(title or f"layer {layer} ({kind}, {d} neurons): measured against model, {n} inputs x {r} shots "
                           f"(model: {mlist[0].K} shots)", fontsize=10)
     return _root(fig)
+
+
+def _points_with_bars(ax, x, y, err, color, label: str) -> None:
+    """Points (x, y) with vertical bars y +- err: the bars one line broken between them (a NaN
+    after each), not matplotlib's ``errorbar`` (a path per bar, each transformed on its own: on log
+    axes, thousands of bars cost a second per figure); the legend shows the point."""
+    x, y, err = (np.ravel(np.asarray(a, float)) for a in (x, y, err))
+    gap = np.full_like(x, np.nan)
+    ax.plot(np.column_stack([x, x, gap]).ravel(), np.column_stack([y - err, y + err, gap]).ravel(), color=color,
+            lw=0.4, alpha=0.5)
+    ax.plot(x, y, "o", ms=2.5, color=color, alpha=0.5, label=label)
 
 
 def _empty_corner(measured, models) -> str:

@@ -86,6 +86,29 @@ def test_moments_figure_returns_a_labelled_figure_and_uses_a_given_fig(moments, 
     assert os.listdir(tmp_path) == []
 
 
+def test_each_point_s_bar_spans_its_measured_moment_plus_minus_two_standard_errors(moments):
+    """Panels (a) and (b) draw each cell's bar (one broken line per model): at the model's mean
+    (variance), from the measured value less two standard errors to it plus two (the mean's
+    sqrt(v / r), the variance's v sqrt(2 / (r - 1)))."""
+    li, m = 1, moments[1]
+    fig = moments_figure(list(moments), 2)
+    a_mean, a_var = fig.axes[:2]
+    Y, V, r = m.mean[li].ravel(), m.var[li].ravel(), m.r
+    for ax, x_of, y, half in ((a_mean, lambda mm: mm.model_mean[li].ravel(), Y, 2 * np.sqrt(V / r)),
+                              (a_var, lambda mm: mm.model_var[li].ravel(), V, 2 * V * np.sqrt(2.0 / (r - 1)))):
+        bars = [ln for ln in ax.get_lines() if np.isnan(ln.get_ydata()).any()]
+        assert len(bars) == len(moments)  # one line of bars per model, in the models' order
+        for line, mm in zip(bars, moments):
+            xs, ys = (np.asarray(v, float).reshape(-1, 3) for v in line.get_data())
+            assert np.isnan(xs[:, 2]).all() and np.isnan(ys[:, 2]).all()  # broken after each bar
+            np.testing.assert_array_equal(xs[:, 0], x_of(mm))
+            np.testing.assert_array_equal(xs[:, 1], x_of(mm))
+            np.testing.assert_allclose(ys[:, 0], y - half, rtol=1e-12)
+            np.testing.assert_allclose(ys[:, 1], y + half, rtol=1e-12)
+    labels = [t.get_text() for t in a_mean.get_legend().get_texts()]
+    assert labels == ["before", "after", "identity"]  # each model once (its points), not once per bar
+
+
 @pytest.mark.parametrize("shift, corner", [(-1.0, "lower right"), (1.0, "upper left")])
 def test_a_moments_legend_sits_on_the_side_of_the_diagonal_the_points_are_not(moments, shift, corner):
     """Panels (a) and (b) plot measured against model: with the model's means (variances) below the
@@ -131,6 +154,10 @@ def test_where_figure_has_one_colour_scale_the_bin_edges_and_marks_the_significa
     assert len(texts) == 7 * 6 and f"{stats['maps']['log_var_ratio'][0, 1]:.1f}" in texts
     assert len([label for a in panels[0].artists for label in getattr(a, "labels", ())]) == 7 * 6 - 1  # not the empty bin
     assert fig.get_layout_engine() is not None
+    # every panel spans the same rows (row 0 at the top); only the first names them
+    assert {p.get_ylim() for p in panels} == {(6.5, -0.5)}
+    assert [t.get_text() for t in panels[0].get_yticklabels()] == stats["rows"]
+    assert [len(p.get_yticks()) for p in panels[1:]] == [0, 0]
     given = Figure()
     assert where_figure(stats, fig=given) is given
     assert os.listdir(tmp_path) == []

@@ -57,9 +57,10 @@ def _hand_over(drawing, figures: dict, data: dict | None = None, *, folder: str)
 
 #: the relative cost of drawing each kind of figure (t240's figures drawn warm, in units of the
 #: correlation figure's 0.4 s: where.png's 56 rows of cells the largest, a ppc figure's 16 panels
-#: next; the rest about 0.3-0.6) and of writing a figure's numbers (``nc``): the costliest are taken
-#: first, so that the two processes end together
-_COST = {"where": 3.0, "ppc": 1.7, "moments": 1.3, "correlation": 1.0, "nc": 0.1}
+#: next; a kind not listed counts 1) and of writing a figure's numbers (``nc``): the costliest are
+#: taken first, so that the two processes end together
+_COST = {"where": 3.0, "ppc": 1.7, "moments": 1.3, "correlation": 1.0, "pit": 0.6, "law": 0.6, "time": 0.5,
+         "comparison": 0.4, "ladder": 0.3, "nc": 0.1}
 
 
 def _kind(path: str) -> str:

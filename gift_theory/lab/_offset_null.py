@@ -30,7 +30,7 @@ from .._model import (
 )
 from .._process import release_freed_memory
 from ._budget import map_in_threads
-from ._shots import Model, params32, to32
+from ._shots import Model, padded_rows, params32, to32
 from ._offset_kinds import (
     _initial_scale,
     _split_by_kind,
@@ -87,7 +87,7 @@ def effective_dof(key, meas: Measurement, model: Model, kinds) -> tuple[float, i
         spans, size = input_chunks(meas.n, len(owner) * draws * d_l * 4)
         gram = 0.0
         for i0, i1 in spans:
-            part = functools.partial(_rows, i0=i0, i1=i1, size=size)
+            part = functools.partial(padded_rows, i0=i0, i1=i1, size=size)
             cols = np.asarray(_layer_jvps(zero, W, b, part(a), jax.tree_util.tree_map(part, noise), model.physics,
                                           None if t is None else part(t), basis, arch, l, axis, here)[1], np.float64)
             cols = cols[:, :i1 - i0].reshape(len(owner), -1, d_l)  # (P_i, samples, neurons)
@@ -110,25 +110,13 @@ JVP_CHUNK_BYTES = 96 << 20
 
 def input_chunks(n: int, per_input: int, budget: int | None = None):
     """``(spans, size)``: ``range(n)`` in equal chunks of ``size`` inputs (the last one shorter,
-    padded by :func:`_rows` so that one compiled program serves every chunk) of at most
+    padded by :func:`~._shots.padded_rows` so that one compiled program serves every chunk) of at most
     ``budget`` bytes (default :data:`JVP_CHUNK_BYTES`) at ``per_input`` bytes an input; one
     chunk, unpadded, when all fit."""
     budget = JVP_CHUNK_BYTES if budget is None else budget
     k = max(1, -(-n * int(per_input) // int(budget)))
     size = -(-n // k)
     return [(i, min(i + size, n)) for i in range(0, n, size)], size
-
-
-def _rows(v, i0: int, i1: int, size: int):
-    """Rows ``i0:i1`` of ``v``, the last row repeated up to ``size`` rows (the rows past ``i1``
-    are computed and dropped)."""
-    if i0 == 0 and i1 == size == v.shape[0]:
-        return v  # the whole measurement in one chunk
-    v = jnp.asarray(v)
-    part = v[i0:i1]
-    if i1 - i0 < size:
-        part = jnp.concatenate([part, jnp.repeat(v[i1 - 1:i1], size - (i1 - i0), axis=0)], axis=0)
-    return part
 
 
 def _output_jacobian(key, meas: Measurement, model: Model, kinds, chunk: int = 64):

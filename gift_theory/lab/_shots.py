@@ -158,11 +158,24 @@ def model_shots(key, model: Model, meas: Measurement, shots: int | None = None):
                           lambda k, chunk: draws(k, model.physics, meas, chunk))
 
 
+def padded_rows(v, i0: int, i1: int, size: int):
+    """Rows ``i0:i1`` of ``v``, the last row repeated up to ``size`` rows: a block of a larger
+    array's inputs in the block's compiled shape (the padding rows are computed and dropped).
+    A numpy array is sliced on the host, a JAX array on the device; the whole array, in one
+    block, is ``v`` itself."""
+    if i0 == 0 and i1 == size == v.shape[0]:
+        return v
+    xp = np if isinstance(v, np.ndarray) else jnp
+    part = v[i0:i1]
+    if i1 - i0 < size:
+        part = xp.concatenate([part, xp.repeat(v[i1 - 1:i1], size - (i1 - i0), axis=0)], axis=0)
+    return part
+
+
 def _host_rows(a, start: int, k: int, size: int):
-    """Rows ``start .. start + k - 1`` of the host array ``a`` as float32 on the device, the last
-    row repeated up to ``size`` rows (a block's padding)."""
-    a = np.asarray(a)[start:start + k]
-    return to32(a if k == size else np.concatenate([a, np.repeat(a[-1:], size - k, 0)]))
+    """Rows ``start .. start + k - 1`` of the host array ``a`` as float32 on the device, padded to
+    ``size`` rows (:func:`padded_rows`)."""
+    return to32(padded_rows(np.asarray(a), start, start + k, size))
 
 
 def _shots_of_rows(key, model: Model, meas: Measurement, K: int, start: int, size: int, noise_of):
@@ -223,8 +236,7 @@ def draw_rows(key, physics, meas: Measurement, K: int, start: int, size: int) ->
         v = None if whole else _site_rows(key, name, (meas.n, int(K)) + tuple(event), site_law, start, size)
         if v is None:
             every = draws(key, physics, meas, K) if every is None else every
-            w = every[name][start:start + size]
-            v = w if w.shape[0] == size else jnp.concatenate([w, jnp.repeat(w[-1:], size - w.shape[0], 0)])
+            v = padded_rows(every[name], start, min(start + size, meas.n), size)
         out[name] = v
     return out
 

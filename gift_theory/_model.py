@@ -29,6 +29,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import _random, _xla
 from ._arch import Architecture
@@ -126,15 +127,32 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
             for name, (event, law) in site_laws(arch, physics).items()}
 
 
-@partial(_xla.jit, static_argnames=("arch", "shape", "dtype"))
-def compiled_draws(key, physics, *, arch, shape, dtype):
-    """:func:`sample_noise` as its own compiled program (materialised draws).
+#: :func:`tagged_draws` as a compiled program with the tag traced: one program per shape, law and
+#: dtype draws every site of that shape, whatever the physics around it (the draws of a site
+#: depend only on the key, its name, shape and law)
+site_program = _xla.jit(tagged_draws, static_argnames=("shape", "law", "dtype"))
 
-    Compiled apart from the kernels that consume them: fused into a kernel, XLA recomputes
-    the draws in every consumer; behind an optimization barrier it splits the sampler into
-    many materialised pieces (both measured slower). One compiled sampler per (arch, shape,
-    physics structure) serves every estimator, the referee and the objective.
+
+def compiled_draws(key, physics, *, arch, shape, dtype):
+    """:func:`sample_noise` made by compiled programs (materialised draws), bit for bit.
+
+    Each site is drawn by :data:`site_program`, so one program per site shape and law serves
+    every physics structure, estimator, the referee, the objective and the lab (a whole-physics
+    sampler compiled one program per structure: the threefry rounds of every site again). A
+    noise law with parameters is drawn by one program of the whole physics (its values are
+    arguments, not part of a program's key). The draws are compiled apart from the kernels that
+    consume them: fused into a kernel, XLA recomputes them in every consumer.
     """
+    law = noise_law(physics)
+    if law is not None and law.param_dict():
+        return _whole_draws(key, physics, arch=arch, shape=tuple(shape), dtype=dtype)
+    return {name: site_program(key, np.uint32(name_tag(name)), tuple(shape) + tuple(event), site_law, dtype)
+            for name, (event, site_law) in site_laws(arch, physics).items()}
+
+
+@partial(_xla.jit, static_argnames=("arch", "shape", "dtype"))
+def _whole_draws(key, physics, *, arch, shape, dtype):
+    """:func:`sample_noise` as one compiled program (a noise law with parameters)."""
     return sample_noise(key, arch, physics, shape, dtype)
 
 

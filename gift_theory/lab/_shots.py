@@ -32,7 +32,7 @@ from .._model import (
     noisy_input,
     sample_noise,
     site_laws,
-    tagged_draws,
+    site_program,
 )
 from .._params import Layer, params32, to32  # noqa: F401  (the lab's modules import them from here)
 
@@ -99,12 +99,6 @@ _draw_lock = threading.Lock()
 _draw_bytes = [0]
 
 
-#: :func:`gift_theory._model.site_draws` with the site's name traced (its tag): one compiled
-#: program per shape and law, shared by the sites of that shape (w_l and a_l: a fresh process
-#: traced and lowered 30 of them, one per site, ~1.8 s of a diagnosis)
-_site_draws = jax.jit(tagged_draws, static_argnames=("shape", "law", "dtype"))
-
-
 def draws(key, physics, meas: Measurement, K: int) -> dict:
     """Standard draws of ``physics`` for K shots of each input of ``meas`` (the core's sampler).
 
@@ -129,7 +123,7 @@ def draws(key, physics, meas: Measurement, K: int) -> dict:
             if v is not None:
                 _draw_cache.move_to_end(ck)
         if v is None:
-            v = _site_draws(key, np.uint32(name_tag(name)), full, site_law, jnp.float32)
+            v = site_program(key, np.uint32(name_tag(name)), full, site_law, jnp.float32)
             with _draw_lock:
                 if ck not in _draw_cache:
                     _draw_cache[ck] = v

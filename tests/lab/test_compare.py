@@ -307,13 +307,14 @@ def test_the_fit_s_loss_runs_the_comparison_s_compiled_forward(setup, extra):
                                   {"uniform": True, "multiplicative": 0.2}, {"common_mode": 0.1, "drift": 0.1}])
 def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
     """``lab._shots.draws`` keeps draws per site and shares them between candidate models; each
-    site must be bit for bit what the core's compiled whole-physics sampler draws, whether it
-    comes from the cache or not (both draw through ``_model.site_draws``); the eager sampler
-    and a plain gift_theory._random reference guard the site's subkey and law."""
+    site must be bit for bit what the core's sampler draws -- its per-site programs
+    (``compiled_draws``) and the whole physics' sampler compiled as one program, as the chip's
+    and the one-step programs inline it -- whether it comes from the cache or not; the eager
+    sampler and a plain gift_theory._random reference guard the site's subkey and law."""
     from gift_theory import sample_noise
     # private: the lab's per-site draw cache against the core's compiled sampler and its named subkeys, bit for bit
     from gift_theory import _random
-    from gift_theory._model import compiled_draws, named_subkey
+    from gift_theory._model import _whole_draws, compiled_draws, named_subkey
     from gift_theory.lab._shots import draws
 
     phys = gt.Physics.create(s=0.1, **spec)
@@ -322,6 +323,10 @@ def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
     meas = simulate_measurement(jax.random.PRNGKey(2), params, x, phys, shots=3)
     key = jax.random.PRNGKey(9)
     want = compiled_draws(key, phys, arch=ARCH, shape=(6, 5), dtype=jnp.float32)
+    whole = _whole_draws(key, phys, arch=ARCH, shape=(6, 5), dtype=jnp.float32)
+    assert set(whole) == set(want)
+    for name in want:
+        np.testing.assert_array_equal(np.asarray(whole[name]), np.asarray(want[name]))
     eager = sample_noise(key, ARCH, phys, (6, 5), jnp.float32)
     for _ in range(2):  # drawn, then served from the cache
         got = draws(key, phys, meas, 5)

@@ -106,7 +106,7 @@ def draws(key, physics, meas: Measurement, K: int) -> dict:
     law -- not on the other effects -- so every candidate model of a diagnosis reuses the
     draws of the sites it shares with the others: they are kept per site (up to
     :data:`DRAW_CACHE_BYTES`), bit for bit what :func:`gift_theory._model.compiled_draws`
-    returns for the whole physics (both draw through :func:`gift_theory._model.site_draws`).
+    returns for the whole physics (both draw through :data:`gift_theory._model.site_program`).
     A law with parameters cannot key the cache (its draws depend on their values): such a
     physics is drawn whole."""
     shape = (meas.n, int(K))

@@ -130,13 +130,18 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
 #: :func:`tagged_draws` as a compiled program with the tag traced: one program per shape, law and
 #: dtype draws every site of that shape, whatever the physics around it (the draws of a site
 #: depend only on the key, its name, shape and law)
-site_program = _xla.jit(tagged_draws, static_argnames=("shape", "law", "dtype"))
+_site_program = _xla.jit(tagged_draws, static_argnames=("shape", "law", "dtype"))
+
+
+def compiled_site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype=jnp.float32) -> jax.Array:
+    """:func:`site_draws` by the compiled program every site of this shape and law shares."""
+    return _site_program(key, np.uint32(name_tag(name)), tuple(shape), law, dtype)
 
 
 def compiled_draws(key, physics, *, arch, shape, dtype):
     """:func:`sample_noise` made by compiled programs (materialised draws), bit for bit.
 
-    Each site is drawn by :data:`site_program`, so one program per site shape and law serves
+    Each site is drawn by :func:`compiled_site_draws`, so one program per site shape and law serves
     every physics structure, estimator, the referee, the objective and the lab (a whole-physics
     sampler compiled one program per structure: the threefry rounds of every site again). A
     noise law with parameters is drawn by one program of the whole physics (its values are
@@ -146,7 +151,7 @@ def compiled_draws(key, physics, *, arch, shape, dtype):
     law = noise_law(physics)
     if law is not None and law.param_dict():
         return _whole_draws(key, physics, arch=arch, shape=tuple(shape), dtype=dtype)
-    return {name: site_program(key, np.uint32(name_tag(name)), tuple(shape) + tuple(event), site_law, dtype)
+    return {name: compiled_site_draws(key, name, tuple(shape) + tuple(event), site_law, dtype)
             for name, (event, site_law) in site_laws(arch, physics).items()}
 
 

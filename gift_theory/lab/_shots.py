@@ -24,6 +24,7 @@ from .._finite import check_all_finite, check_finite
 from .._measurement import Measurement
 from .._model import (
     compiled_draws,
+    compiled_site_draws,
     forward,
     layer_step,
     name_tag,
@@ -32,7 +33,6 @@ from .._model import (
     noisy_input,
     sample_noise,
     site_laws,
-    site_program,
 )
 from .._params import Layer, params32, to32  # noqa: F401  (the lab's modules import them from here)
 
@@ -106,7 +106,7 @@ def draws(key, physics, meas: Measurement, K: int) -> dict:
     law -- not on the other effects -- so every candidate model of a diagnosis reuses the
     draws of the sites it shares with the others: they are kept per site (up to
     :data:`DRAW_CACHE_BYTES`), bit for bit what :func:`gift_theory._model.compiled_draws`
-    returns for the whole physics (both draw through :data:`gift_theory._model.site_program`).
+    returns for the whole physics (both draw through :func:`gift_theory._model.compiled_site_draws`).
     A law with parameters cannot key the cache (its draws depend on their values): such a
     physics is drawn whole."""
     shape = (meas.n, int(K))
@@ -123,7 +123,7 @@ def draws(key, physics, meas: Measurement, K: int) -> dict:
             if v is not None:
                 _draw_cache.move_to_end(ck)
         if v is None:
-            v = site_program(key, np.uint32(name_tag(name)), full, site_law, jnp.float32)
+            v = compiled_site_draws(key, name, full, site_law, jnp.float32)
             with _draw_lock:
                 if ck not in _draw_cache:
                     _draw_cache[ck] = v

@@ -29,9 +29,10 @@ def _env():
 def _run_time_bound(env):
     """``env`` for a command whose run time outweighs its compile time (the not-explained
     diagnosis designs the next measurement: a few hundred simulated campaigns): XLA's backend
-    optimisation level 1 in place of the test run's 0 (tests/conftest.py). On one core with a
-    fresh compilation cache that command takes 0.5-0.6 of its level-0 time at level 1
-    (studies/results/2026-12-02, section 4). A level the user set is kept."""
+    optimisation level 1 where ``XLA_FLAGS`` asks for level 0 (the test run's, tests/conftest.py,
+    or a user's); any other level is left as it is. On one core with a fresh compilation cache
+    that command takes 0.5-0.6 of its level-0 time at level 1 (studies/results/2026-12-02,
+    section 4)."""
     flags = env.get("XLA_FLAGS", "")
     env["XLA_FLAGS"] = flags.replace("--xla_backend_optimization_level=0", "--xla_backend_optimization_level=1")
     return env

@@ -11,10 +11,20 @@ from __future__ import annotations
 
 import contextlib
 import os
+import struct
 import tempfile
+import zipfile
+import zlib
 from typing import Callable
 
 from ._errors import require
+
+#: what reading an .npz (a zip archive) raises on a damaged or unreadable file: a broken archive
+#: (BadZipFile, struct.error, zlib.error, EOFError), a header zipfile refuses (NotImplementedError:
+#: a zip version or compression method it does not know; RuntimeError: an encrypted member),
+#: an unreadable file (OSError), a bad array header (ValueError) or a missing member (KeyError)
+NPZ_READ_ERRORS = (zipfile.BadZipFile, struct.error, zlib.error, EOFError, RuntimeError, OSError, ValueError,
+                   KeyError)
 
 
 @contextlib.contextmanager

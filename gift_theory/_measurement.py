@@ -13,12 +13,12 @@ import dataclasses
 import os
 import re
 import stat
-import zipfile
 
 import numpy as np
 
 from ._arch import ACTIVATIONS, Architecture
 from ._errors import GiftInputError, require
+from ._io import NPZ_READ_ERRORS
 from ._params import Layer
 
 
@@ -270,7 +270,7 @@ def _npz_arrays(path, what: str, keep=None) -> dict:
             return {k: f[k] for k in f.files if keep is None or keep(k)}
     except MemoryError:
         raise GiftInputError(f"{path}: an array in this .npz is too large to load into memory") from None
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
+    except NPZ_READ_ERRORS as exc:
         msg = str(exc).splitlines()[0] if str(exc) else ""
         raise GiftInputError(f"{path}: not a readable .npz {what}file ({type(exc).__name__}"
                              f"{': ' + msg if msg else ''})") from None

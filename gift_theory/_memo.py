@@ -32,13 +32,12 @@ import hashlib
 import json
 import os
 import time
-import zipfile
 
 import jax
 import numpy as np
 
 from ._cachedir import unwritable, warn_once
-from ._io import atomic_write_bytes
+from ._io import NPZ_READ_ERRORS, atomic_write_bytes
 
 #: results kept in process
 KEEP = 32
@@ -216,7 +215,7 @@ def lookup(tag: str, parts):
     if path and os.path.isfile(path):
         try:
             value = _read_entry(path, key)
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+        except NPZ_READ_ERRORS as exc:  # (json.JSONDecodeError is a ValueError)
             warn_once("broken entry", f"memo entry {path} is unreadable ({type(exc).__name__}: {exc}); computed again")
             return None  # an unreadable entry is recomputed and rewritten
         _count[tag]["hits"] += 1

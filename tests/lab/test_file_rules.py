@@ -5,6 +5,7 @@ format, and random corruptions that give exit 2 and one line, never exit 1 or a 
 
 import os
 import random
+import re
 import threading
 import warnings
 
@@ -292,6 +293,36 @@ def _corrupt(data: bytes, how: str, rnd: random.Random) -> bytes:
         j = rnd.randrange(len(lines[0].split(",")))
         lines = [",".join(c for k, c in enumerate(l.split(",")) if k != j) for l in lines]
     return ("\n".join(lines) + "\n").encode()
+
+
+def _central_field(data: bytes, offset: int, value: int, size: int = 2) -> bytes:
+    """``data`` (a zip archive) with a field of every central-directory header set to ``value``
+    (little-endian; offsets from the header's signature PK\\x01\\x02)."""
+    out = bytearray(data)
+    for m in re.finditer(rb"PK\x01\x02", bytes(data)):
+        out[m.start() + offset:m.start() + offset + size] = value.to_bytes(size, "little")
+    return bytes(out)
+
+
+@pytest.mark.parametrize("field, offset, value", [("version needed", 6, 109), ("flags: encrypted", 8, 1),
+                                                  ("compression method", 10, 99)])
+def test_an_archive_zipfile_cannot_open_is_a_bad_input(tmp_path, capsys, meas, field, offset, value):
+    """A header zipfile refuses with NotImplementedError (a version or compression method it does
+    not know) or RuntimeError (an encrypted member) is a damaged .npz, exit 2 in one line -- for a
+    measurement and for the weights beside it; the file is left as it was."""
+    path = _npz(tmp_path, meas)
+    weights = tmp_path / "weights.npz"
+    save_weights(weights, meas)
+    for bad in (path, weights):
+        good = bad.read_bytes()
+        bad.write_bytes(_central_field(good, offset, value))
+        before = bad.read_bytes()
+        code, out, err = run(capsys, "compare", path, "--weights", weights, "--effect", "awgn=0.1", "--json",
+                             "--power-replicates", "0")
+        assert code == 2 and out == "", (field, code, err)
+        assert one_line(err).startswith(f"{bad}: not a readable .npz"), (field, err)
+        assert bad.read_bytes() == before
+        bad.write_bytes(good)
 
 
 @settings(max_examples=40, deadline=None)

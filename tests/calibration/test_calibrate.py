@@ -121,6 +121,7 @@ def test_fit_layers_without_taps_reads_the_output_map(setting):
     np.testing.assert_allclose(f.W, chip.det_gain[:, None] * np.asarray(w0[1].W), atol=6 * f.W_se.max())
 
 
+@pytest.mark.slow
 def test_calibrate_recovers_gains_offsets_and_bias_shifts(setting):
     """Loss on layer 1, a bias current off, the detectors' gains and offsets: the loop programs
     weights under which the chip's loss is within noise of the ideal chip's, and the confirmation
@@ -141,6 +142,7 @@ def test_calibrate_recovers_gains_offsets_and_bias_shifts(setting):
     assert info["noise"]["used"] == "awgn (it fits)", info["noise"]
 
 
+@pytest.mark.slow
 def test_calibrate_pins_stuck_weights_and_retrains_around_them(setting):
     ds, w0 = setting
     W1 = np.asarray(w0[0].W)

@@ -182,6 +182,7 @@ def test_progress_reported_as_items_finish_estimates_what_is_left(monkeypatch):
     assert [ln.split("(")[1] for ln in lines] == ["0 s)", "1 s, ~2 s left)", "2 s, ~1 s left)", "3 s)"]
 
 
+@pytest.mark.slow
 def test_import_gift_theory_changes_no_jax_setting():
     import subprocess
     import sys

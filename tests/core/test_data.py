@@ -20,6 +20,7 @@ def test_digits_fixed_split_and_scaling():
     assert np.array_equal(a.y_train.argmax(1), a.labels_train) and np.allclose(a.y_train.sum(1), 1)
 
 
+@pytest.mark.slow
 def test_mnist5k():
     d = load_dataset("mnist5k")
     assert d.x_train.shape == (4000, 784) and d.x_test.shape == (1000, 784) and d.y_train.shape == (4000, 10)

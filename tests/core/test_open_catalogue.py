@@ -474,6 +474,7 @@ def test_per_neuron_scope_ignores_other_layers(x64):
     np.testing.assert_allclose(np.asarray(gt.forward(params, x, {}, wide, arch).y), want, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_per_neuron_parameters_under_jit_and_grad(x64):
     _per_neuron_class()
     arch, params, x = net((3, 4, 5, 2))

@@ -34,6 +34,7 @@ print(f"{before:.1f} {after:.1f}")
 """
 
 
+@pytest.mark.slow
 def test_freed_memory_goes_back_to_the_system():
     proc = subprocess.run([sys.executable, "-c", _CHILD], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]

@@ -108,6 +108,7 @@ def test_float32_normal_is_the_inverse_cdf_to_a_few_ulps_everywhere():
     assert np.array_equal(z, -z[::-1])  # exactly symmetric
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("law", R.ROW_LAWS)
 @pytest.mark.parametrize("shape", [(13, 7, 3), (8, 5), (1, 1), (6, 1, 4, 2)])
 def test_a_block_of_rows_is_the_whole_draw_s_rows_bit_for_bit(law, shape):

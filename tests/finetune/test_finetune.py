@@ -92,6 +92,7 @@ def test_repaired_search_finds_and_confirms_a_real_improvement():
     assert problem.evaluations_used() <= 20
 
 
+@pytest.mark.slow
 def test_repaired_search_keeps_w0_at_the_optimum():
     """At w* = w0 every candidate is worse, but one a hair from w0 is worse by a^2 only, so
     the confirmation accepts it at up to its level alpha = P(Z > 2.5) = 0.62 % overall -- its

@@ -45,6 +45,7 @@ def fitted(tmp_path_factory):
     return d, json.loads(buf.getvalue())
 
 
+@pytest.mark.slow
 def test_fit_saves_the_model_it_reports(fitted):
     d, fit = fitted
     assert fit["chip_model"] == str(d / "m.chip.npz")
@@ -70,6 +71,7 @@ def test_fit_saves_the_model_it_reports(fitted):
     np.testing.assert_allclose(np.asarray(got[0].W), W_new + (r1.eff_W - r1.prog_W), atol=1e-12)
 
 
+@pytest.mark.slow
 def test_simulate_draws_from_the_model_and_compare_scores_it(fitted, capsys, tmp_path):
     d, fit = fitted
     out = tmp_path / "again.npz"

@@ -305,6 +305,7 @@ def test_the_fit_s_loss_runs_the_comparison_s_compiled_forward(setup, extra):
 
 @pytest.mark.parametrize("spec", [{}, {"shot": 0.05, "crosstalk": 0.2}, {"laplace": True, "shot": 0.05},
                                   {"uniform": True, "multiplicative": 0.2}, {"common_mode": 0.1, "drift": 0.1}])
+@pytest.mark.slow
 def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
     """``lab._shots.draws`` keeps draws per site and shares them between candidate models; each
     site must be bit for bit what the core's sampler draws -- its per-site programs
@@ -486,6 +487,7 @@ def test_the_moment_fit_compares_log_variances_net_of_their_bias(x64):
     assert abs(direct.mean() - log_variance_bias(r - 1)) <= Z * direct.std(ddof=1) / np.sqrt(direct.size)
 
 
+@pytest.mark.slow
 def test_the_fitted_awgn_level_of_a_wide_layer_is_the_true_one():
     """A 256-wide hidden layer with taps, 120 inputs x 8 shots, the true model awgn(0.1), 16
     data sets: the mean relative error of the fitted s (on each set's fitting half) is within
@@ -581,6 +583,7 @@ class StudentTBlocks(Effect):
 
 @pytest.mark.parametrize("spec", [{"shot": 0.05, "crosstalk": 0.2}, {"laplace": True, "drift": 0.1},
                                   {"uniform": True, "weight_error": 0.05}, {"student_t_blocks": True}])
+@pytest.mark.slow
 def test_a_file_s_model_shots_made_a_block_of_inputs_at_a_time_give_the_whole_array_s_numbers(spec, monkeypatch):
     """A large file's model shots are made and scored a block of inputs at a time, so they are
     never held whole; every channel is a function of its input's shots, so compare's numbers must

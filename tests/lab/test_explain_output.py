@@ -71,6 +71,7 @@ def test_the_shape_polynomials_are_legendres_and_their_slope_its_derivative():
     assert np.allclose(_legendre_slope(z, 2.5, c), np.where(np.abs(z) <= 2.5, ref, 0.0))
 
 
+@pytest.mark.slow
 def test_without_taps_a_dead_neuron_is_named_by_the_neuron_that_explains_the_mean():
     meas = sim(12, dead=(2, 3), n=120, r=32, taps=False)
     ident = identify(meas)
@@ -85,6 +86,7 @@ def test_without_taps_a_dead_neuron_is_named_by_the_neuron_that_explains_the_mea
     assert "neuron 2:4" in m[0]["evidence"]
 
 
+@pytest.mark.slow
 def test_without_taps_a_gain_on_every_layer_is_a_gain_error_and_a_null_is_left_alone():
     gain = identify(sim(11, gains={1: 0.7, 2: 0.7, 3: 0.7}, n=120, r=32, taps=False))
     cands = {c.name: c for c in gain.output_candidates}
@@ -98,6 +100,7 @@ def test_without_taps_a_gain_on_every_layer_is_a_gain_error_and_a_null_is_left_a
     assert order_map_classes(mechs, null.output_candidates) == mechs
 
 
+@pytest.mark.slow
 def test_without_taps_a_transfer_that_is_not_tanh_leads_as_activation_mismatch():
     meas = sim(21, n=160, r=32, act=np.sin, taps=False)
     ident = identify(meas)
@@ -106,6 +109,7 @@ def test_without_taps_a_transfer_that_is_not_tanh_leads_as_activation_mismatch()
     assert _first(ident)[0]["mechanism"] == "activation_mismatch"
 
 
+@pytest.mark.slow
 def test_explain_is_deterministic_and_reports_every_class():
     meas = sim(12, dead=(2, 3), n=120, r=16, taps=False)
     a = explain(meas, 0.05)
@@ -115,6 +119,7 @@ def test_explain_is_deterministic_and_reports_every_class():
                                         "readout_nonlinearity", "weight_error"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed,widths", [(21, (4, 12, 5)), (22, (4, 12, 5)), (23, (6, 10, 8, 4))])
 def test_without_taps_a_square_law_detector_is_the_outputs_transfer(seed, widths):
     """y = z_L^2 (an intensity detector): the output's mean is E (z + n)^2, a polynomial of z; the

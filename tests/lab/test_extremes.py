@@ -74,6 +74,7 @@ def test_a_layers_own_level_is_found_without_a_floor():
         assert abs(s / 1e-6 - 1) < 0.03, (l, s)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("s, taps", [(10.0, True), (10.0, False)])
 def test_a_correctly_specified_file_names_nothing_at_large_noise(s, taps):
     """s = 10: every map's least squares ran off along a flat valley (|z| ~ 1e7 with taps; without,
@@ -87,6 +88,7 @@ def test_a_correctly_specified_file_names_nothing_at_large_noise(s, taps):
         assert abs(li.s / s - 1) < 6 * li.s_se / s + 0.01, (li.layer, li.s)
 
 
+@pytest.mark.slow
 def test_a_map_the_data_see_in_part_names_no_dead_neuron():
     """s = 1 with taps (set 27 of the levels null): layer 2's neurons are read at maps so steep that
     their designs have rank 6-16 of 17 -- the Gram's plain inverse was rounding noise, the sandwich

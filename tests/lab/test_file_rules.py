@@ -252,6 +252,7 @@ def _all_formats(folder, m):
     return paths
 
 
+@pytest.mark.slow
 @settings(max_examples=8, deadline=None)
 @given(m=campaigns())
 def test_every_loader_gives_the_same_campaign_and_verdict(tmp_path_factory, m):
@@ -329,6 +330,7 @@ def test_an_archive_zipfile_cannot_open_is_a_bad_input(tmp_path, capsys, meas, f
 @given(fmt=st.sampled_from(["npz", "nc", "wide", "long"]),
        how=st.sampled_from(["truncate", "flip", "garbage", "drop_line", "duplicate_line", "bad_number", "drop_column"]),
        seed=st.integers(0, 2 ** 31))
+@pytest.mark.slow
 def test_a_corrupted_file_is_exit_2_and_one_line(tmp_path_factory, capsys, meas, fmt, how, seed):
     """Any corruption of a valid file: either still a valid campaign (exit 0) or a bad input with one
     line on stderr (exit 2); never a traceback, never exit 1."""

@@ -53,6 +53,7 @@ def _identical(a: Measurement, b: Measurement):
         np.testing.assert_array_equal(A[k], B[k], err_msg=k)  # exact, not close
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(measurements())
 def test_round_trips_are_exact(meas):

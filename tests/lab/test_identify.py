@@ -500,6 +500,7 @@ def test_without_taps_a_bottleneck_upstream_leaves_the_noise_level_the_chips():
     assert not [r for r in ident.rows() if r["p_adj"] < 0.01]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 3])
 def test_without_taps_a_map_the_monte_carlo_regressor_does_not_resolve_names_nothing(seed):
     """3-21-8 without taps: three inputs through 21 hidden neurons span a 3-dimensional manifold,
@@ -523,6 +524,7 @@ def test_without_taps_a_map_the_monte_carlo_regressor_does_not_resolve_names_not
     assert np.linalg.norm(ident.layers[-1].W_eff - W) < 0.1 * np.linalg.norm(W)
 
 
+@pytest.mark.slow
 def test_without_taps_correlated_noise_on_a_general_weight_error_is_still_named():
     """The other side, on the same 3-21-8 geometry: a weight error of half of W (the general map
     chosen) and noise common to the output's neurons; the correlated noise is named."""
@@ -532,6 +534,7 @@ def test_without_taps_correlated_noise_on_a_general_weight_error_is_still_named(
     assert _sig(ident, "correlated_noise")
 
 
+@pytest.mark.slow
 def test_a_weight_error_s_misfit_counts_only_the_directions_the_data_see():
     """3-21-8 without taps with a weight error: the general map is chosen and most directions of the
     output's map are unseen (the Monte Carlo regressor does not resolve them; the covariance is 0
@@ -590,6 +593,7 @@ def test_shot_noise_is_input_dependent_noise_not_a_noise_law_and_a_law_on_top_st
                                      "noise_law")} == {2}
 
 
+@pytest.mark.slow
 def test_a_chance_signal_dependence_does_not_name_the_noise_law():
     """A correctly specified file (awgn at s = 1, taps; the null study's set 380) on which the
     output's variance-against-signal test rejects by chance: the variance fitted to |v| then
@@ -608,6 +612,7 @@ def test_a_chance_signal_dependence_does_not_name_the_noise_law():
     assert "variance fitted to the signal" not in law[0]["evidence"]
 
 
+@pytest.mark.slow
 def test_the_activation_s_shape_is_read_on_the_neurons_whose_z_the_data_resolve():
     """At s = 1 with taps a hidden layer's map is barely identified (seen only in part for about
     half its neurons, W_eff's error thousands of times |W| for the others): each shot's z at W_eff

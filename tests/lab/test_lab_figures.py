@@ -204,6 +204,7 @@ def test_error_ladder_draws_into_a_given_ax(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_savers_write_atomically_where_told(meas, tmp_path):
     cmp = types.SimpleNamespace(discrepancy=10.0, se=2.0, p_value=0.2, noise_floor=9.0, floor_se=2.0)
     res = types.SimpleNamespace(ladder=[("awgn", cmp), ("awgn + shot", cmp)], comparison_after=cmp,
@@ -234,6 +235,7 @@ def _fit_like(meas):
                                  after=Model(gt.Physics.parse(["awgn=0.05", "shot=0.02"])))
 
 
+@pytest.mark.slow
 def test_two_processes_write_the_same_files_as_one_and_share_the_drawing(meas, tmp_path, monkeypatch):
     """``processes=2``: a helper process writes some of the files (every netCDF, as it is handed
     over), and every file (PNG and netCDF) is byte for byte the one a single process writes. Which figures this process drew is read
@@ -264,6 +266,7 @@ def test_two_processes_write_the_same_files_as_one_and_share_the_drawing(meas, t
         assert a.read() == b.read()
 
 
+@pytest.mark.slow
 def test_a_diagnosis_s_figures_drawn_while_it_runs_are_the_files_drawn_after_it(meas, tmp_path, monkeypatch):
     """``DiagnosisFigures``: the figures that need only the ranking handed over before the rest (as
     ``gift diagnose`` does while it localises), a helper drawing them and writing every netCDF:
@@ -308,6 +311,7 @@ def test_a_diagnosis_s_figures_drawn_while_it_runs_are_the_files_drawn_after_it(
     assert not (tmp_path / "new").exists()
 
 
+@pytest.mark.slow
 def test_a_drawing_the_helper_cannot_do_is_done_here_and_its_error_raised_here(tmp_path, monkeypatch):
     from functools import partial
 

@@ -24,6 +24,7 @@ def chip():
     return simulate_measurement(jax.random.PRNGKey(5), params, x, gt.Physics.create(s=0.05), shots=16, taps=True)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", ["bias_offset", "weight_error"])
 def test_the_offsets_cost_read_in_chunks_of_inputs_equals_the_whole(chip, effect, monkeypatch):
     kinds = kinds_of([effect], chip.arch)

@@ -71,6 +71,7 @@ def meas_file(tmp_path_factory):
     return str(d / "m.npz")
 
 
+@pytest.mark.slow
 def test_a_hook_returning_nan_is_named_in_simulate_and_nothing_is_written(tmp_path, capsys):
     p = plugin(tmp_path, "nanout", "readout", "v * jnp.nan")
     out = tmp_path / "sim.npz"
@@ -147,6 +148,7 @@ FAULTS = {
 }
 
 
+@pytest.mark.slow
 @settings(max_examples=12, deadline=None)
 @given(fault=st.sampled_from(sorted(FAULTS)), where=st.integers(0, 7), layer=st.sampled_from(["all", (1,), (2,)]))
 def test_any_broken_hook_result_is_a_bad_input_naming_the_hook(tmp_path_factory, fault, where, layer):

@@ -87,6 +87,7 @@ def test_plugins_page_diagnosis_with_the_plugin_is_explained(page):
     assert explained.startswith("explained: awgn + act_shape"), explained[:300]
 
 
+@pytest.mark.slow
 def test_plugins_page_bad_plugins_are_one_line_and_exit_2(page):
     blocks, cwd = page
     bad = _run(blocks[5], cwd)

@@ -271,6 +271,7 @@ def test_plugin_that_raises_while_running_is_one_line_exit_2(tmp_path, where, ca
     assert lines[0].startswith("bad.py: effect mzm_bad") and f"hook {hook}" in lines[0] and exc in lines[0]
 
 
+@pytest.mark.slow
 def test_a_noise_law_restricted_to_one_layer(x64):
     """Student-t noise in layer 2 only: layer 2's additive sites draw heavy-tailed noise, the
     others stay Gaussian -- the share of draws beyond 3 standard deviations is 0.0117 for the

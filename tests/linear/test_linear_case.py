@@ -35,6 +35,7 @@ def test_J_matches_monte_carlo_both_placements(x64):
         assert abs(float(est.mean) - closed) < 4.5 * float(est.se), (mode, est, closed)
 
 
+@pytest.mark.slow
 def test_s_derivatives_are_2s_gradB_and_2_gradB(x64):
     rng = np.random.default_rng(2)
     ws = tuple(jnp.asarray(W) for W in _random_ws(rng, (2, 3, 1)))

@@ -98,6 +98,7 @@ def test_hierarchical_sampling(monkeypatch):
     assert _sampling.hierarchical_sampling(jax.random.PRNGKey(5))["verdict"] == "fails"
 
 
+@pytest.mark.slow
 def test_hierarchical_borel_cantelli():
     rows = _sampling_proofs.schedule_table()
     # independent (p-series): sum 1/(K1 K2) < inf iff the exponent of n exceeds 1
@@ -164,6 +165,7 @@ def test_d0_covariance_identity_moments_hypothesis_can_fail(monkeypatch):
     assert r["verdict"] == "fails" and r["counterexample"]["violations"] == 1
 
 
+@pytest.mark.slow
 def test_square_integrability(x64):
     r = _sampling.square_integrability(jax.random.PRNGKey(6), samples=2 ** 13)      # quick size (gift check: 2^15)
     assert r["verdict"] == "holds" and ALL_VERIFIED(r)
@@ -188,6 +190,7 @@ def test_square_integrability(x64):
 
 
 # ---------------------------------------------------------------------------------- linear example
+@pytest.mark.slow
 def test_linear_example_bound(x64):
     r = _linear.linear_example_bound(jax.random.PRNGKey(9))
     assert r["verdict"] == "fails" and r["correction"] and ALL_VERIFIED(r)
@@ -275,6 +278,7 @@ def test_theorem1_condition(monkeypatch):
 
 
 # ---------------------------------------------------------------------------------- numerical checks
+@pytest.mark.slow
 def test_d0_limit(x64):
     r = _sampling.d0_limit(jax.random.PRNGKey(4))
     assert r["verdict"] == "fails" and r["correction"] and ALL_VERIFIED(r)
@@ -298,6 +302,7 @@ def test_sgd_limit_points(x64):
     assert f"W* = {W_star.round(3).tolist()}" in _hyp(r, "B2")["detail"]
 
 
+@pytest.mark.slow
 def test_proposition1_ode_limit(x64):
     windows = (500, 4000, 32000)                        # quick size (gift check: 1000, 8000, 64000)
     r = _sgd.proposition1_ode_limit(jax.random.PRNGKey(17), windows=windows)
@@ -323,6 +328,7 @@ def test_proposition2_unique_point(x64):
     assert _hyp(r, "B2")["verified"] is None                    # not decided on this instance, and said so
 
 
+@pytest.mark.slow
 def test_kushner_verification(x64):
     r = _kushner.kushner_verification(jax.random.PRNGKey(31))
     assert r["verdict"] == "fails" and r["correction"] and ALL_VERIFIED(r)
@@ -479,6 +485,7 @@ def test_corrected_selection_verdict():
     assert V(0, 120, 0, 120, k - 1, 0.1, a)["verdict"] == "inconclusive"
 
 
+@pytest.mark.slow
 def test_algorithm1_stopping_rule(onn, x64, monkeypatch):
     ex = _gift.stopping_rule_exact()
     # independent closed form: f(c) = a c + b c^2 has (f(eta) + f(-eta))/2 - f(0) = b eta^2 and minimiser

@@ -7,6 +7,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 import sympy as sp
 
 import linear_case as lc
@@ -62,6 +63,7 @@ def test_numeric_copy_matches_sympy(x64):
     assert crit["verified"] is None and "degenerate" in crit["detail"]
 
 
+@pytest.mark.slow
 def test_trivial_point_certificate(x64):
     """The trivial point of a tanh ONN (W = 0, hidden b = 0, b_L = mean y) is a degenerate critical point,
     which Krawczyk's test cannot certify; with sign-symmetric draws the finite-mean objective keeps the
@@ -118,6 +120,7 @@ def test_per_sample_non_critical_family_is_outside_never_a_counterexample(x64, c
     assert dj["lo"] <= 0.25 - 0.175 ** 2 / 2 <= dj["hi"]
 
 
+@pytest.mark.slow
 def test_a_decimal_w0_is_not_critical_exactly_and_the_check_says_why_and_what_to_do():
     s, w = sp.Symbol("s", positive=True), sp.Symbol("w", real=True)
     J = (w - sp.sqrt(2) * s) ** 2 + s ** 2 * w ** 4 / 10

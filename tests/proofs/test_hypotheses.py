@@ -191,6 +191,7 @@ def test_report_table_counts_assumed_hypotheses():
     assert "1/2 1 assumed" in t and "assumed" in t.splitlines()[-1]
 
 
+@pytest.mark.slow
 def test_a_real_check_cannot_fail_on_an_assumed_hypothesis(monkeypatch):
     """hierarchical_borel_cantelli refutes the proof step inside its (computed) hypothesis; with that
     hypothesis replaced by an assumed one, the same check can only say "inconclusive"."""

@@ -3,12 +3,14 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import gift_theory as gt
 import linear_case as lc
 from proofs_checks import _sgd
 
 
+@pytest.mark.slow
 def test_closed_form_with_biases_matches_monte_carlo(x64):
     rng = np.random.default_rng(0)
     arch = gt.Architecture((2, 2, 1), activation="identity", noise_sites="all")

@@ -119,6 +119,7 @@ def test_the_study_names_every_builtin_effect():
     assert set(SETTINGS) | {"weight_error"} == set(CATALOGUE) >= set(gt.EFFECT_NAMES)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SETTINGS))
 def test_builtin_effect_agrees_in_distribution(name):
     _needs_gift(name)
@@ -155,6 +156,7 @@ def _recover_offsets(Ws, bs, x, taps):
     return E
 
 
+@pytest.mark.slow
 def test_weight_error_is_a_fixed_iid_gaussian_offset_per_device(x64):
     """CONTRACTS §2: W_eff = W + E, E iid N(0, e^2), drawn once per device and fixed."""
     widths, e, devices = (12, 12, 12), 0.1, 6

@@ -133,9 +133,39 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
 _site_program = _xla.jit(tagged_draws, static_argnames=("shape", "law", "dtype"))
 
 
+#: the built-in noise laws (by effect name; None: the standard normal) whose draws a program of a
+#: padded size makes (:func:`gift_theory._random.tagged_flat`)
+FLAT_LAWS = {None: "normal", "laplace": "laplace", "uniform": "uniform_law"}
+
+
+def flat_law(law, dtype) -> str | None:
+    """The :data:`gift_theory._random.ROW_LAWS` name of a site's law when its float32 draws can be
+    made apart from their shape (a built-in law, or None), else None (a plugin's law)."""
+    from .effects._base import _is_builtin
+
+    if jnp.dtype(dtype) != jnp.float32:
+        return None
+    if law is None:
+        return FLAT_LAWS[None]
+    return FLAT_LAWS.get(law.name) if _is_builtin(type(law)) else None
+
+
 def compiled_site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype=jnp.float32) -> jax.Array:
-    """:func:`site_draws` by the compiled program every site of this shape and law shares."""
-    return _site_program(key, np.uint32(name_tag(name)), tuple(shape), law, dtype)
+    """:func:`site_draws` by a compiled program that draws of other shapes share.
+
+    On the CPU a float32 draw of a built-in law up to :data:`gift_theory._random.PADDED_MAX_WORDS`
+    words is made by the program of its padded length (:func:`gift_theory._random.padded_size`:
+    a diagnosis's some twenty site shapes need about a dozen programs, a test run's hundreds of
+    shapes a few dozen) and its first words reshaped, without a copy; any other draw by the
+    program of its own shape, law and dtype. The numbers are the same either way, bit for bit."""
+    shape = tuple(int(d) for d in shape)
+    n = int(np.prod(shape, dtype=np.int64))
+    row_law = flat_law(law, dtype)
+    size = _random.padded_size(n) if row_law is not None and n > 0 else None
+    if size is not None and jax.default_backend() == "cpu":
+        flat = _random.tagged_flat(row_law, key, name_tag(name), n, size)
+        return jax.device_put(np.asarray(flat)[:n].reshape(shape))  # a view of the program's output
+    return _site_program(key, np.uint32(name_tag(name)), shape, law, dtype)
 
 
 def compiled_draws(key, physics, *, arch, shape, dtype):

@@ -39,6 +39,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _xla
+
 _ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
 _PARITY = 0x1BD11BDA
 
@@ -213,16 +215,22 @@ def _uniform32(words):
     return (m.astype(jnp.float32) + 0.5) * (2.0 ** -22) - 1.0
 
 
-@functools.partial(jax.jit, static_argnames=("law", "shape", "rows"))
-def _rows(key, start, *, law: str, shape: tuple, rows: int):
-    per_row = math.prod(shape[1:])
-    words = _row_words(key, math.prod(shape), start * jnp.uint32(per_row), rows * per_row)
+def _law_of_words(law: str, words):
+    """A float32 law's draws from its words (:data:`ROW_LAWS`): the transforms of :func:`normal`,
+    :func:`laplace` and :func:`uniform_law`, element by element."""
     if law == "normal":
         v = _normal32(words)
     else:
         u = _uniform32(words)
         v = -jnp.sign(u) * jnp.log1p(-jnp.abs(u)) * np.sqrt(0.5) if law == "laplace" else np.sqrt(3.0) * u
-    return v.astype(jnp.float32).reshape((rows,) + tuple(shape[1:]))
+    return v.astype(jnp.float32)
+
+
+@functools.partial(jax.jit, static_argnames=("law", "shape", "rows"))
+def _rows(key, start, *, law: str, shape: tuple, rows: int):
+    per_row = math.prod(shape[1:])
+    words = _row_words(key, math.prod(shape), start * jnp.uint32(per_row), rows * per_row)
+    return _law_of_words(law, words).reshape((rows,) + tuple(shape[1:]))
 
 
 def rows_fit(shape, start: int, size: int) -> bool:
@@ -243,3 +251,42 @@ def rows(law: str, key, shape, start: int, size: int) -> jax.Array:
     if not rows_fit(shape, start, size):
         raise ValueError(f"rows: a draw of {shape} words exceeds the 2^32 word indices of a block")
     return _rows(key, np.uint32(start), law=law, shape=shape, rows=int(size))
+
+
+# ---- a draw made by a program of a padded size ---------------------------------------------------
+#: the largest draw (in words) :func:`padded_size` pads: above it a draw's run time outweighs its
+#: program's compile time, and a program of its own shape wastes nothing
+PADDED_MAX_WORDS = 2 ** 22
+
+
+def padded_size(n: int) -> int | None:
+    """The length of the program that makes an ``n``-word draw (:func:`tagged_flat`): the
+    smallest of 1024, 1536, 2048, 3072, ... (2^e and 3 2^(e-1)) at least ``n``, so draws
+    of different shapes share one compiled program (at most half of its words padding); None
+    above :data:`PADDED_MAX_WORDS` (such a draw gets a program of its own shape)."""
+    n = int(n)
+    if n > PADDED_MAX_WORDS:
+        return None
+    size = 1024
+    while size < n:
+        size = size * 3 // 2 if size & (size - 1) == 0 else size // 3 * 4
+    return size
+
+
+@functools.partial(_xla.jit, static_argnames=("law", "size"))
+def _tagged_flat(key, tag, n, *, law: str, size: int):
+    words = _row_words(jax.random.fold_in(key, tag), n, jnp.uint32(0), size)
+    return _law_of_words(law, words)
+
+
+def tagged_flat(law: str, key, tag, n: int, size: int) -> jax.Array:
+    """Words 0 .. ``size`` - 1 of the draw of ``n`` words of ``law`` (:data:`ROW_LAWS`) under
+    ``fold_in(key, tag)``, as a flat float32 array: its first ``n`` values are
+    ``normal(fold_in(key, tag), shape)`` (``laplace``, ``uniform_law``) of any ``shape`` of
+    ``n`` elements, flattened, bit for bit (the rest is padding). ``n`` and ``tag`` are traced:
+    one compiled program per (law, size) serves every draw that fits."""
+    if law not in ROW_LAWS:
+        raise ValueError(f"tagged_flat: law {law!r} is not one of {ROW_LAWS}")
+    if not 0 < int(n) <= int(size) < 2 ** 32:
+        raise ValueError(f"tagged_flat: {n} words do not fit a program of {size}")
+    return _tagged_flat(key, np.uint32(tag), np.uint32(n), law=law, size=int(size))

@@ -126,3 +126,39 @@ def test_a_block_of_rows_is_the_whole_draw_s_rows_bit_for_bit(law, shape):
             np.testing.assert_array_equal(got[:shape[0] - start], whole[start:start + size])
     with pytest.raises(ValueError, match="law"):
         R.rows("cauchy", key, shape, 0, 1)
+
+
+def test_padded_lengths_cover_every_draw_with_at_most_half_padding():
+    """The ladder 1024, 1536, 2048, 3072, ... : every length at least the draw, at most 1.5 times
+    it above 1024 words, and draws above the cap get none (their own shape's program)."""
+    sizes = [R.padded_size(n) for n in range(1, 70_000, 7)]
+    assert all(s >= n and (n <= 1024 or s <= 1.5 * n) for n, s in zip(range(1, 70_000, 7), sizes))
+    assert sorted(set(sizes)) == [1024, 1536, 2048, 3072, 4096, 6144, 8192, 12288, 16384, 24576, 32768, 49152,
+                                  65536, 98304]
+    assert R.padded_size(R.PADDED_MAX_WORDS) == R.PADDED_MAX_WORDS and R.padded_size(R.PADDED_MAX_WORDS + 1) is None
+
+
+@pytest.mark.parametrize("x64", [False, True])
+def test_a_site_drawn_by_a_padded_program_is_its_own_shape_s_draw_bit_for_bit(x64):
+    """compiled_site_draws makes a float32 draw of a built-in law by the program of its padded
+    length and keeps the first words: the numbers must be those of the site's own-shape sampler
+    (site_draws, jitted), for odd and even word counts, across a length step, for every built-in
+    law and for a plugin's law (drawn by its own-shape program). Private: the padding is invisible
+    by design, so no public output can tell the two programs apart."""
+    from gift_theory import _model as M
+    from gift_theory.effects import REGISTRY
+
+    key = jax.random.fold_in(jax.random.key(3), 11)
+    laws = [None, REGISTRY["laplace"](), REGISTRY["uniform"]()]
+    with jax.enable_x64(x64):
+        for shape in [(1,), (3, 1), (13, 7, 3), (41, 8, 5), (1025,), (2, 769), (80, 48, 4, 8)]:
+            for law in laws:
+                for name in ("a0", "w2"):
+                    got = M.compiled_site_draws(key, name, shape, law)
+                    own = jax.jit(M.site_draws, static_argnums=(1, 2, 3))(key, name, shape, law)
+                    assert got.shape == shape and got.dtype == jnp.float32
+                    np.testing.assert_array_equal(np.asarray(got).view(np.uint32), np.asarray(own).view(np.uint32))
+    with pytest.raises(ValueError, match="law"):
+        R.tagged_flat("cauchy", key, 1, 4, 1024)
+    with pytest.raises(ValueError, match="fit"):
+        R.tagged_flat("normal", key, 1, 2000, 1024)

@@ -290,3 +290,41 @@ def tagged_flat(law: str, key, tag, n: int, size: int) -> jax.Array:
     if not 0 < int(n) <= int(size) < 2 ** 32:
         raise ValueError(f"tagged_flat: {n} words do not fit a program of {size}")
     return _tagged_flat(key, np.uint32(tag), np.uint32(n), law=law, size=int(size))
+
+
+# ---- jax.random.uniform's numbers, by a program of a padded length -------------------------------
+def _jax_threefry_key(key) -> bool:
+    """Whether ``jax.random.uniform`` draws ``key``'s bits from Threefry counters laid out by index
+    (a Threefry key -- raw ``uint32`` under the default implementation, or typed -- with
+    ``jax_threefry_partitionable``, JAX's default): its word i is then y0 ^ y1 of the cipher on
+    the counter (0, i), whatever the shape."""
+    if not jax.config.jax_threefry_partitionable:
+        return False
+    if jnp.issubdtype(getattr(key, "dtype", np.uint32), jax.dtypes.prng_key):
+        return "threefry" in str(jax.random.key_impl(key))
+    return str(jax.config.jax_default_prng_impl) == "threefry2x32" and tuple(np.shape(key)) == (2,)
+
+
+@functools.partial(_xla.jit, static_argnames=("size",))
+def _uniform01_flat(key, *, size: int):
+    k0, k1 = key_words(key)
+    i = jax.lax.iota(jnp.uint32, size)
+    y0, y1 = threefry2x32(k0, k1, jnp.zeros_like(i), i)
+    one = np.float32(1.0)
+    mantissa = ((y0 ^ y1) >> jnp.uint32(9)) | jnp.uint32(one.view(np.uint32))
+    return jax.lax.bitcast_convert_type(mantissa, jnp.float32) - one
+
+
+def uniform01(key, shape) -> np.ndarray:
+    """``jax.random.uniform(key, shape)`` (float32 on [0, 1) without 64-bit mode; float64 with it,
+    by ``jax.random.uniform`` itself) bit for bit, as a read-only numpy
+    array, made by one compiled program per padded length (:func:`padded_size`) instead of one
+    per shape, and without JAX's own Threefry lowering (whose compilation costs seconds per shape
+    on a CPU). A key or configuration whose bits are laid out otherwise, and draws above
+    :data:`PADDED_MAX_WORDS`, go to ``jax.random.uniform`` itself."""
+    shape = tuple(int(d) for d in shape)
+    n = math.prod(shape)
+    size = padded_size(n) if n > 0 else None
+    if size is None or jax.config.jax_enable_x64 or not _jax_threefry_key(key) or jax.default_backend() != "cpu":
+        return np.asarray(jax.random.uniform(key, shape))
+    return np.asarray(_uniform01_flat(key, size=size))[:n].reshape(shape)

@@ -27,6 +27,7 @@ import jax
 import numpy as np
 from scipy import stats
 
+from .. import _random
 from .._measurement import Measurement
 from .._model import named_subkey
 from ..effects import REGISTRY
@@ -391,7 +392,7 @@ def _pit(key, Y, M):
     chunk = max(1, int(2e7 // max(r * M.shape[1] * d, 1)))
     for c0 in range(0, n, chunk):
         below[c0:c0 + chunk] = np.sum(M[c0:c0 + chunk, None, :, :] < Y[c0:c0 + chunk, :, None, :], axis=2)
-    u = np.asarray(jax.random.uniform(key, Y.shape), np.float64)
+    u = np.asarray(_random.uniform01(key, Y.shape), np.float64)  # jax.random.uniform's numbers
     return (below + u) / (M.shape[1] + 1)
 
 

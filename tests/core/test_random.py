@@ -162,3 +162,23 @@ def test_a_site_drawn_by_a_padded_program_is_its_own_shape_s_draw_bit_for_bit(x6
         R.tagged_flat("cauchy", key, 1, 4, 1024)
     with pytest.raises(ValueError, match="fit"):
         R.tagged_flat("normal", key, 1, 2000, 1024)
+
+
+@pytest.mark.parametrize("make_key", [lambda: jax.random.PRNGKey(3), lambda: jax.random.key(9),
+                                      lambda: jax.random.fold_in(jax.random.PRNGKey(7), 5),
+                                      lambda: jax.random.key(4, impl="rbg")])
+def test_uniform01_is_jax_random_uniform_bit_for_bit(make_key):
+    """The lab's randomised PIT draws jax.random.uniform's numbers by a program of a padded length:
+    the same numbers, shape and dtype for Threefry keys (raw and typed), an odd, an empty and a
+    multi-axis shape; an rbg key (other bits) and 64-bit mode (float64) go to JAX itself.
+    Private: the padding is invisible by design."""
+    key = make_key()
+    for shape in [(5,), (7, 3), (0, 3), (80, 48, 16)]:
+        ref = np.asarray(jax.random.uniform(key, shape))
+        got = R.uniform01(key, shape)
+        assert got.shape == ref.shape and got.dtype == ref.dtype
+        np.testing.assert_array_equal(got.view(np.uint32), ref.view(np.uint32))
+    with jax.enable_x64(True):
+        ref = np.asarray(jax.random.uniform(key, (6, 2)))
+        got = R.uniform01(key, (6, 2))
+        assert got.dtype == np.float64 and np.array_equal(got, ref)

@@ -129,7 +129,8 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
 
 #: :func:`tagged_draws` as a compiled program with the tag traced: one program per shape, law and
 #: dtype draws every site of that shape, whatever the physics around it (the draws of a site
-#: depend only on the key, its name, shape and law)
+#: depend only on the key, its name, shape and law); :func:`compiled_site_draws` uses it where a
+#: program of a padded length cannot serve (a plugin's law, float64, a draw above the cap)
 _site_program = _xla.jit(tagged_draws, static_argnames=("shape", "law", "dtype"))
 
 
@@ -155,8 +156,8 @@ def compiled_site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype
 
     On the CPU a float32 draw of a built-in law up to :data:`gift_theory._random.PADDED_MAX_WORDS`
     words is made by the program of its padded length (:func:`gift_theory._random.padded_size`:
-    a diagnosis's some twenty site shapes need about a dozen programs, a test run's hundreds of
-    shapes a few dozen) and its first words reshaped, without a copy; any other draw by the
+    the 22 site shapes of a small diagnosis need 14 programs) and its first words reshaped,
+    without a copy; any other draw by the
     program of its own shape, law and dtype. The numbers are the same either way, bit for bit."""
     shape = tuple(int(d) for d in shape)
     n = int(np.prod(shape, dtype=np.int64))
@@ -171,8 +172,8 @@ def compiled_site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype
 def compiled_draws(key, physics, *, arch, shape, dtype):
     """:func:`sample_noise` made by compiled programs (materialised draws), bit for bit.
 
-    Each site is drawn by :func:`compiled_site_draws`, so one program per site shape and law serves
-    every physics structure, estimator, the referee, the objective and the lab (a whole-physics
+    Each site is drawn by :func:`compiled_site_draws`, so one program per padded length (or site
+    shape) and law serves every physics structure, estimator, the referee, the objective and the lab (a whole-physics
     sampler compiled one program per structure: the threefry rounds of every site again). A
     noise law with parameters is drawn by one program of the whole physics (its values are
     arguments, not part of a program's key). The draws are compiled apart from the kernels that

@@ -134,8 +134,9 @@ def sample_noise(key: jax.Array, arch: Architecture, physics: Physics, batch_sha
 _site_program = _xla.jit(tagged_draws, static_argnames=("shape", "law", "dtype"))
 
 
-#: the built-in noise laws (by effect name; None: the standard normal) whose draws a program of a
-#: padded size makes (:func:`gift_theory._random.tagged_flat`)
+#: the built-in noise laws (by effect name; None: the standard normal) whose draws are made apart
+#: from their shape: by a program of a padded size (:func:`gift_theory._random.tagged_flat`) or a
+#: block of rows at a time (:func:`gift_theory._random.rows`, the lab's shot blocks)
 FLAT_LAWS = {None: "normal", "laplace": "laplace", "uniform": "uniform_law"}
 
 

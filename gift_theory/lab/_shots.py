@@ -25,6 +25,7 @@ from .._measurement import Measurement
 from .._model import (
     compiled_draws,
     compiled_site_draws,
+    flat_law,
     forward,
     layer_step,
     name_tag,
@@ -201,21 +202,13 @@ def _shots_of_rows(key, model: Model, meas: Measurement, K: int, start: int, siz
     return tuple(outs)
 
 
-#: the built-in noise laws whose draws :func:`gift_theory._random.rows` makes a block of rows of
-_ROW_LAW = {None: "normal", "laplace": "laplace", "uniform": "uniform_law"}
-
-
 def _site_rows(key, name: str, full: tuple, site_law, start: int, size: int):
     """Rows ``start .. start + size - 1`` of one site's draws of shape ``full`` (the draws of
     :func:`draws`, bit for bit), or None where they cannot be made alone: a plugin's law, or a
     draw whose words (with the block's padding) pass the 2^32 a block's word index can count."""
-    from ..effects._base import _is_builtin
-
-    if site_law is not None and not (_is_builtin(type(site_law)) and site_law.name in _ROW_LAW):
+    law = flat_law(site_law, jnp.float32)  # a built-in law's name in _random, None for a plugin's
+    if law is None or not _random.rows_fit(full, start, size) or math.prod(full) >= 2 ** 32:
         return None
-    if not _random.rows_fit(full, start, size) or math.prod(full) >= 2 ** 32:
-        return None
-    law = _ROW_LAW[None if site_law is None else site_law.name]
     return _random.rows(law, jax.random.fold_in(key, np.uint32(name_tag(name))), full, start, size)
 
 

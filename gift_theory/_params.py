@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
+from . import _random
 from ._arch import Architecture
 from ._errors import GiftInputError, require
 
@@ -50,7 +51,7 @@ def init_params(key: jax.Array, arch: Architecture, *, dtype=jnp.float32, gain: 
     for l, (d_in, d_out) in enumerate(zip(arch.widths[:-1], arch.widths[1:])):
         k = jax.random.fold_in(key, l)
         lim = gain * np.sqrt(6.0 / (d_in + d_out))
-        W = jax.random.uniform(k, (d_out, d_in), dtype, -lim, lim)
+        W = _random.uniform_like_jax(k, (d_out, d_in), dtype, -lim, lim)  # jax.random.uniform's numbers
         layers.append(Layer(W, jnp.zeros((d_out,), dtype)))
     return tuple(layers)
 

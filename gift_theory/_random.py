@@ -28,6 +28,13 @@ ones. Laws (all exactly symmetric about 0, never infinite):
 
 Keys: any JAX key (typed or raw ``uint32``); the first two words of its data are the
 cipher key (an ``rbg`` key made by tiling a Threefry key therefore draws the same numbers).
+
+Where gift needs ``jax.random``'s own numbers (initial weights, inputs, teacher data, device
+errors, the lab's splits and shuffles), :func:`uniform01`, :func:`uniform_like_jax`,
+:func:`normal_like_jax`, :func:`permutation` and :func:`split_permutations` make them bit for
+bit by programs of a padded length instead of JAX's program per shape (each compiles its
+Threefry in about a second on a CPU); a traced call, 64-bit mode or a key whose bits are laid
+out otherwise goes to ``jax.random`` itself.
 """
 
 from __future__ import annotations
@@ -305,14 +312,65 @@ def _jax_threefry_key(key) -> bool:
     return str(jax.config.jax_default_prng_impl) == "threefry2x32" and tuple(np.shape(key)) == (2,)
 
 
-@functools.partial(_xla.jit, static_argnames=("size",))
-def _uniform01_flat(key, *, size: int):
+def _jax_words(key, size: int):
+    """Words 0 .. ``size`` - 1 of ``jax.random.bits(key, (n,))`` for any n >= size (the cipher on
+    the counter (0, i), its two outputs xor-ed)."""
     k0, k1 = key_words(key)
     i = jax.lax.iota(jnp.uint32, size)
     y0, y1 = threefry2x32(k0, k1, jnp.zeros_like(i), i)
+    return y0 ^ y1
+
+
+def _mantissa01(key, size: int):
+    """Words 0 .. ``size`` - 1 of ``jax.random.uniform``'s [0, 1) float32 values under ``key``."""
     one = np.float32(1.0)
-    mantissa = ((y0 ^ y1) >> jnp.uint32(9)) | jnp.uint32(one.view(np.uint32))
+    mantissa = (_jax_words(key, size) >> jnp.uint32(9)) | jnp.uint32(one.view(np.uint32))
     return jax.lax.bitcast_convert_type(mantissa, jnp.float32) - one
+
+
+@functools.partial(_xla.jit, static_argnames=("size",))
+def _uniform01_flat(key, *, size: int):
+    return _mantissa01(key, size)
+
+
+# compiled as JAX compiles its own samplers (no gift options): the same program, the same rounding
+@functools.partial(jax.jit, static_argnames=("size",))
+def _uniform_flat(key, minval, maxval, *, size: int):
+    # jax.random.uniform's own operations on its [0, 1) values, in its order
+    return jax.lax.max(minval, _mantissa01(key, size) * (maxval - minval) + minval)
+
+
+@functools.partial(jax.jit, static_argnames=("size",))
+def _normal_flat(key, *, size: int):
+    # jax.random.normal: a uniform on (-1, 1) (its lower end the float after -1), times sqrt(2) erfinv
+    lo, hi = np.nextafter(np.float32(-1.0), np.float32(0.0)), np.float32(1.0)
+    u = jax.lax.max(lo, _mantissa01(key, size) * (hi - lo) + lo)
+    return jax.lax.mul(np.float32(np.sqrt(2)), jax.lax.erf_inv(u))
+
+
+def _eager() -> bool:
+    """Whether no function is being traced (a draw made inside a trace belongs in its program:
+    made apart, it would enter as a constant, and XLA rounds a fused sampler differently)."""
+    clean = getattr(jax._src.core, "trace_state_clean", None)
+    return bool(clean()) if clean is not None else False
+
+
+def _padded_words(key, shape, dtype) -> int | None:
+    """The padded length of a draw of ``shape`` that a program of :func:`padded_size` words makes
+    as JAX's own sampler would, or None where JAX must draw it (float64 or 64-bit mode, a key laid
+    out otherwise, no words, too many, off the CPU)."""
+    n = math.prod(shape)
+    if isinstance(key, jax.core.Tracer) or not _eager():  # traced: JAX's sampler is part of the program
+        return None
+    if n == 0 or jnp.dtype(jnp.float32 if dtype is None else dtype) != jnp.float32 or jax.config.jax_enable_x64:
+        return None
+    if not _jax_threefry_key(key) or jax.default_backend() != "cpu":
+        return None
+    return padded_size(n)
+
+
+def _reshaped(flat, shape) -> np.ndarray:
+    return np.asarray(flat)[:math.prod(shape)].reshape(shape)
 
 
 def uniform01(key, shape) -> np.ndarray:
@@ -323,8 +381,91 @@ def uniform01(key, shape) -> np.ndarray:
     on a CPU). A key or configuration whose bits are laid out otherwise, and draws above
     :data:`PADDED_MAX_WORDS`, go to ``jax.random.uniform`` itself."""
     shape = tuple(int(d) for d in shape)
-    n = math.prod(shape)
-    size = padded_size(n) if n > 0 else None
-    if size is None or jax.config.jax_enable_x64 or not _jax_threefry_key(key) or jax.default_backend() != "cpu":
+    size = _padded_words(key, shape, None)
+    if size is None:
         return np.asarray(jax.random.uniform(key, shape))
-    return np.asarray(_uniform01_flat(key, size=size))[:n].reshape(shape)
+    return _reshaped(_uniform01_flat(key, size=size), shape)
+
+
+def uniform_like_jax(key, shape, dtype=None, minval=0.0, maxval=1.0):
+    """``jax.random.uniform(key, shape, dtype, minval, maxval)`` bit for bit (a JAX array), for
+    scalar bounds by one compiled program per padded length where :func:`uniform01` would use
+    one; otherwise (array bounds, a traced key) by JAX itself."""
+    shape = tuple(int(d) for d in shape)
+    concrete = not any(isinstance(v, jax.core.Tracer) for v in (minval, maxval))
+    size = _padded_words(key, shape, dtype) if concrete and np.ndim(minval) == 0 and np.ndim(maxval) == 0 else None
+    if size is None:
+        return jax.random.uniform(key, shape, dtype, minval, maxval)
+    return jax.device_put(_reshaped(_uniform_flat(key, np.float32(minval), np.float32(maxval), size=size), shape))
+
+
+def normal_like_jax(key, shape, dtype=None):
+    """``jax.random.normal(key, shape, dtype)`` bit for bit (a JAX array), by one compiled program
+    per padded length where :func:`uniform01` would use one; otherwise (a traced key) by JAX
+    itself. (Not :func:`normal`, gift's own fused sampler, whose words are laid out differently.)"""
+    shape = tuple(int(d) for d in shape)
+    size = _padded_words(key, shape, dtype)
+    if size is None:
+        return jax.random.normal(key, shape, dtype)
+    return jax.device_put(_reshaped(_normal_flat(key, size=size), shape))
+
+
+_bits_flat = jax.jit(_jax_words, static_argnames=("size",))
+
+
+def _rounds(n: int) -> int:
+    """The sorting rounds of ``jax.random.permutation`` of ``n`` items."""
+    return int(np.ceil(3 * np.log(max(1, n)) / np.log(np.iinfo(np.uint32).max)))
+
+
+def permutation(key, n: int) -> np.ndarray:
+    """``jax.random.permutation(key, n)`` for an integer ``n``, bit for bit (an int32 numpy array).
+
+    JAX shuffles ``arange(n)`` in ``ceil(3 ln n / ln(2^32 - 1))`` rounds, each a stable sort of
+    the current order by 32 fresh random bits per position (the bits of ``split(key)[1]``, the
+    next round keyed by ``split(key)[0]``); here each round's bits come from a program of a padded
+    length (:func:`padded_size`) and the stable sort is numpy's, so no program is compiled per
+    ``n``. Where the bits are laid out otherwise (see :func:`uniform01`) JAX shuffles itself."""
+    n = int(n)
+    size = padded_size(n) if n > 0 else None
+    if size is None or not _eager() or not _jax_threefry_key(key) or jax.default_backend() != "cpu":
+        return np.asarray(jax.random.permutation(key, n))
+    x = np.arange(n, dtype=np.int32)
+    for _ in range(_rounds(n)):
+        key, subkey = jax.random.split(key)
+        bits = np.asarray(_bits_flat(subkey, size=size))[:n]
+        x = x[np.argsort(bits, kind="stable")]
+    return x
+
+
+@functools.partial(jax.jit, static_argnames=("rows", "r", "rounds"))
+def _split_shuffle_bits(key, *, rows: int, r: int, rounds: int):
+    # split(key, rows)[i] is the cipher of the counter (0, i); split(k) is [cipher_k(0, 0), cipher_k(0, 1)]:
+    # each round sorts by the bits of the second and hands the first to the next round
+    k0, k1 = key_words(key)
+    i = jax.lax.iota(jnp.uint32, rows)
+    a0, a1 = threefry2x32(k0, k1, jnp.zeros_like(i), i)
+    j = jax.lax.iota(jnp.uint32, r)[None, :]
+    zero, one = jnp.uint32(0), jnp.uint32(1)
+    out = []
+    for _ in range(rounds):
+        s0, s1 = threefry2x32(a0, a1, zero, one)
+        a0, a1 = threefry2x32(a0, a1, zero, zero)
+        y0, y1 = threefry2x32(s0[:, None], s1[:, None], jnp.zeros_like(j), j)
+        out.append(y0 ^ y1)
+    return jnp.stack(out) if out else jnp.zeros((0, rows, r), jnp.uint32)
+
+
+def split_permutations(key, n: int, r: int) -> np.ndarray:
+    """``vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n))`` bit for bit, an
+    (n, r) int32 numpy array: each round's bits from one program per (padded n, r, rounds), the
+    stable sorts numpy's (see :func:`permutation`); otherwise (see :func:`uniform01`) by JAX."""
+    n, r = int(n), int(r)
+    rows = padded_size(n) if n > 0 else None
+    if (rows is None or rows * r * max(_rounds(r), 1) > PADDED_MAX_WORDS or not _eager()
+            or not _jax_threefry_key(key) or jax.default_backend() != "cpu"):
+        return np.asarray(jax.vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n)))
+    x = np.broadcast_to(np.arange(r, dtype=np.int32), (n, r))
+    for bits in np.asarray(_split_shuffle_bits(key, rows=rows, r=r, rounds=_rounds(r)))[:, :n]:
+        x = np.take_along_axis(x, np.argsort(bits, axis=1, kind="stable"), axis=1)
+    return np.ascontiguousarray(x)

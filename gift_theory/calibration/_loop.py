@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _random
 from .._params import Layer, params32
 from .._phases import phase
 from ..effects import awgn
@@ -163,7 +164,7 @@ def calibrate(problem, *, inputs: int = 256, shots: int = 8, rounds: int | None 
     spend = (problem.evaluations_left() - reserve) * problem.unit_shots
     n = int(min(inputs, problem.K1, max(32, spend // (4 * int(shots)))))
     max_rounds = None if rounds is None else int(rounds)
-    order = np.asarray(jax.random.permutation(jax.random.fold_in(problem.key, 7000), problem.K1))
+    order = _random.permutation(jax.random.fold_in(problem.key, 7000), problem.K1)  # jax.random.permutation's
     idx_cal = np.sort(order[:n])
     x_cal, y_cal = problem.x_ft[idx_cal], np.asarray(problem.y_ft[idx_cal], np.float64)
     cost = n * int(shots) / problem.unit_shots

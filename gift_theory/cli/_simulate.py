@@ -11,6 +11,7 @@ import os
 import jax
 import numpy as np
 
+from .. import _random
 from .._errors import require
 from ._plugins import add_plugin_argument, load_plugins
 
@@ -98,7 +99,7 @@ def run(args):
                 f"--chip-model {args.chip_model}: a model of a {'-'.join(map(str, model.widths))} network, "
                 f"not {'-'.join(map(str, arch.widths))}")
     physics.check_scope(arch, "--effect")
-    x = np.asarray(jax.random.uniform(named_subkey(key, "inputs"), (args.inputs, arch.widths[0])), np.float64)
+    x = np.asarray(_random.uniform01(named_subkey(key, "inputs"), (args.inputs, arch.widths[0])), np.float64)
     realised = params if model is None else model.realise(params)
     meas = simulate_measurement(named_subkey(key, "shots"), realised, x, physics, shots=args.shots,
                                 activation=activation, taps=args.taps, times=args.times)

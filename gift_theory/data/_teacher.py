@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _random
 from .._arch import Architecture
 from .._errors import require
 from .._params import init_params
@@ -52,13 +53,13 @@ class Teacher:
     def params(self, dtype=jnp.float32):
         key = jax.random.PRNGKey(self.seed)
         p = init_params(key, self.arch, dtype=dtype, gain=self.gain)
-        return tuple(type(layer)(layer.W, 0.1 * jax.random.normal(jax.random.fold_in(key, 99 + l), layer.b.shape, dtype))
+        return tuple(type(layer)(layer.W, 0.1 * _random.normal_like_jax(jax.random.fold_in(key, 99 + l), layer.b.shape, dtype))
                      for l, layer in enumerate(p))
 
     def inputs(self, key, n: int, dtype=jnp.float32):
         if self.input_dist == "normal":
-            return self.input_scale * jax.random.normal(key, (n, self.widths[0]), dtype)
-        return jax.random.uniform(key, (n, self.widths[0]), dtype)
+            return self.input_scale * _random.normal_like_jax(key, (n, self.widths[0]), dtype)
+        return _random.uniform_like_jax(key, (n, self.widths[0]), dtype)
 
     def label(self, x):
         """The teacher's noiseless output T(x); x of shape (..., d_0)."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 
+from .. import _random
 from ._base import Effect, register
 
 #: fold_in offset of the device stream (weight_error's is 1_000_003: the streams differ)
@@ -18,7 +19,7 @@ STREAM = 2_000_003
 def device_draw(seed: int, layer: int, shape, dtype):
     """The standard-normal delta_l / sigma of device ``seed`` (fixed for the device's life)."""
     key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), STREAM + layer)
-    return jax.random.normal(key, shape, dtype)
+    return _random.normal_like_jax(key, shape, dtype)
 
 
 @register

@@ -7,13 +7,14 @@ from __future__ import annotations
 import jax
 import numpy as np
 
+from .. import _random
 from ._base import Effect, register
 
 
 def device_draw(seed: int, layer: int, shape, dtype):
     """The standard-normal E_l / e of device ``seed`` (fixed for the device's life)."""
     key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), 1_000_003 + layer)
-    return jax.random.normal(key, shape, dtype)
+    return _random.normal_like_jax(key, shape, dtype)
 
 
 @register

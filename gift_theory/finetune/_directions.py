@@ -6,6 +6,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from .. import _random
 from .._errors import require
 from ..estimators import d_ds_grad, grad_objective, hvp
 from ._tree import axpy, norm, scale, vdot
@@ -75,7 +76,7 @@ def _direction(problem, kind: str, K2: int):
     if kind == "random":
         leaves, tree = jax.tree_util.tree_flatten(problem.w0)
         ks = jax.random.split(jax.random.fold_in(problem.key, 999), len(leaves))
-        return jax.tree_util.tree_unflatten(tree, [jax.random.normal(k, l.shape, l.dtype) for k, l in zip(ks, leaves)]), {}
+        return jax.tree_util.tree_unflatten(tree, [_random.normal_like_jax(k, l.shape, l.dtype) for k, l in zip(ks, leaves)]), {}
     g = d_ds_grad(key, *args, method="pathwise", K2=K2).mean
     op = hvp_operator(problem)
     rayleigh = float(vdot(g, op(g)) / vdot(g, g))

@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _xla
+from .. import _random, _xla
 from .._errors import GiftInputError
 from .._finite import check_finite
 from .._measurement import Measurement
@@ -192,21 +192,13 @@ def layer_scales(Y):
     return float(np.mean(wy)), wy1.mean(0)
 
 
-def _shot_permutations(key, n: int, r: int):
-    """(n, r): a random permutation of the r shots of each of n inputs."""
-    return jax.vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n))
-
-
-#: the permutations in one program per (n, r), shared by every layer's data (dispatched op by
-#: op they were some eight programs; compiled with the data they were one per layer shape)
-_permutations = jax.jit(_shot_permutations, static_argnames=("n", "r"))
-
-
 def _halves(key, Y):
     """Random halves (per cell) of the measured shots Y (n, r, d), float32: two (n, r//2, d)
-    arrays (the permutation compiled once per (n, r); the gather on the host, exact)."""
+    arrays (each input's shots in the order of ``jax.random.permutation`` of its key of
+    ``jax.random.split(key, n)``, by :func:`gift_theory._random.split_permutations`; the gather
+    on the host, exact)."""
     n, r, _ = Y.shape
-    perm = np.asarray(_permutations(key, n, r))
+    perm = _random.split_permutations(key, n, r)
     Yp = np.take_along_axis(np.asarray(Y, np.float32), perm[:, :, None], axis=1)
     h = r // 2
     return to32(Yp[:, :h]), to32(Yp[:, h:2 * h])
@@ -384,7 +376,7 @@ def reference(key, meas: Measurement, splits: int = 2) -> Reference:
     layers = meas.layers()
     scales = tuple(layer_scales(Y) for Y in layers)
     k_split, k_floor = jax.random.split(key)
-    split = np.asarray(_permutations(k_split, meas.n, meas.r))
+    split = _random.split_permutations(k_split, meas.n, meas.r)
     moments = meas.r >= MIN_SHOTS_MOMENTS
     channels = CHANNELS if moments else CHANNELS[:2]
     F = np.zeros((meas.n, len(layers), len(channels)))

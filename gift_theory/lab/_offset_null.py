@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import optimize
 
+from .. import _random
 from .._measurement import Measurement
 from .._model import (
     forward,
@@ -249,7 +250,7 @@ def offset_replicates(key, model: Model, fit_meas: Measurement, test_meas: Measu
                                                                             "truth"))
         truth = model
         if spread is not None:
-            z = spread @ np.asarray(jax.random.normal(k_truth, (spread.shape[1],)), np.float64)
+            z = spread @ np.asarray(_random.normal_like_jax(k_truth, (spread.shape[1],)), np.float64)
             flat = np.concatenate([np.ravel(a) for k in kinds for a in fitted[k]]) + z
             deltas = _split_by_kind(unflat_vector(flat, shapes), kinds)
             p, ph = apply_all(kinds, deltas, base.weights(fit_meas), base.physics, arch)

@@ -14,6 +14,7 @@ import zlib
 import jax
 import numpy as np
 
+from .. import _random
 from .._errors import GiftInputError
 from .._measurement import Measurement
 from .._model import named_subkey
@@ -42,7 +43,7 @@ def split_inputs(key, n: int, frac: float = 0.5):
     """Random disjoint (fit, held-out) index arrays over ``n`` inputs."""
     if n < 4:
         raise GiftInputError(f"measurement has {n} inputs; fitting and held-out scoring need at least 4")
-    perm = np.asarray(jax.random.permutation(key, n))
+    perm = _random.permutation(key, n)  # jax.random.permutation's
     k = n - int(round(n * (1 - frac)))  # held-out half n // 2 (equal halves share compiled shapes)
     k = min(max(k, 2), n - 2)
     return np.sort(perm[:k]), np.sort(perm[k:])

@@ -182,3 +182,61 @@ def test_uniform01_is_jax_random_uniform_bit_for_bit(make_key):
         ref = np.asarray(jax.random.uniform(key, (6, 2)))
         got = R.uniform01(key, (6, 2))
         assert got.dtype == np.float64 and np.array_equal(got, ref)
+
+
+_KEYS = [lambda: jax.random.PRNGKey(3), lambda: jax.random.key(9), lambda: jax.random.fold_in(jax.random.PRNGKey(7), 5),
+         lambda: jax.random.key(4, impl="rbg")]
+
+
+@pytest.mark.parametrize("make_key", _KEYS)
+def test_jax_s_samplers_by_padded_programs_are_jax_s_numbers_bit_for_bit(make_key):
+    """Initial weights, teacher data, device errors, the offset null's truths, the session's split
+    and the noise floor's halves draw jax.random's uniform, normal and permutation numbers by
+    programs of a padded length (no program per shape): the same values, shapes and dtypes for
+    Threefry keys (raw and typed) over odd, empty and multi-axis shapes, bounds that do not
+    round to float32 exactly, permutations of one and of two sorting rounds (n > 1625), and the
+    halves' permutation of every input's key of a split; an rbg key, 64-bit mode and a draw
+    inside a traced function go to JAX itself. Private: the padding is invisible by design."""
+    key = make_key()
+
+    def same(got, ref):
+        ref = np.asarray(ref)
+        got = np.asarray(got)
+        assert got.shape == ref.shape and got.dtype == ref.dtype
+        np.testing.assert_array_equal(got.view(np.uint8), ref.view(np.uint8))
+
+    for shape in [(5,), (7, 3), (0, 3), (32, 16), (80, 48, 4)]:
+        for lo, hi in [(0.0, 1.0), (-0.433, 0.433), (-np.sqrt(6 / 48), np.sqrt(6 / 48)), (2.0, 2.5)]:
+            same(R.uniform_like_jax(key, shape, jnp.float32, lo, hi), jax.random.uniform(key, shape, jnp.float32, lo, hi))
+        same(R.normal_like_jax(key, shape), jax.random.normal(key, shape))
+        same(R.normal_like_jax(key, shape, jnp.float32), jax.random.normal(key, shape, jnp.float32))
+    for n in [1, 2, 17, 240, 1625, 1626, 5000]:
+        same(R.permutation(key, n), jax.random.permutation(key, n))
+    shuffle = jax.jit(lambda k, n, r: jax.vmap(lambda kk: jax.random.permutation(kk, r))(jax.random.split(k, n)),
+                      static_argnums=(1, 2))
+    for n, r in [(1, 1), (3, 2), (80, 48), (7, 1626)]:
+        same(R.split_permutations(key, n, r), shuffle(key, n, r))
+    with jax.enable_x64(True):
+        same(R.uniform_like_jax(key, (6, 2), None, -1.0, 1.0), jax.random.uniform(key, (6, 2), None, -1.0, 1.0))
+        same(R.normal_like_jax(key, (6, 2)), jax.random.normal(key, (6, 2)))
+    traced = jax.jit(lambda k: (R.uniform_like_jax(k, (9,), jnp.float32, -0.5, 0.5), R.normal_like_jax(k, (9,))))(key)
+    same(traced[0], jax.random.uniform(key, (9,), jnp.float32, -0.5, 0.5))
+    same(traced[1], jax.random.normal(key, (9,)))
+
+
+def test_jax_s_samplers_compile_one_program_per_padded_length_not_per_shape():
+    """Why a private test: the point of the padded programs is that draws of many shapes share
+    one compiled program (a program per shape cost the suite some 400 compilations). Five shapes
+    of 700 to 1024 words, drawn from one key, leave one program each in the uniform's, the
+    normal's and the shuffle's caches."""
+    key = jax.random.PRNGKey(11)
+    R._uniform_flat.clear_cache()
+    R._normal_flat.clear_cache()
+    R._bits_flat.clear_cache()
+    for shape in [(700,), (35, 21), (1024,), (8, 100), (3, 5, 50)]:
+        R.uniform_like_jax(key, shape, jnp.float32, -1.0, 1.0)
+        R.normal_like_jax(key, shape)
+        R.permutation(key, int(np.prod(shape)))
+    assert R._uniform_flat._cache_size() == 1
+    assert R._normal_flat._cache_size() == 1
+    assert R._bits_flat._cache_size() == 1

@@ -80,7 +80,13 @@ def site_laws(arch: Architecture, physics: Physics) -> dict:
 def site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype=jnp.float32) -> jax.Array:
     """One site's standard draws: from the site's own named subkey, the law's unit-variance
     draws (``law``: a noise-law effect) or standard normal (None). The one per-site sampler:
-    :func:`sample_noise` and the lab's per-site draw cache both draw through it."""
+    :func:`sample_noise` and the lab's per-site draw cache both draw through it. Called outside
+    a traced function, a built-in law's float32 draws come from the program of their padded
+    length (:func:`compiled_site_draws`: the same numbers, no program per shape)."""
+    if not isinstance(key, jax.core.Tracer) and _random._eager():
+        flat = _padded_site_draws(key, name, shape, law, dtype)
+        if flat is not None:
+            return flat
     return tagged_draws(key, name_tag(name), shape, law, dtype)  # a site's draws are named by the site
 
 
@@ -160,14 +166,23 @@ def compiled_site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype
     the 22 site shapes of a small diagnosis need 14 programs) and its first words reshaped,
     without a copy; any other draw by the
     program of its own shape, law and dtype. The numbers are the same either way, bit for bit."""
+    flat = _padded_site_draws(key, name, shape, law, dtype)
+    if flat is not None:
+        return flat
+    return _site_program(key, np.uint32(name_tag(name)), tuple(int(d) for d in shape), law, dtype)
+
+
+def _padded_site_draws(key, name: str, shape, law, dtype):
+    """A site's float32 draws of a built-in law by the program of their padded length, or None
+    where that program cannot make them (a plugin's law, float64, too many words, off the CPU)."""
     shape = tuple(int(d) for d in shape)
     n = int(np.prod(shape, dtype=np.int64))
     row_law = flat_law(law, dtype)
     size = _random.padded_size(n) if row_law is not None and n > 0 else None
-    if size is not None and jax.default_backend() == "cpu":
-        flat = _random.tagged_flat(row_law, key, name_tag(name), n, size)
-        return jax.device_put(np.asarray(flat)[:n].reshape(shape))  # a view of the program's output
-    return _site_program(key, np.uint32(name_tag(name)), shape, law, dtype)
+    if size is None or jax.default_backend() != "cpu":
+        return None
+    flat = _random.tagged_flat(row_law, key, name_tag(name), n, size)
+    return jax.device_put(np.asarray(flat)[:n].reshape(shape))  # a view of the program's output
 
 
 def compiled_draws(key, physics, *, arch, shape, dtype):

@@ -143,7 +143,8 @@ def test_a_site_drawn_by_a_padded_program_is_its_own_shape_s_draw_bit_for_bit(x6
     """compiled_site_draws makes a float32 draw of a built-in law by the program of its padded
     length and keeps the first words: the numbers must be those of the site's own-shape sampler
     (site_draws, jitted), for odd and even word counts, across a length step, for every built-in
-    law and for a plugin's law (drawn by its own-shape program). Private: the padding is invisible
+    law and for a plugin's law (drawn by its own-shape program), and so must site_draws' called
+    outside a trace (which draws through the padded program). Private: the padding is invisible
     by design, so no public output can tell the two programs apart."""
     from gift_theory import _model as M
     from gift_theory.effects import REGISTRY
@@ -156,8 +157,10 @@ def test_a_site_drawn_by_a_padded_program_is_its_own_shape_s_draw_bit_for_bit(x6
                 for name in ("a0", "w2"):
                     got = M.compiled_site_draws(key, name, shape, law)
                     own = jax.jit(M.site_draws, static_argnums=(1, 2, 3))(key, name, shape, law)
-                    assert got.shape == shape and got.dtype == jnp.float32
+                    eager = M.site_draws(key, name, shape, law)  # outside a trace: the padded program too
+                    assert got.shape == eager.shape == shape and got.dtype == eager.dtype == jnp.float32
                     np.testing.assert_array_equal(np.asarray(got).view(np.uint32), np.asarray(own).view(np.uint32))
+                    np.testing.assert_array_equal(np.asarray(eager).view(np.uint32), np.asarray(own).view(np.uint32))
     with pytest.raises(ValueError, match="law"):
         R.tagged_flat("cauchy", key, 1, 4, 1024)
     with pytest.raises(ValueError, match="fit"):

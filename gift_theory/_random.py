@@ -357,8 +357,8 @@ def _eager() -> bool:
 
 def _padded_words(key, shape, dtype) -> int | None:
     """The padded length of a draw of ``shape`` that a program of :func:`padded_size` words makes
-    as JAX's own sampler would, or None where JAX must draw it (float64 or 64-bit mode, a key laid
-    out otherwise, no words, too many, off the CPU)."""
+    as JAX's own sampler would, or None where JAX must draw it (inside a trace, float64 or 64-bit
+    mode, a key laid out otherwise, no words, too many, off the CPU)."""
     n = math.prod(shape)
     if isinstance(key, jax.core.Tracer) or not _eager():  # traced: JAX's sampler is part of the program
         return None
@@ -378,8 +378,8 @@ def uniform01(key, shape) -> np.ndarray:
     by ``jax.random.uniform`` itself) bit for bit, as a read-only numpy
     array, made by one compiled program per padded length (:func:`padded_size`) instead of one
     per shape, and without JAX's own Threefry lowering (whose compilation costs seconds per shape
-    on a CPU). A key or configuration whose bits are laid out otherwise, and draws above
-    :data:`PADDED_MAX_WORDS`, go to ``jax.random.uniform`` itself."""
+    on a CPU). A traced call, a key or configuration whose bits are laid out otherwise, and draws
+    above :data:`PADDED_MAX_WORDS` go to ``jax.random.uniform`` itself."""
     shape = tuple(int(d) for d in shape)
     size = _padded_words(key, shape, None)
     if size is None:

@@ -83,7 +83,7 @@ def site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype=jnp.floa
     :func:`sample_noise` and the lab's per-site draw cache both draw through it. Called outside
     a traced function, a built-in law's float32 draws come from the program of their padded
     length (:func:`compiled_site_draws`: the same numbers, no program per shape)."""
-    if not isinstance(key, jax.core.Tracer) and _random._eager():
+    if not isinstance(key, jax.core.Tracer) and _random._eager():  # gift's own stream: any key kind, 64-bit mode too
         flat = _padded_site_draws(key, name, shape, law, dtype)
         if flat is not None:
             return flat

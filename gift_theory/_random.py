@@ -355,16 +355,20 @@ def _eager() -> bool:
     return bool(clean()) if clean is not None else False
 
 
+def _as_jax_draws(key) -> bool:
+    """Whether a padded program can make what ``jax.random`` makes from ``key`` here: outside a
+    trace (a traced draw belongs in its program), without 64-bit mode (float64 values, int64
+    permutations), a key whose bits are laid out by index (:func:`_jax_threefry_key`), on the CPU."""
+    return (not isinstance(key, jax.core.Tracer) and _eager() and not jax.config.jax_enable_x64
+            and _jax_threefry_key(key) and jax.default_backend() == "cpu")
+
+
 def _padded_words(key, shape, dtype) -> int | None:
-    """The padded length of a draw of ``shape`` that a program of :func:`padded_size` words makes
-    as JAX's own sampler would, or None where JAX must draw it (inside a trace, float64 or 64-bit
-    mode, a key laid out otherwise, no words, too many, off the CPU)."""
+    """The padded length of a float32 draw of ``shape`` that a program of :func:`padded_size`
+    words makes as JAX's own sampler would, or None where JAX must draw it (see
+    :func:`_as_jax_draws`; another dtype, no words, too many)."""
     n = math.prod(shape)
-    if isinstance(key, jax.core.Tracer) or not _eager():  # traced: JAX's sampler is part of the program
-        return None
-    if n == 0 or jnp.dtype(jnp.float32 if dtype is None else dtype) != jnp.float32 or jax.config.jax_enable_x64:
-        return None
-    if not _jax_threefry_key(key) or jax.default_backend() != "cpu":
+    if n == 0 or jnp.dtype(jnp.float32 if dtype is None else dtype) != jnp.float32 or not _as_jax_draws(key):
         return None
     return padded_size(n)
 
@@ -425,10 +429,10 @@ def permutation(key, n: int) -> np.ndarray:
     the current order by 32 fresh random bits per position (the bits of ``split(key)[1]``, the
     next round keyed by ``split(key)[0]``); here each round's bits come from a program of a padded
     length (:func:`padded_size`) and the stable sort is numpy's, so no program is compiled per
-    ``n``. Where the bits are laid out otherwise (see :func:`uniform01`) JAX shuffles itself."""
+    ``n``. Elsewhere (:func:`_as_jax_draws`: a trace, 64-bit mode, another key) JAX shuffles itself."""
     n = int(n)
     size = padded_size(n) if n > 0 else None
-    if size is None or not _eager() or not _jax_threefry_key(key) or jax.default_backend() != "cpu":
+    if size is None or not _as_jax_draws(key):
         return np.asarray(jax.random.permutation(key, n))
     x = np.arange(n, dtype=np.int32)
     for _ in range(_rounds(n)):
@@ -459,11 +463,10 @@ def _split_shuffle_bits(key, *, rows: int, r: int, rounds: int):
 def split_permutations(key, n: int, r: int) -> np.ndarray:
     """``vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n))`` bit for bit, an
     (n, r) int32 numpy array: each round's bits from one program per (padded n, r, rounds), the
-    stable sorts numpy's (see :func:`permutation`); otherwise (see :func:`uniform01`) by JAX."""
+    stable sorts numpy's (see :func:`permutation`); elsewhere (:func:`_as_jax_draws`) by JAX."""
     n, r = int(n), int(r)
     rows = padded_size(n) if n > 0 else None
-    if (rows is None or rows * r * max(_rounds(r), 1) > PADDED_MAX_WORDS or not _eager()
-            or not _jax_threefry_key(key) or jax.default_backend() != "cpu"):
+    if rows is None or rows * r * max(_rounds(r), 1) > PADDED_MAX_WORDS or not _as_jax_draws(key):
         return np.asarray(jax.vmap(lambda k: jax.random.permutation(k, r))(jax.random.split(key, n)))
     x = np.broadcast_to(np.arange(r, dtype=np.int32), (n, r))
     for bits in np.asarray(_split_shuffle_bits(key, rows=rows, r=r, rounds=_rounds(r)))[:, :n]:

@@ -222,6 +222,8 @@ def test_jax_s_samplers_by_padded_programs_are_jax_s_numbers_bit_for_bit(make_ke
     with jax.enable_x64(True):
         same(R.uniform_like_jax(key, (6, 2), None, -1.0, 1.0), jax.random.uniform(key, (6, 2), None, -1.0, 1.0))
         same(R.normal_like_jax(key, (6, 2)), jax.random.normal(key, (6, 2)))
+        same(R.permutation(key, 9), jax.random.permutation(key, 9))  # int64 there
+        same(R.split_permutations(key, 3, 5), shuffle(key, 3, 5))
     traced = jax.jit(lambda k: (R.uniform_like_jax(k, (9,), jnp.float32, -0.5, 0.5), R.normal_like_jax(k, (9,))))(key)
     same(traced[0], jax.random.uniform(key, (9,), jnp.float32, -0.5, 0.5))
     same(traced[1], jax.random.normal(key, (9,)))

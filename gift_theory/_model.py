@@ -185,7 +185,7 @@ def _padded_site_draws(key, name: str, shape, law, dtype):
     return jax.device_put(np.asarray(flat)[:n].reshape(shape))  # a view of the program's output
 
 
-def compiled_draws(key, physics, *, arch, shape, dtype):
+def compiled_draws(key, physics, *, arch, shape, dtype, sites=None):
     """:func:`sample_noise` made by compiled programs (materialised draws), bit for bit.
 
     Each site is drawn by :func:`compiled_site_draws`, so one program per padded length (or site
@@ -193,13 +193,23 @@ def compiled_draws(key, physics, *, arch, shape, dtype):
     sampler compiled one program per structure: the threefry rounds of every site again). A
     noise law with parameters is drawn by one program of the whole physics (its values are
     arguments, not part of a program's key). The draws are compiled apart from the kernels that
-    consume them: fused into a kernel, XLA recomputes them in every consumer.
+    consume them: fused into a kernel, XLA recomputes them in every consumer, and compiles the
+    sampler again into every kernel's program. ``sites``: only these names (default every site
+    of the physics). Called inside a traced function, the draws are traced with it
+    (:func:`sample_noise`: a traced key cannot key a program of its own).
     """
+    laws = site_laws(arch, physics)
+    if sites is not None:
+        laws = {name: laws[name] for name in sites}
+    if isinstance(key, jax.core.Tracer) or not _random._eager():
+        return {name: tagged_draws(key, name_tag(name), tuple(shape) + tuple(event), site_law, dtype)
+                for name, (event, site_law) in laws.items()}
     law = noise_law(physics)
     if law is not None and law.param_dict():
-        return _whole_draws(key, physics, arch=arch, shape=tuple(shape), dtype=dtype)
+        every = _whole_draws(key, physics, arch=arch, shape=tuple(shape), dtype=dtype)
+        return {name: every[name] for name in laws}
     return {name: compiled_site_draws(key, name, tuple(shape) + tuple(event), site_law, dtype)
-            for name, (event, site_law) in site_laws(arch, physics).items()}
+            for name, (event, site_law) in laws.items()}
 
 
 @partial(_xla.jit, static_argnames=("arch", "shape", "dtype"))
@@ -309,11 +319,16 @@ def simulate(key: jax.Array, params, x, physics: Physics, arch: Architecture, sh
                      bool(taps))
 
 
-@partial(jax.jit, static_argnames=("arch", "shots", "taps"))
 def _simulate(key, params, x, physics, arch, shots, t, taps):
-    dtype = params[0].W.dtype
-    noise = sample_noise(key, arch, physics, (x.shape[0], shots), dtype)
-    return forward(params, x[:, None, :].astype(dtype), noise, physics, arch, t=t, taps=taps)
+    noise = compiled_draws(key, physics, arch=arch, shape=(x.shape[0], shots), dtype=params[0].W.dtype)
+    return _simulate_forward(params, x, noise, physics, arch, t, taps)
+
+
+@partial(jax.jit, static_argnames=("arch", "taps"))
+def _simulate_forward(params, x, noise, physics, arch, t, taps):
+    """:func:`simulate`'s forward pass on its draws: the draws are made by the programs of their
+    padded lengths (:func:`compiled_draws`), so a new shape or physics compiles only this."""
+    return forward(params, x[:, None, :].astype(params[0].W.dtype), noise, physics, arch, t=t, taps=taps)
 
 
 def squared_error(y_pred, y):

@@ -15,17 +15,24 @@ import numpy as np
 from .._arch import Architecture
 from .._errors import require
 from .._finite import check_all_finite
-from .._model import forward, sample_noise
+from .._model import compiled_draws, forward
 from .._params import Layer, check_params, params32
 from ..effects import Physics
 from .._measurement import Measurement
 from ._base import Ledger
 
 
-@partial(jax.jit, static_argnames=("arch", "shots", "taps", "with_t"))
 def _measure(key, params, x, physics, *, arch, shots, taps, with_t):
+    """A campaign's shots: its draws by the programs of their padded lengths
+    (:func:`~gift_theory._model.compiled_draws`), then the forward pass, so a new campaign shape
+    or physics compiles only the forward pass."""
+    noise = compiled_draws(key, physics, arch=arch, shape=(x.shape[0], shots), dtype=params[0].W.dtype)
+    return _measure_forward(params, x, noise, physics, arch=arch, shots=shots, taps=taps, with_t=with_t)
+
+
+@partial(jax.jit, static_argnames=("arch", "shots", "taps", "with_t"))
+def _measure_forward(params, x, noise, physics, *, arch, shots, taps, with_t):
     dtype = params[0].W.dtype
-    noise = sample_noise(key, arch, physics, (x.shape[0], shots), dtype)
     n = x.shape[0] * shots
     # drift: shots acquired one after the other over the call, t normalised to [0, 1]
     t = (jnp.arange(n, dtype=dtype) / max(n - 1, 1)).reshape(x.shape[0], shots) if with_t else None

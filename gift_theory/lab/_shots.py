@@ -273,10 +273,17 @@ def strong32(physics):
     return jax.tree_util.tree_map(lambda v: np.asarray(v, np.float32), physics)
 
 
-@functools.partial(jax.jit, static_argnames=("arch", "layer", "q"))
 def _one_step(key, W, b, a, physics, t, arch, layer, q):
+    """Layer ``layer``'s model shots fed ``a``: the draws of the sites that layer reads
+    (:func:`_step_sites`) by the programs of their padded lengths, then the step itself, so a new
+    shape or physics compiles only the step."""
     shape = a.shape[:2] + ((q,) if q else ())
-    noise = sample_noise(key, arch, physics, shape, jnp.float32)
+    noise = compiled_draws(key, physics, arch=arch, shape=shape, dtype=jnp.float32,
+                           sites=_step_sites(W, b, a, physics, t, arch, layer, q))
+    return _one_step_forward(W, b, a, noise, physics, t, arch, layer, q)
+
+
+def _step(W, b, a, noise, physics, t, arch, layer, q):
     if q:  # q draws per measured shot: the measured input and time repeat
         a = a[:, :, None, :]
         t = None if t is None else t[:, :, None] * jnp.ones((1, 1, q), t.dtype)
@@ -286,6 +293,79 @@ def _one_step(key, W, b, a, physics, t, arch, layer, q):
     # draw-major: block j holds draw j of every measured shot, so each block of r shots has the
     # measured input's spread, like the measured shots themselves
     return jnp.swapaxes(out, 1, 2).reshape(out.shape[0], -1, out.shape[-1]) if q else out
+
+
+_one_step_forward = functools.partial(jax.jit, static_argnames=("arch", "layer", "q"))(_step)
+
+
+class _Asked(dict):
+    """Draws that note the names a step asks for (``[]``, ``get``, ``in``); a step that lists
+    them (iteration, ``keys``, ``items``, ``values``, ``len``) is noted as asking for all."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.asked, self.every = set(), False
+
+    def __getitem__(self, name):
+        self.asked.add(name)
+        return super().__getitem__(name)
+
+    def get(self, name, default=None):
+        self.asked.add(name)
+        return super().get(name, default)
+
+    def __contains__(self, name):
+        self.asked.add(name)
+        return super().__contains__(name)
+
+    def _all(self, method, *args):
+        self.every = True
+        return getattr(super(), method)(*args)
+
+    def __iter__(self):
+        return self._all("__iter__")
+
+    def __len__(self):
+        return self._all("__len__")
+
+    def keys(self):
+        return self._all("keys")
+
+    def items(self):
+        return self._all("items")
+
+    def values(self):
+        return self._all("values")
+
+
+_sites_memo: dict = {}
+
+
+def _step_sites(W, b, a, physics, t, arch, layer, q):
+    """The draw sites one-step layer ``layer`` reads, found by tracing the step abstractly once
+    per physics structure: a layer's step reads its own sites (and layer 1 the input's), and
+    drawing the others would cost the draws of the whole network per check. Every name the step
+    asked for or tested is kept, so a test of a name absent from the physics answers as before;
+    a step that lists the draws, or a trace that fails, gets every site."""
+    laws = site_laws(arch, physics)
+    memo_key = (arch, layer, q, t is None, jax.tree_util.tree_structure(physics), tuple(laws))
+    if memo_key in _sites_memo:
+        return _sites_memo[memo_key]
+    shape = a.shape[:2] + ((q,) if q else ())
+    seen = []
+
+    def probe(W, b, a, t):
+        noise = _Asked({name: jnp.zeros(shape + tuple(event), jnp.float32) for name, (event, _) in laws.items()})
+        _step(W, b, a, noise, physics, t, arch, layer, q)
+        seen.append(noise)
+
+    try:
+        jax.eval_shape(probe, W, b, a, t)
+        sites = None if seen[0].every else tuple(name for name in laws if name in seen[0].asked)
+    except Exception:  # the step itself runs next and says what is wrong
+        sites = None
+    _sites_memo[memo_key] = sites
+    return sites
 
 
 def one_step_shots(key, model: Model, meas: Measurement, layer: int, draws: int = 0):

@@ -46,7 +46,7 @@ from .._finite import check_finite
 from .._measurement import Measurement
 from .._model import named_subkey
 from ._qtest import q_test
-from ._shots import Model, default_model_shots, model_shots, shot_blocks, to32
+from ._shots import Model, default_model_shots, shot_blocks, to32
 
 
 def _pair_dist(A, B):

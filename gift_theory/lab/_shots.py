@@ -32,7 +32,6 @@ from .._model import (
     named_subkey,
     noise_law,
     noisy_input,
-    sample_noise,
     site_laws,
 )
 from .._params import Layer, params32, to32  # noqa: F401  (the lab's modules import them from here)

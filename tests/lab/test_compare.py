@@ -342,6 +342,34 @@ def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
             np.testing.assert_allclose(np.asarray(v), np.asarray(ref), rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.parametrize("spec", [{"shot": 0.05, "crosstalk": 0.2}, {"laplace": True, "multiplicative": 0.2},
+                                  {"common_mode": 0.1, "drift": 0.1}])
+def test_one_step_shots_are_the_forward_pass_of_the_same_draws(spec):
+    """The one-step shots of layer l (fed the measured layer before, same shot) draw only the
+    sites layer l reads, from the programs of their padded lengths, and run the step alone: on
+    a measurement whose taps are the forward pass of ``sample_noise(key)``, every layer's
+    one-step shots under the same key are that forward pass's layer, up to float32 rounding. A
+    site left out, a wrong subkey or a wrong layer's sites would move them by the noise's scale."""
+    # private: the model side of the one-step check; its draws against the public sampler's
+    from gift_theory.lab._shots import one_step_shots
+
+    phys = gt.Physics.create(s=0.1, **spec)
+    params = gt.init_params(jax.random.PRNGKey(0), ARCH)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(1), (6, 4)))
+    t = np.asarray(jax.random.uniform(jax.random.PRNGKey(3), (6, 5)))
+    key = jax.random.PRNGKey(9)
+    noise = gt.sample_noise(key, ARCH, phys, (6, 5), jnp.float32)
+    fwd = gt.forward(params, jnp.asarray(x, jnp.float32)[:, None, :], noise, phys, ARCH, t=jnp.asarray(t), taps=True)
+    meas = simulate_measurement(jax.random.PRNGKey(2), params, x, phys, shots=5, taps=True, times=True)
+    meas = dataclasses.replace(meas, t=t, taps=tuple(np.asarray(a, np.float64) for a in fwd.taps[:-1]),
+                               y=np.asarray(fwd.y, np.float64))
+    for layer in meas.layer_ids():
+        got = np.asarray(one_step_shots(key, Model(phys), meas, layer))
+        want = np.asarray(fwd.taps[layer - 1])
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5, err_msg=f"layer {layer}")
+        assert np.abs(want).max() > 0.05  # the layer's values are large beside the tolerance
+
+
 # ---- power stated ------------------------------------------------------------------------------
 
 def test_power_notes_say_what_is_weak_in_the_file_s_numbers():

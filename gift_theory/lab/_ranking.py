@@ -12,6 +12,7 @@ from ._results import STATUSES, Candidate, _status
 from ._session import Session
 from ._verdict import (
     first_refusal,
+    found_reproduced_rule,
     identification_refusals,
     mechanism_classes,
     unmoved_tails_rule,
@@ -92,9 +93,10 @@ def rank_candidates(session: Session, names, second, verbose: bool, ident=None, 
     with that reason. Otherwise every candidate is fitted."""
     def fitted(specs):
         return identification_refusals(session.candidates(specs, progress), ident, session.baseline_comparison,
-                                       law)
+                                       law, found)
 
     law = first_refusal(unmoved_tails_rule(session, ident), unreproduced_correlations_rule(session, ident))
+    found = found_reproduced_rule(session, ident)
 
     flagged = flagged_classes(ident)
     # the built-in memory is fitted only where the lag test names memory (through each

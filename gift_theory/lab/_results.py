@@ -43,6 +43,9 @@ class Candidate:
     refused_because : why a candidate that passes its test is not an explanation (status refused)
     lacks : refused (also) for something the identification finds that it has no term for (rules
         b'', b''', e, f, g): a second effect on top of it may be what is missing
+    bought_by : when it buys its keep by what the identification found rather than on the
+        held-out half (:func:`~gift_theory.lab._verdict.found_reproduced_rule`), the sentence
+        saying so
     """
 
     effects: tuple
@@ -55,6 +58,7 @@ class Candidate:
     status: str = ""
     refused_because: tuple = ()
     lacks: bool = False
+    bought_by: str = ""
 
     @property
     def name(self) -> str:
@@ -73,6 +77,8 @@ class Candidate:
             out["with"] = list(self.effects[:-1])
         if self.refused_because:
             out["refused_because"] = list(self.refused_because)
+        if self.bought_by:
+            out["bought_by"] = self.bought_by
         from ._intervals import per_neuron_json  # reference §2b: per-neuron values and their standard errors
         out.update(per_neuron_json(self.model))
         if self.comparison.replicates:

@@ -70,7 +70,12 @@ layer-wise
      average; and
    * *buys its keep*: an effect fitted by its scalar parameters buys its keep: its penalised
      score (held-out discrepancy + 2 sd per parameter, the ranking's) is below the baseline's
-     discrepancy -- else the effect that passes may just absorb noise.
+     discrepancy -- else the effect that passes may just absorb noise. Or, when the baseline
+     passes its held-out test and the identification rejects it, it buys its keep *where the
+     identification looked* (:func:`found_reproduced_rule`): the identification run on the
+     candidate's own campaigns reproduces every test that rejects awgn, and run on the
+     baseline's it does not -- on a small file the held-out half cannot pay for a parameter
+     that the identification's tests, pooled over every input, plainly need.
 
 A model that fits anything is not an explanation: *identified values* and *its own effect's
 values* refuse one that passed only because it could follow whatever the chip did. The same

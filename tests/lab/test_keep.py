@@ -72,3 +72,22 @@ def test_only_campaigns_with_what_was_found_buy_the_keep(shot_file):
     ok, why = check(types.SimpleNamespace(effects=("awgn",), model=session.baseline))
     assert not ok
 
+
+
+def test_a_law_with_the_other_tails_does_not_reproduce_a_kurtosis_finding(tmp_path):
+    """Each test's z is read with the sign of its effect: on a small Laplace file the kurtosis
+    test rejects awgn (heavier tails), and uniform noise (lighter tails) deviates from the
+    Gaussian law by as large a z the other way -- its campaigns must not reproduce the finding."""
+    path = tmp_path / "laplace.npz"
+    code, _ = _run(["simulate", "--arch", "6-12-4", "--inputs", "40", "--shots", "8", "--effect", "awgn=0.05",
+                    "--effect", "laplace", "--taps", "--times", "--seed", "0", "--out", str(path), "--json"])
+    assert code == 0
+    meas = load_measurement(str(path))
+    session = Session.create(jax.random.PRNGKey(0), meas)
+    ident = identify(meas)
+    assert {r["class"] for r in ident.rows() if r["p_adj"] < 0.01} == {"noise_law"}
+    check = found_reproduced_rule(session, ident)
+    ok, why = check(types.SimpleNamespace(effects=("laplace",), model=session.fit(("laplace",))))
+    assert ok, why
+    ok, why = check(types.SimpleNamespace(effects=("uniform",), model=session.fit(("uniform",))))
+    assert not ok and "noise_law's kurtosis test" in why, why

@@ -100,6 +100,9 @@ def render(out) -> str:
                          + ("explains  " if c["explains"] else "          ") + c["candidate"])
     if not out.get("explained", True) and out.get("reasons"):
         lines.append("why not explained: " + "; ".join(out["reasons"]))
+    top = (out.get("ranking") or [{}])[0]
+    if out.get("explained") and top.get("bought_by"):
+        lines.append(top["bought_by"])
     if len(out.get("explained_by") or []) > 1:
         lines.append("explained by each of: " + ", ".join("awgn + " + e for e in out["explained_by"]))
     nxt = out.get("next_measurement")

@@ -52,10 +52,11 @@ def test_a_small_shot_noise_file_is_explained_by_shot(shot_file):
     assert top["score"] >= d["baseline"]["discrepancy"]
     assert "where the identification looked" in top["bought_by"] and top["bought_by"] in d["reasons"]
     assert d["verdict"].startswith("explained: awgn + shot")
-    # the text output says why (rendered from the same object: a second diagnosis would add 15 s)
+    # the text output says why (rendered from the same object, a second diagnosis would add 15 s;
+    # the signatures' NaN z, null in JSON, are left out: the text prints them from floats)
     from gift_theory.cli._diagnose import render
 
-    assert top["bought_by"] in render(d).splitlines()
+    assert top["bought_by"] in render({**d, "signatures": {}}).splitlines()
 
 
 def test_only_campaigns_with_what_was_found_buy_the_keep(shot_file):

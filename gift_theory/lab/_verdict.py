@@ -71,8 +71,9 @@ layer-wise
    * *buys its keep*: an effect fitted by its scalar parameters buys its keep: its penalised
      score (held-out discrepancy + 2 sd per parameter, the ranking's) is below the baseline's
      discrepancy -- else the effect that passes may just absorb noise. Or, when the baseline
-     passes its held-out test and the identification rejects it, it buys its keep *where the
-     identification looked* (:func:`found_reproduced_rule`): the identification run on the
+     passes its held-out test and the identification rejects it, an effect of a class the
+     identification names buys its keep *where the identification looked*
+     (:func:`found_reproduced_rule`): the identification run on the
      candidate's own campaigns reproduces every test that rejects awgn, and run on the
      baseline's it does not -- on a small file the held-out half cannot pay for a parameter
      that the identification's tests, pooled over every input, plainly need.
@@ -652,6 +653,11 @@ def identification_refusals(cands: list, ident, base_cmp=None, shots_rule=None, 
     :func:`first_refusal`): a candidate whose own shots' tails, or correlations, differ from the
     measured ones and have not moved towards them from the baseline's.
 
+    Before them, ``found_rule`` (:func:`found_reproduced_rule`) is asked of a candidate with an
+    effect of a class the identification names that was refused only because it does not buy
+    its keep on the held-out half: where its own campaigns reproduce what the identification
+    found, it buys its keep there (``bought_by``) and passes on to these rules.
+
     Each refusal here but a memory not found marks the candidate ``lacks``: when none passes, the
     greedy second step builds on it."""
     if ident is None:
@@ -663,7 +669,11 @@ def identification_refusals(cands: list, ident, base_cmp=None, shots_rule=None, 
                    base_cmp is not None and base_cmp.p_value >= ALPHA, sorted({r["class"] for r in rows}), base_cmp)
     out = []
     for c in cands:
+        # only an effect of a class the identification names can buy its keep there: any other
+        # is refused below (what the held-out test cannot see), and each check runs the
+        # identification on 16 campaigns (without taps about 3 s each)
         if (found_rule is not None and c.status == "refused" and base_cmp is not None
+                and mechanism_classes(c.name) & set(found.flagged)
                 and c.refused_because == (keep_refusal(c, base_cmp),)):
             bought, why = found_rule(c)
             c = dataclasses.replace(c, status="passes", refused_because=(), bought_by=why) if bought else \

@@ -104,6 +104,7 @@ from scipy import stats
 
 from .._model import named_subkey
 from ..effects import REGISTRY
+from ._budget import default_workers, map_in_threads
 from ._compare import failing_layers
 from ._explain_output import mean_refusal
 from ._level import ALPHA
@@ -464,6 +465,22 @@ def _key(row) -> tuple:
     return row["class"], row["test"], 0 if row["test"] == "levels" else int(row["layer"])
 
 
+def _one_blas_thread():
+    """One OpenBLAS/MKL thread around the campaigns' threads (as :func:`identify` has inside
+    each; entered once outside them, so that their own limits restore one thread, not the
+    process's count, whichever thread leaves first)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - scikit-learn brings it
+        import contextlib
+        return contextlib.nullcontext()
+    return threadpool_limits(1)
+
+
+#: the first stage's level: the first half of the campaigns refuses a candidate below it (with
+#: the second stage's 0.01, a right candidate is refused at most 0.011 of the time)
+EARLY = 1e-3
+
 #: the identification is run on this many of a candidate's own campaigns (the spread of each
 #: flagged test's z under the candidate; :func:`found_reproduced_rule`)
 REPLICATES = 16
@@ -494,7 +511,9 @@ def found_reproduced_rule(session, ident):
     reproduces what was found when no test's two-sided p, Bonferroni over the tests, is below
     0.01 -- every finding, of every class (a finding the candidate has no term for is one it
     does not reproduce). The baseline's own campaigns are read the same way: a candidate buys
-    nothing where they reproduce it too.
+    nothing where they reproduce it too. The campaigns are drawn in two stages of R / 2 (in the
+    lab's threads): the first refuses where a test is not made on one of them, or where p on
+    their own spread is below :data:`EARLY` -- then the second half is not drawn.
 
     Each test's z is read with the sign of its effect (:func:`_signed`): a test's z is its
     deviation's size, and a law with lighter tails than the Gaussian's deviates as far from it as
@@ -510,46 +529,58 @@ def found_reproduced_rule(session, ident):
     zd = np.array([_signed(r_) for r_ in rows])
     m = len(rows)
 
-    def campaigns_z(model, name):
-        """(R, m) signed z of the tests on the model's campaigns, and how many were drawn: the
-        draws stop after the first pair with a test not made (what it makes only sometimes is
-        not reproduced, and without taps each identification takes seconds)."""
-        out = np.full((REPLICATES, m), np.nan)
-        for j in range(REPLICATES // 2):  # two campaigns per draw of 2 r shots (the fit's compiled shape)
-            own = model_shots(named_subkey(session.k_cmp, f"found/{name}/{j}"), model, meas, 2 * r)
-            for h in range(2):
-                part = [np.asarray(a[:, h * r:(h + 1) * r], np.float64) for a in own]
-                sim = dataclasses.replace(meas, y=part[-1], taps=tuple(part[:-1]) if meas.has_taps else None)
-                got = {_key(g): _signed(g) for g in identify(sim).rows()}
-                out[2 * j + h] = [got.get(k, np.nan) for k in keys]
-            if np.isnan(out[:2 * j + 2]).any():
-                return out[:2 * j + 2], 2 * j + 2
-        return out, REPLICATES
+    threads = default_workers(meas)
+
+    def pair(model, name, j):
+        """The signed z of the tests on the model's campaigns 2 j and 2 j + 1 (one draw of 2 r
+        shots, the fit's compiled shape; NaN where a campaign does not make a test)."""
+        own = model_shots(named_subkey(session.k_cmp, f"found/{name}/{j}"), model, meas, 2 * r)
+        out = np.full((2, m), np.nan)
+        for h in range(2):
+            part = [np.asarray(a[:, h * r:(h + 1) * r], np.float64) for a in own]
+            sim = dataclasses.replace(meas, y=part[-1], taps=tuple(part[:-1]) if meas.has_taps else None)
+            got = {_key(g): _signed(g) for g in identify(sim, output_candidates=False).rows()}
+            out[h] = [got.get(k, np.nan) for k in keys]
+        return out
+
+    def campaigns(model, name):
+        """The tests on the model's campaigns (pure, keyed work, in the lab's threads), in two
+        stages: the first :data:`REPLICATES` / 2 campaigns, and the rest only where those do not
+        already refuse it (a test not made, or p below :data:`EARLY` on their own spread); then
+        the worst test as :func:`worst` reads it."""
+        with _one_blas_thread():
+            z = np.concatenate(map_in_threads(lambda j: pair(model, name, j), range(REPLICATES // 4), threads))
+            first = worst(z)
+            if first[4] or first[0] < EARLY:
+                return first
+            z = np.concatenate([z] + map_in_threads(lambda j: pair(model, name, j),
+                                                    range(REPLICATES // 4, REPLICATES // 2), threads))
+        return worst(z)
 
     def worst(z):
-        z, drawn = z
+        R = len(z)
         missing = np.isnan(z).sum(0)  # a test some campaigns do not make (a layer of no one level) is not reproduced
         with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)  # a column all NaN: its mean is NaN
             mean, sd = np.nanmean(z, 0), np.nanstd(z, 0, ddof=1)
-            t = (zd - mean) / (np.maximum(sd, 1.0) * np.sqrt(1.0 + 1.0 / REPLICATES))
-            tail = np.where(sd > 1.0, 2.0 * stats.t.sf(np.abs(t), REPLICATES - 1), 2.0 * stats.norm.sf(np.abs(t)))
+            t = (zd - mean) / (np.maximum(sd, 1.0) * np.sqrt(1.0 + 1.0 / R))
+            tail = np.where(sd > 1.0, 2.0 * stats.t.sf(np.abs(t), R - 1), 2.0 * stats.norm.sf(np.abs(t)))
         p = np.where((missing == 0) & np.isfinite(t), np.minimum(1.0, m * tail), 0.0)
         i = int(np.argmin(p))
-        return float(p[i]), i, float(mean[i]), float(sd[i]), int(missing[i]), drawn
+        return float(p[i]), i, float(mean[i]), float(sd[i]), int(missing[i]), R
 
     base = []
 
     def check(c):
         name = " + ".join(c.effects)
-        p, i, mean, sd, missing, drawn = worst(campaigns_z(c.model, "+".join(c.effects)))
+        p, i, mean, sd, missing, drawn = campaigns(c.model, "+".join(c.effects))
         if p >= ALPHA and not base:  # the baseline's campaigns: only where the candidate's reproduce it all
-            base.append(worst(campaigns_z(session.baseline, "awgn")))
+            base.append(campaigns(session.baseline, "awgn"))
         cls, test, layer = keys[i]
         said = (f"{cls}'s {test} test " + (f"at layer {layer}" if layer else "across the layers")
                 + f": z = {zd[i]:.2f} measured (signed by its effect), "
                 + (f"not made on {missing} of the {drawn} campaigns of its own shots drawn" if missing else
-                   f"{mean:.2f} +- {sd:.2f} on {REPLICATES} campaigns of its own shots (p = {p:.2g}"
+                   f"{mean:.2f} +- {sd:.2f} on {drawn} campaigns of its own shots (p = {p:.2g}"
                    + (f"; the baseline's p = {base[0][0]:.2g})" if base else ")")))
         if p >= ALPHA and base[0][0] < ALPHA:
             return True, (f"awgn + {name} buys its keep where the identification looked: its own campaigns "

@@ -66,7 +66,7 @@ class Identification:
         return {li.layer: li for li in self.layers}
 
 
-def identify(meas: Measurement, s: float | None = None) -> Identification:
+def identify(meas: Measurement, s: float | None = None, *, output_candidates: bool = True) -> Identification:
     """Identify every layer of ``meas`` (taps) or its output (no taps) from the shots.
 
     Parameters
@@ -74,6 +74,9 @@ def identify(meas: Measurement, s: float | None = None) -> Identification:
     meas : Measurement
     s : the noise level the identification starts from (the smoothing of the activation);
         default: read off the within-input spread of the first measured layer
+    output_candidates : without taps, also fit each candidate mechanism to the output's mean
+        (``output_candidates``; about half an identification's time): False where only the
+        tests' rows are read
 
     Returns
     -------
@@ -88,7 +91,7 @@ def identify(meas: Measurement, s: float | None = None) -> Identification:
     else:
         limits = threadpool_limits(1)
     with limits:
-        return _identify(meas, s)
+        return _identify(meas, s, output_candidates)
 
 
 def _levels_row(out: list) -> dict | None:
@@ -126,7 +129,7 @@ def _levels_row(out: list) -> dict | None:
     return levels
 
 
-def _identify(meas: Measurement, s: float | None) -> Identification:
+def _identify(meas: Measurement, s: float | None, output_candidates: bool = True) -> Identification:
     act = meas.activation if meas.activation in _ACT else "tanh"
     if s is None:
         Y0 = np.asarray(meas.layers()[0], np.float64)
@@ -151,7 +154,7 @@ def _identify(meas: Measurement, s: float | None) -> Identification:
     out = [dataclasses.replace(li, rows=li.rows + tuple(rw for rw in [lattice_row(Ys[ids.index(li.layer)], li.layer)]
                                                         if rw is not None)) for li in out]
     cands = ()
-    if not meas.has_taps and meas.arch.depth > 1:
+    if output_candidates and not meas.has_taps and meas.arch.depth > 1:
         from .._explain_output import explain
         cands = tuple(explain(meas, out[-1].s))
     levels = _levels_row(out) if meas.has_taps and len(out) > 1 else None

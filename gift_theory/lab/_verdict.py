@@ -551,7 +551,8 @@ def found_reproduced_rule(session, ident):
         with _one_blas_thread():
             z = np.concatenate(map_in_threads(lambda j: pair(model, name, j), range(REPLICATES // 4), threads))
             first = worst(z)
-            if first[4] or first[0] < EARLY:
+            p, missing = first[0], first[4]
+            if missing or p < EARLY:
                 return first
             z = np.concatenate([z] + map_in_threads(lambda j: pair(model, name, j),
                                                     range(REPLICATES // 4, REPLICATES // 2), threads))
@@ -708,7 +709,7 @@ def identification_refusals(cands: list, ident, base_cmp=None, shots_rule=None, 
     for c in cands:
         # only an effect of a class the identification names can buy its keep there: any other
         # is refused below (what the held-out test cannot see), and each check runs the
-        # identification on 16 campaigns (without taps about 3 s each)
+        # identification on up to 16 campaigns (without taps a second or more each)
         if (found_rule is not None and c.status == "refused" and base_cmp is not None
                 and mechanism_classes(c.name) & set(found.flagged)
                 and c.refused_because == (keep_refusal(c, base_cmp),)):

@@ -172,16 +172,32 @@ def compiled_site_draws(key: jax.Array, name: str, shape: tuple, law=None, dtype
     return _site_program(key, np.uint32(name_tag(name)), tuple(int(d) for d in shape), law, dtype)
 
 
+def _padded_length(shape, law, dtype) -> int | None:
+    """The padded length of the program that draws a site of ``shape`` (:func:`_padded_site_draws`),
+    or None where a program of the site's own shape draws it."""
+    n = int(np.prod(tuple(int(d) for d in shape), dtype=np.int64))
+    if flat_law(law, dtype) is None or n <= 0 or jax.default_backend() != "cpu":
+        return None
+    return _random.padded_size(n)
+
+
+def site_draw_bytes(shape, law=None, dtype=jnp.float32) -> int:
+    """The bytes a site's draws of :func:`compiled_site_draws` hold: a padded program's whole
+    output (the draws are a view of it), else the draws' own."""
+    size = _padded_length(shape, law, dtype)
+    n = int(np.prod(tuple(int(d) for d in shape), dtype=np.int64))
+    return int(size if size is not None else n) * jnp.dtype(dtype).itemsize
+
+
 def _padded_site_draws(key, name: str, shape, law, dtype):
     """A site's float32 draws of a built-in law by the program of their padded length, or None
     where that program cannot make them (a plugin's law, float64, too many words, off the CPU)."""
     shape = tuple(int(d) for d in shape)
-    n = int(np.prod(shape, dtype=np.int64))
-    row_law = flat_law(law, dtype)
-    size = _random.padded_size(n) if row_law is not None and n > 0 else None
-    if size is None or jax.default_backend() != "cpu":
+    size = _padded_length(shape, law, dtype)
+    if size is None:
         return None
-    flat = _random.tagged_flat(row_law, key, name_tag(name), n, size)
+    n = int(np.prod(shape, dtype=np.int64))
+    flat = _random.tagged_flat(flat_law(law, dtype), key, name_tag(name), n, size)
     return jax.device_put(np.asarray(flat)[:n].reshape(shape))  # a view of the program's output
 
 

@@ -25,6 +25,7 @@ from .._measurement import Measurement
 from .._model import (
     compiled_draws,
     compiled_site_draws,
+    site_draw_bytes,
     flat_law,
     forward,
     layer_step,
@@ -94,7 +95,7 @@ def _tiled(meas: Measurement, K: int) -> np.ndarray:
 
 #: bytes of standard draws kept between calls (least recently used first out)
 DRAW_CACHE_BYTES = 64 << 20
-_draw_cache: "collections.OrderedDict[tuple, jax.Array]" = collections.OrderedDict()
+_draw_cache: "collections.OrderedDict[tuple, tuple]" = collections.OrderedDict()  # key -> (draws, bytes held)
 _draw_lock = threading.Lock()
 _draw_bytes = [0]
 
@@ -122,14 +123,15 @@ def draws(key, physics, meas: Measurement, K: int) -> dict:
             v = _draw_cache.get(ck)
             if v is not None:
                 _draw_cache.move_to_end(ck)
+                v = v[0]
         if v is None:
             v = compiled_site_draws(key, name, full, site_law, jnp.float32)
             with _draw_lock:
-                if ck not in _draw_cache:
-                    _draw_cache[ck] = v
-                    _draw_bytes[0] += v.nbytes
+                if ck not in _draw_cache:  # counted as held: a padded program's whole output
+                    _draw_cache[ck] = (v, site_draw_bytes(full, site_law, jnp.float32))
+                    _draw_bytes[0] += _draw_cache[ck][1]
                 while _draw_bytes[0] > DRAW_CACHE_BYTES and len(_draw_cache) > 1:
-                    _draw_bytes[0] -= _draw_cache.popitem(last=False)[1].nbytes
+                    _draw_bytes[0] -= _draw_cache.popitem(last=False)[1][1]
         out[name] = v
     return out
 

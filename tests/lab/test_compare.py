@@ -336,6 +336,17 @@ def test_the_lab_s_per_site_draw_cache_is_the_core_s_sampler_bit_for_bit(spec):
             np.testing.assert_array_equal(np.asarray(got[name]), np.asarray(want[name]))
             # eager and compiled differ in the last bits (XLA fuses the transforms differently)
             np.testing.assert_allclose(np.asarray(eager[name]), np.asarray(want[name]), rtol=1e-5, atol=1e-6)
+    # the cache counts what it holds: a padded program's whole output (the draws are a view of it)
+    from gift_theory.lab import _shots
+
+    with _shots._draw_lock:
+        held = list(_shots._draw_cache.values())
+    assert _shots._draw_bytes[0] == sum(b for _, b in held)
+    assert all(b >= v.nbytes for v, b in held)
+    # this physics' sites are drawn by programs longer than the sites: some entry holds more than its draws
+    sizes = [_random.padded_size(int(np.prod(v.shape))) for v in want.values()]
+    assert any(z is not None and z > int(np.prod(v.shape)) for z, v in zip(sizes, want.values()))
+    assert any(b > v.nbytes for v, b in held)
     if not spec:  # Gaussian: every site is a standard normal from its own named subkey
         for name, v in want.items():
             ref = _random.normal(named_subkey(key, name), v.shape, jnp.float32)

@@ -185,8 +185,8 @@ def site_draw_bytes(shape, law=None, dtype=jnp.float32) -> int:
     """The bytes a site's draws of :func:`compiled_site_draws` hold: a padded program's whole
     output (the draws are a view of it), else the draws' own."""
     size = _padded_length(shape, law, dtype)
-    n = int(np.prod(tuple(int(d) for d in shape), dtype=np.int64))
-    return int(size if size is not None else n) * jnp.dtype(dtype).itemsize
+    n = size if size is not None else int(np.prod(tuple(int(d) for d in shape), dtype=np.int64))
+    return int(n) * jnp.dtype(dtype).itemsize
 
 
 def _padded_site_draws(key, name: str, shape, law, dtype):

@@ -103,3 +103,16 @@ def map_in_threads(f, items, threads: int) -> list:
 
     with concurrent.futures.ThreadPoolExecutor(max_workers=min(len(items), int(threads))) as pool:
         return list(pool.map(lambda item: contextvars.copy_context().run(f, item), items))
+
+
+def one_blas_thread():
+    """A context with one OpenBLAS/MKL thread: the lab's small dense algebra (the
+    identification, and the threads that run identifications, entered once outside them so
+    that their own limits restore one thread, not the process's count, whichever leaves
+    first). Threads spinning on a loaded machine cost 100x there."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - scikit-learn brings it
+        import contextlib
+        return contextlib.nullcontext()
+    return threadpool_limits(1)

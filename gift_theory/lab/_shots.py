@@ -25,7 +25,6 @@ from .._measurement import Measurement
 from .._model import (
     compiled_draws,
     compiled_site_draws,
-    site_draw_bytes,
     flat_law,
     forward,
     layer_step,
@@ -33,6 +32,7 @@ from .._model import (
     named_subkey,
     noise_law,
     noisy_input,
+    site_draw_bytes,
     site_laws,
 )
 from .._params import Layer, params32, to32  # noqa: F401  (the lab's modules import them from here)

@@ -104,7 +104,7 @@ from scipy import stats
 
 from .._model import named_subkey
 from ..effects import REGISTRY
-from ._budget import default_workers, map_in_threads
+from ._budget import default_workers, map_in_threads, one_blas_thread
 from ._compare import failing_layers
 from ._explain_output import mean_refusal
 from ._level import ALPHA
@@ -465,18 +465,6 @@ def _key(row) -> tuple:
     return row["class"], row["test"], 0 if row["test"] == "levels" else int(row["layer"])
 
 
-def _one_blas_thread():
-    """One OpenBLAS/MKL thread around the campaigns' threads (as :func:`identify` has inside
-    each; entered once outside them, so that their own limits restore one thread, not the
-    process's count, whichever thread leaves first)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - scikit-learn brings it
-        import contextlib
-        return contextlib.nullcontext()
-    return threadpool_limits(1)
-
-
 #: the first stage's level: the first half of the campaigns refuses a candidate below it (with
 #: the second stage's 0.01, a right candidate is refused at most 0.011 of the time)
 EARLY = 1e-3
@@ -548,7 +536,7 @@ def found_reproduced_rule(session, ident):
         stages: the first :data:`REPLICATES` / 2 campaigns, and the rest only where those do not
         already refuse it (a test not made, or p below :data:`EARLY` on their own spread); then
         the worst test as :func:`worst` reads it."""
-        with _one_blas_thread():
+        with one_blas_thread():  # entered once around the campaigns' threads
             z = np.concatenate(map_in_threads(lambda j: pair(model, name, j), range(REPLICATES // 4), threads))
             first = worst(z)
             p, missing = first[0], first[4]

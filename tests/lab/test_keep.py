@@ -20,6 +20,8 @@ import pytest
 
 from gift_theory.cli import main
 from gift_theory.lab import Session, identify, load_measurement
+# private: the rule's own computation (a signed z against the campaigns' spread, floored at 1) is
+# what a slip would break, and the diagnosis only shows its verdict
 from gift_theory.lab._verdict import found_reproduced_rule
 
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..._arch import NUMPY_ACTIVATIONS as _ACT
 from ..._measurement import Measurement
-from .._budget import default_workers, map_in_threads
+from .._budget import default_workers, map_in_threads, one_blas_thread
 from .._discrete import lattice_row
 from .._level import ALPHA
 from ._layer import identify_layer
@@ -82,15 +82,7 @@ def identify(meas: Measurement, s: float | None = None, *, output_candidates: bo
     -------
     Identification
     """
-    # small dense algebra: one BLAS thread (threads spinning on a loaded machine cost 100x here)
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - scikit-learn brings it
-        import contextlib
-        limits = contextlib.nullcontext()
-    else:
-        limits = threadpool_limits(1)
-    with limits:
+    with one_blas_thread():  # small dense algebra
         return _identify(meas, s, output_candidates)
 
 

@@ -156,18 +156,19 @@ def diagnose(key, meas: Measurement, *, candidates=None, shots: int | None = Non
     threads = default_workers(meas) if workers is None else max(1, int(workers))
     # the layer-wise identification (closed form, numpy: the mechanisms' backbone, and which
     # candidates to fit first) needs only the data: with threads to spare it runs beside the
-    # baseline's fit, and localising -- which needs only the baseline -- beside the candidates
-    # when the memory budget holds a thread for it (after them otherwise)
+    # baseline's fit, and localising -- which needs only the baseline -- starts as soon as the
+    # baseline is fitted, beside the rest of the identification and the candidates, when the
+    # memory budget holds a thread for it (after the candidates otherwise)
     with concurrent.futures.ThreadPoolExecutor(max_workers=2) as side:
         ident_f = side.submit(identify, meas) if threads > 1 else None
         session = Session.create(key, meas, shots, workers)
         base, base_cmp = session.baseline, session.baseline_comparison
         _log(f"baseline {base.describe()}: discrepancy {base_cmp.discrepancy:.3g} +- {base_cmp.se:.2g} "
              f"(floor {session.ref.noise_floor:.3g}), p = {base_cmp.p_value:.3g}", verbose)
-        # the identification first (the candidates wait for it): localising starts when it is done
-        ident = ident_f.result() if ident_f is not None else identify(meas)
         local = (side.submit(contextvars.copy_context().run, _localise, session, base, meas, shots)
                  if threads > 1 and localise_beside(meas, threads) else None)
+        # the candidates wait for the identification (it says which to fit first)
+        ident = ident_f.result() if ident_f is not None else identify(meas)
         ranking, not_fitted = rank_candidates(session, names, second, verbose, ident, progress)
         ranking, not_fitted = with_alternatives(session, ranking, not_fitted, ident, verbose, progress)
         if ranked is not None:

@@ -41,6 +41,10 @@ class Candidate:
     nominal : the parameters it adds, every offset counted as one
     status : ``"passes"``, ``"refused"`` or ``"fails"`` (see the module); empty until checked
     refused_because : why a candidate that passes its test is not an explanation (status refused)
+    refused_for : the name of the rule behind each sentence of ``refused_because``, in its order
+        (``"keep"``, ``"identified"``, ``"prior"``, ``"time_free_twin"``, ``"one_step"``, an
+        identification rule's function name, ``"shots"``, ``"not_reproduced"``): what the code
+        reads, where the sentences are what a user reads
     lacks : refused (also) for something the identification finds that it has no term for (rules
         b'', b''', e, f, g): a second effect on top of it may be what is missing
     bought_by : when it buys its keep by what the identification found rather than on the
@@ -57,6 +61,7 @@ class Candidate:
     nominal: int = 0
     status: str = ""
     refused_because: tuple = ()
+    refused_for: tuple = ()
     lacks: bool = False
     bought_by: str = ""
 

@@ -31,7 +31,7 @@ from ._offset_null import effective_dof, offset_replicates
 from ._offset_prior import prior_check
 from ._results import Candidate, n_scalar_params, penalised_score
 from ._shots import Model
-from ._verdict import refusals, time_free
+from ._verdict import refusal_rules, time_free
 
 
 #: with taps, an offset model whose plain held-out test gives p below this is not run against
@@ -201,17 +201,18 @@ class Session:
 
     def checks(self, cand: "Candidate") -> "Candidate":
         """``cand`` with its status: ``"fails"`` below 0.01, else ``"passes"`` or ``"refused"`` by
-        the verdict's rule (:func:`~gift_theory.lab._verdict.refusals`: its fitted values against
+        the verdict's rule (:func:`~gift_theory.lab._verdict.refusal_rules`: its fitted values against
         their prior, with taps every layer's one-step check, a time effect against its time-free
         twin, and whether it buys its keep)."""
         if cand.comparison.p_value < ALPHA:
-            return dataclasses.replace(cand, status="fails", refused_because=())
+            return dataclasses.replace(cand, status="fails", refused_because=(), refused_for=())
         steps = self.one_step(cand.model, own_level=False) if self.meas.has_taps else None
         twin = None
         if self.meas.t is not None and any(REGISTRY[e].needs_times for e in cand.effects):
             twin = self.score(cand.model, held_out=time_free(self.test_meas))
-        why = refusals(cand, self.baseline_comparison, steps, self.prior(cand.model), twin)
-        return dataclasses.replace(cand, status="refused" if why else "passes", refused_because=tuple(why))
+        why = refusal_rules(cand, self.baseline_comparison, steps, self.prior(cand.model), twin)
+        return dataclasses.replace(cand, status="refused" if why else "passes",
+                                   refused_because=tuple(w for _, w in why), refused_for=tuple(k for k, _ in why))
 
     def _prepare(self, start, fit_names, added):
         """Fit, score and check one candidate: pure."""

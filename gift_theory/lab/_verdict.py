@@ -130,12 +130,19 @@ def p_words(p: float) -> str:
 
 
 def refusals(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[str]:
-    """Why a candidate that passes its held-out test is still no explanation (*identified values*,
-    *its own effect's values*, *a trend that buys its keep*, *every layer right*, *buys its
-    keep*); [] when none refuses it. ``steps``: its one-step checks (with taps);
-    ``prior``: :func:`~gift_theory.lab._offset_prior.prior_check` rows of its fitted values;
-    ``twin``: its held-out comparison with the times held at their mean, when it acts through
-    them."""
+    """Why a candidate that passes its held-out test is still no explanation: the sentences of
+    :func:`refusal_rules`."""
+    return [why for _, why in refusal_rules(cand, baseline_cmp, steps, prior, twin)]
+
+
+def refusal_rules(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[tuple[str, str]]:
+    """Why a candidate that passes its held-out test is still no explanation, as ``(rule,
+    sentence)`` pairs: ``identified`` (*identified values*), ``keep`` (*buys its keep*),
+    ``prior`` (*its own effect's values*), ``time_free_twin`` (*a trend that buys its keep*),
+    ``one_step`` (*every layer right*); [] when none refuses it. ``steps``: its one-step checks
+    (with taps); ``prior``: :func:`~gift_theory.lab._offset_prior.prior_check` rows of its fitted
+    values; ``twin``: its held-out comparison with the times held at their mean, when it acts
+    through them."""
     name = " + ".join(cand.effects)
     why = []
     # per-neuron values identified neuron by neuron (._neurons) are an explanation: the count of
@@ -143,11 +150,11 @@ def refusals(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[str]:
     per_neuron, _ = identified(cand.model)
     if (cand.nominal and cand.n_free < 0.5 * cand.nominal and any(cand.model.offsets)
             and not per_neuron):
-        why.append(f"{name}'s {cand.nominal} fitted values are not identified by the data (effective degrees of "
-                   f"freedom {cand.n_free:.0f}: the prior, not the data, sets most of them)")
+        why.append(("identified", f"{name}'s {cand.nominal} fitted values are not identified by the data (effective "
+                                  f"degrees of freedom {cand.n_free:.0f}: the prior, not the data, sets most of them)"))
     keep = keep_refusal(cand, baseline_cmp)
     if keep:
-        why.append(keep)
+        why.append(("keep", keep))
     what = {"w_correlation": "weight offsets of layer {l} are proportional to the programmed weights (a gain, not an "
                              "error drawn apart from them)",
             "w_structure": "weight offsets of layer {l} are a fixed linear map of the programmed weights (a coupling)",
@@ -160,18 +167,20 @@ def refusals(cand, baseline_cmp, steps=None, prior=(), twin=None) -> list[str]:
         if row["test"] in findings:  # a neuron unlike the rest is the finding, not a refusal
             continue
         text = what.get(row["test"], row.get("what", f"{row['test']} of layer {{l}}")).format(l=row["layer"])
-        why.append(f"the fitted {text}: z = {row['z']:.1f}" + (f" (p = {row['p']:.2g})" if "p" in row else ""))
+        why.append(("prior", f"the fitted {text}: z = {row['z']:.1f}" + (f" (p = {row['p']:.2g})" if "p" in row else "")))
     unit = baseline_cmp.se if baseline_cmp.se > 0 else 1.0
     if twin is not None and twin.discrepancy - cand.comparison.discrepancy < 2.0 * unit:
-        why.append(f"with every acquisition time held at its mean, awgn + {name} does nearly as well (held-out "
-                   f"discrepancy {twin.discrepancy:.3g} against {cand.comparison.discrepancy:.3g}, "
-                   f"{(twin.discrepancy - cand.comparison.discrepancy) / unit:.1f} sd apart, less than the 2 sd a "
-                   f"parameter must buy; p = {twin.p_value:.3g}): a constant does what its trend in time does, "
-                   f"so the data show no trend")
+        why.append(("time_free_twin",
+                    f"with every acquisition time held at its mean, awgn + {name} does nearly as well (held-out "
+                    f"discrepancy {twin.discrepancy:.3g} against {cand.comparison.discrepancy:.3g}, "
+                    f"{(twin.discrepancy - cand.comparison.discrepancy) / unit:.1f} sd apart, less than the 2 sd a "
+                    f"parameter must buy; p = {twin.p_value:.3g}): a constant does what its trend in time does, "
+                    f"so the data show no trend"))
     if steps:
         bad = failing_layers(steps)
         if bad:
-            why.append(f"with {name} fitted, layer(s) {', '.join(map(str, bad))} still fail their one-step check")
+            why.append(("one_step", f"with {name} fitted, layer(s) {', '.join(map(str, bad))} still fail their "
+                                    "one-step check"))
     return why
 
 
@@ -288,8 +297,9 @@ def mechanism_classes(name: str) -> set:
 
 # ---- the rules of the identification: what the held-out test cannot see -----------------------
 
-def _refuse(c, why, lacks: bool = False):
+def _refuse(c, why, rule: str, lacks: bool = False):
     return dataclasses.replace(c, status="refused", refused_because=tuple(c.refused_because) + (why,),
+                               refused_for=tuple(c.refused_for) + (rule,),
                                lacks=c.lacks or lacks)
 
 
@@ -700,16 +710,16 @@ def identification_refusals(cands: list, ident, base_cmp=None, shots_rule=None, 
         # identification on up to 16 campaigns (without taps a second or more each)
         if (found_rule is not None and c.status == "refused" and base_cmp is not None
                 and mechanism_classes(c.name) & set(found.flagged)
-                and c.refused_because == (keep_refusal(c, base_cmp),)):
+                and c.refused_for == ("keep",)):
             bought, why = found_rule(c)
-            c = dataclasses.replace(c, status="passes", refused_because=(), bought_by=why) if bought else \
-                dataclasses.replace(c, refused_because=c.refused_because + (why,))
+            c = (dataclasses.replace(c, status="passes", refused_because=(), refused_for=(), bought_by=why) if bought
+                 else _refuse(c, why, "not_reproduced", lacks=c.lacks))
         for rule in IDENTIFICATION_RULES:
             hit = rule(c, found) if c.status == "passes" else None
             if hit:
-                c = _refuse(c, hit[0], lacks=hit[1])
+                c = _refuse(c, hit[0], rule.__name__, lacks=hit[1])
         why = shots_rule(c) if c.status == "passes" and shots_rule is not None else None
         if why:
-            c = _refuse(c, why, lacks=True)
+            c = _refuse(c, why, "shots", lacks=True)
         out.append(c)
     return out

@@ -98,3 +98,17 @@ def test_a_law_with_the_other_tails_does_not_reproduce_a_kurtosis_finding(tmp_pa
     assert ok, why
     ok, why = check(types.SimpleNamespace(effects=("uniform",), model=session.fit(("uniform",))))
     assert not ok and "noise_law's kurtosis test" in why, why
+
+
+def test_a_refusal_names_its_rule_beside_its_sentence(shot_file):
+    # the rule above is offered only candidates refused for their keep alone: it reads the
+    # rules' names (``refused_for``), one per sentence, never the sentences
+    meas = load_measurement(str(shot_file))
+    session = Session.create(jax.random.PRNGKey(0), meas)
+    shot, laplace = session.candidates([(("shot",), None, ("shot",), ("shot",)),
+                                        (("laplace",), None, ("laplace",), ("laplace",))])
+    assert shot.status == "refused" and shot.refused_for == ("keep",)
+    assert len(shot.refused_because) == 1 and "does not buy its keep" in shot.refused_because[0]
+    assert len(laplace.refused_for) == len(laplace.refused_because)
+    if laplace.status == "fails":
+        assert laplace.refused_for == ()

@@ -347,6 +347,7 @@ def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_une
         effects: tuple
         status: str = "passes"
         refused_because: tuple = ()
+        refused_for: tuple = ()
         lacks: bool = False
 
     class Ident:
@@ -361,6 +362,7 @@ def test_an_identification_that_rejects_the_passing_baseline_leaves_the_data_une
     assert [c.status for c in out] == ["passes", "refused", "fails"]
     assert [c.lacks for c in out] == [False, True, False]  # refused for what it lacks: the second step builds on it
     assert "noise_law at layer(s) 2, p = 0.001" in out[1].refused_because[0]
+    assert out[1].refused_for == ("refuse_what_the_held_out_test_cannot_see",)  # the rule beside its sentence
     # when the baseline fails its held-out test, only a time trend refuses (rule b'')
     assert [c.status for c in identification_refusals(cands, Ident(), _Cmp(1e-6))] == ["passes", "passes", "fails"]
     assert identification_refusals(cands, None, base_passes) == cands

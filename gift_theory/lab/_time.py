@@ -280,13 +280,6 @@ def _neuron_drift(rd: _Reads, A1, u1, i: int):
     trend: (p, the estimate (p + 1,), its covariance)."""
     n, r, _ = rd.e.shape
     g, G, t, obs = rd.g, rd.G, rd.t, rd.obs
-    # across the inputs' means every input weighs alike (the median of the neuron's cells'
-    # variances; the F test's scale comes from the residuals): a cell's own variance, from its r
-    # shots, is a chi-square of r - 1 degrees of freedom, and weighing the means by it made this
-    # reading's p far too small at r = 8 (null files of 160 inputs x 8 shots acquired in order:
-    # p < 0.01 on 10 of 60 at one layer). Within the inputs' shots the sandwich (HC3) reads each
-    # shot at its cell's own weight, as before
-    v = float(max(np.median(obs[:, i]), 1e-300))
     k1 = A1.shape[2]
     p = k1 - 1
     tc = t - t.mean(1)[:, None]
@@ -312,7 +305,7 @@ def _neuron_drift(rd: _Reads, A1, u1, i: int):
         full_w = _ftest(Cf, rd.e[:, :, i].ravel(), wi, used)
     if rd.use_a:
         Tt = _project_off((cols.mean(1))[:, None, :], rd.X[:, i:i + 1, :])[:, 0, :]
-        ra_i = _ftest(Tt, rd.ebar[:, i], np.full(n, r / v), rd.X.shape[2])
+        ra_i = _ftest(Tt, rd.ebar[:, i], r / obs[:, i], rd.X.shape[2])
     _, Bi, Si, Mi = _combine([full_w if rd.use_w else None, ra_i])
     Binv = np.linalg.pinv(Bi, rcond=RCOND)
     return _combine([rw_i, ra_i])[0], Binv @ Si, Binv @ Mi @ Binv

@@ -242,26 +242,6 @@ def test_on_null_files_the_new_tests_are_quiet():
         assert not hits, (seed, order, hits)
 
 
-def test_eight_shots_acquired_in_order_read_no_drift_into_a_correct_map(tmp_path):
-    """awgn alone, 160 inputs x 8 shots acquired one after the other (layer 1 tapped): weighing
-    each input's mean by its own 8 shots' variance, the map drift's across reading came out at
-    p = 1e-4 here, its drift was put into the map, and the map's own trends then read its excess
-    as a time trend at adjusted p = 6e-12 (the diagnosis: NOT EXPLAINED)."""
-    import contextlib
-    import io
-
-    from gift_theory.cli import main
-    from gift_theory.lab import load_measurement
-
-    path = tmp_path / "null.npz"
-    with contextlib.redirect_stdout(io.StringIO()):
-        assert main(["simulate", "--arch", "6-12-4", "--inputs", "160", "--shots", "8", "--effect", "awgn=0.05",
-                     "--times", "--taps", "--seed", "40", "--out", str(path), "--json"]) == 0
-    rows = [r for r in identify(load_measurement(str(path))).rows() if r["class"] == "time_drift"]
-    assert {r["test"] for r in rows} >= {"map_drift", "time_map", "wander"}
-    assert all(r["p_adj"] >= 0.01 for r in rows), [(r["test"], r["layer"], r["p_adj"]) for r in rows]
-
-
 # ---- ambiguity ----------------------------------------------------------------------------------
 
 def _cand(effects, discrepancy, status="passes"):

@@ -129,7 +129,7 @@ def _wald(C, e, w, dof_used: int = 0):
     return float(stats.f.sf(T2 * (ne - rank) / ((ne - 1) * rank), rank, ne - rank)), B, S, M
 
 
-def _ftest(C, e, w, dof_used: int, robust: bool = False):
+def _ftest(C, e, w, dof_used: int, robust: bool = False, lev0: float = 0.0):
     """The classical F test of beta = 0 in e = C beta + error, the errors independent with
     variance 1 / w up to one common scale estimated from the residuals (one number, not a q x q
     covariance: with tens of coefficients per neuron and a hundred inputs a sandwich over the
@@ -137,7 +137,8 @@ def _ftest(C, e, w, dof_used: int, robust: bool = False):
     lost before (the inputs' means, a regression on the shot's own input, the map's columns).
 
     ``robust``: the observations' own sandwich instead of the common scale (HC3: each residual
-    over one less its leverage), for the within reading's thousands of shots. A neuron saturated
+    over one less its leverage, ``lev0`` added to each: the leverage of what the residuals were
+    fitted with before, 1 / r for the inputs' means), for the within reading's thousands of shots. A neuron saturated
     on most shots has columns (its slope times t a) that live on the few shots near its linear
     range, where the map's misfit is too: one scale for all shots read that misfit as a drift (a
     null file's neuron at p = 1e-32). Returns (p, B, S, M) as :func:`_wald` (M: the estimate's
@@ -154,7 +155,7 @@ def _ftest(C, e, w, dof_used: int, robust: bool = False):
     if rank == 0 or dof < 5:
         return 1.0, B, S, B
     if robust:
-        lev = np.einsum("nq,qk,nk->n", Cw, Bi, C)
+        lev = lev0 + np.einsum("nq,qk,nk->n", Cw, Bi, C)
         u = w * res / np.maximum(1.0 - lev, 1e-3)
         M = (C * u[:, None]).T @ (C * u[:, None])
         V = Bi @ M @ Bi
@@ -355,7 +356,7 @@ def _neuron_drift(rd: _Reads, A1, u1, i: int):
         Cb = Cf - Li @ np.linalg.lstsq(Li, Cf, rcond=None)[0]
         wi = np.broadcast_to(1.0 / obs[:, i, None], (n, r)).ravel()
         used = n + (p if G is not None else 0)  # the inputs' means, the shot's own input
-        rw_i = _ftest(Cb, rd.e[:, :, i].ravel(), wi, used + 2, robust=True)
+        rw_i = _ftest(Cb, rd.e[:, :, i].ravel(), wi, used + 2, robust=True, lev0=1.0 / r)
         full_w = _ftest(Cf, rd.e[:, :, i].ravel(), wi, used)
     if rd.use_a:
         Tt = _project_off((cols.mean(1))[:, None, :], rd.X[:, i:i + 1, :])[:, 0, :]

@@ -250,7 +250,7 @@ def identify_layer(lay: _Layer, act: str, s_guess: float, t, depth: int, taps: b
     # read below; a named one is put into the map as a known term of the pre-activation
     E_slow, slow = None, None
     if t is not None:
-        slow = _time.slow_terms(lay, fit[8], fit[5], fit[7], t, l, _row, _within)
+        slow = _time.slow_terms(lay, fit[8], fit[5], fit[7], t, l, _row, _within, fit[6])
         extra_rows.extend(slow.rows)
         if slow.offset is not None:
             E_slow = _within(fit[8], fit[5], lay.A)

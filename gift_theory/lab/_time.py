@@ -30,7 +30,7 @@ Each is read twice, where each acquisition order shows it:
 The two p-values are combined by Bonferroni (the smaller, doubled). The map drift is tested
 neuron by neuron (an F test of its p + 1 coefficients: the shots' own sandwich within, one
 residual scale per neuron across), Bonferroni over the neurons. Each cell weighs by its variance
-moderated towards its neuron's (:func:`_moderated`).
+moderated towards the model's variance of the cell (:func:`_moderated`).
 
 **Put into the model.** A test below :data:`PUT_P` puts its reading into the map as a known term
 of each shot's pre-activation (``_Layer.offset``), estimated from both readings at once (their
@@ -138,10 +138,10 @@ def _ftest(C, e, w, dof_used: int, robust: bool = False, lev0: float = 0.0):
 
     ``robust``: the observations' own sandwich instead of the common scale (HC3: each residual
     over one less its leverage, ``lev0`` added to each: the leverage of what the residuals were
-    fitted with before, 1 / r for the inputs' means), for the within reading's thousands of shots. A neuron saturated
-    on most shots has columns (its slope times t a) that live on the few shots near its linear
-    range, where the map's misfit is too: one scale for all shots read that misfit as a drift (a
-    null file's neuron at p = 1e-32). Returns (p, B, S, M) as :func:`_wald` (M: the estimate's
+    fitted with before, 1 / r for the inputs' means), for the within reading's thousands of
+    shots. A neuron saturated on most shots has columns (its slope times t a) that live on the few
+    shots near its linear range, where the map's misfit is too: one scale for all shots read that
+    misfit as a drift (a null file's neuron at p = 1e-32). Returns (p, B, S, M) as :func:`_wald` (M: the estimate's
     meat -- B times the residuals' scale, or the sandwich's)."""
     Cw = C * w[:, None]
     B = Cw.T @ C
@@ -203,10 +203,11 @@ def _combine(readings):
 
 
 def _moderated(obs, r: int, prior=None):
-    """Each cell's variance (n, d), from its r shots, moderated towards its neuron's (an empirical
-    Bayes prior over the inputs, Smyth 2004): (d0 s0^2 + (r - 1) s^2) / (d0 + r - 1), with s0^2 and
-    the prior's degrees of freedom d0 read from the spread of log s^2 beyond what r - 1 degrees of
-    freedom give (d0 infinite -- the neuron's one variance -- where the spread is no wider).
+    """Each cell's variance (n, d), from its r shots, moderated towards its neuron's -- or, with
+    ``prior``, towards the model's shape of it -- by an empirical Bayes prior over the inputs
+    (Smyth 2004): (d0 s0^2 + (r - 1) s^2) / (d0 + r - 1), with s0^2 and the prior's degrees of
+    freedom d0 read from the spread of log s^2 beyond what r - 1 degrees of freedom give (d0
+    infinite -- the neuron's one variance -- where the spread is no wider).
 
     Weights 1 / s^2 from a handful of shots are heavy-tailed (an inverse chi-square of r - 1
     degrees of freedom): a few inputs carry the weighted sums, and an F test that counts every
@@ -424,7 +425,9 @@ def slow_terms(lay, E, g, X, t, layer: int, row_of, within, var=None) -> Slow:
     # lets it, not 1 / 1e-300 (which overflowed the sandwich and stopped the identification)
     obs = np.maximum(np.var(Ew, axis=1, ddof=1), max(float(lay.res_var), 1e-300)) if r > 1 else np.ones((n, d))
     tbar = t.mean(1)
-    rd = _Reads(Ew - Ew.mean(1, keepdims=True), E.mean(1), _moderated(obs, r, None if var is None else np.mean(var, axis=1)) if r > 2 else obs, g, G, X, t,
+    if r > 2:
+        obs = _moderated(obs, r, None if var is None else np.mean(var, axis=1))
+    rd = _Reads(Ew - Ew.mean(1, keepdims=True), E.mean(1), obs, g, G, X, t,
                 r > 2 and float(np.std(t - tbar[:, None])) >= SPREAD, float(np.std(tbar)) >= SPREAD)
     u = np.broadcast_to(lay.A @ lay.W.T, (n, r, d))
     wander_row, offset, e, ebar = _wander(rd, u, layer, row_of)

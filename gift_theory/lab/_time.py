@@ -184,12 +184,17 @@ def _within_fw(C, g, A):
     return out
 
 
-def _project_off(T, X):
-    """Per neuron, T (n, d, c) less its least-squares projection on the map's columns X (n, d, k)."""
+def _coefficients(T, X):
+    """Per neuron, the least-squares coefficients (d, k, c) of T (n, d, c) on the map's columns
+    X (n, d, k)."""
     Xn = X.transpose(1, 0, 2)
     G = np.linalg.pinv(np.matmul(Xn.transpose(0, 2, 1), Xn))
-    coef = np.matmul(G, np.matmul(Xn.transpose(0, 2, 1), T.transpose(1, 0, 2)))
-    return T - np.matmul(Xn, coef).transpose(1, 0, 2)
+    return np.matmul(G, np.matmul(Xn.transpose(0, 2, 1), T.transpose(1, 0, 2)))
+
+
+def _project_off(T, X):
+    """Per neuron, T (n, d, c) less its least-squares projection on the map's columns X (n, d, k)."""
+    return T - np.matmul(X.transpose(1, 0, 2), _coefficients(T, X)).transpose(1, 0, 2)
 
 
 def _combine(readings):
@@ -448,9 +453,7 @@ def _trends_left(offset, g, X, u, tbar):
     read at t = 0 without the drift's time average."""
     p1 = X.shape[2] - 2
     h = np.mean(g * offset, axis=1)  # (n, d) how the term moves each input's mean, to first order
-    Xn = X.transpose(1, 0, 2)  # (d, n, k): the map's design, neuron by neuron
-    G = np.einsum("ina,inb->iab", Xn, Xn)
-    coef = np.einsum("iab,ib->ia", np.linalg.pinv(G, rcond=1e-12), np.einsum("ina,ni->ia", Xn, h))  # (d, k)
+    coef = _coefficients(h[:, :, None], X)[:, :, 0]  # (d, k)
     return offset - tbar[:, None, None] * (coef[:, p1] + coef[:, p1 + 1] * u)
 
 

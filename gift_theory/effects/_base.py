@@ -581,7 +581,9 @@ class Effect:
         """This effect's signature in the residuals of a model without it, or None.
 
         ``res`` (:class:`gift_theory.lab.Residuals`) holds per measured layer the measured and
-        the model's per-cell means, variances and shots. Returns ``{"statistic": str,
+        the model's per-cell means, variances and shots (the model's, on a large file, made
+        again a block of inputs at a time on each reading: a statistic of each input's model
+        shots reads them once with ``res.per_input_of_model_halves``). Returns ``{"statistic": str,
         "value": float, "z": float}`` with z ~ N(0, 1) under the model (a score test in the
         direction the effect would move the data); large positive z points at the effect.
         """

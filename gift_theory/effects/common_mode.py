@@ -30,13 +30,18 @@ class CommonMode(Effect):
 
     @classmethod
     def signature(cls, res):
+        def unit(m):
+            return m / np.sqrt(np.sum(m ** 2, axis=1, keepdims=True) + 1e-300)
+
+        def excess(S, w):
+            return np.var(np.einsum("nkd,nd->nk", S, w), axis=1, ddof=1) - np.sum(w ** 2 * S.var(1, ddof=1), 1)
+
         # a common gain adds c^2 u_j u_k to every covariance: the variance of the shots projected
         # on the mean direction beyond the sum of the per-neuron variances
         T = 0.0
-        for Y, MA, mB, vB in zip(res.Y, res.MA, res.mB, res.vB):
-            w = mB / np.sqrt(np.sum(mB ** 2, axis=1, keepdims=True) + 1e-300)
-            def excess(S):
-                return np.var(np.einsum("nkd,nd->nk", S, w), axis=1, ddof=1) - np.sum(w ** 2 * S.var(1, ddof=1), 1)
-            T = T + (excess(Y) - excess(MA)) / (np.sum(w ** 2 * vB, 1) + 1e-300)
+        model = res.per_input_of_model_halves(lambda li, sl, MA, MB: excess(MA, unit(res.mB[li][sl])))
+        for Y, mB, vB, m in zip(res.Y, res.mB, res.vB, model):
+            w = unit(mB)
+            T = T + (excess(Y, w) - m) / (np.sum(w ** 2 * vB, 1) + 1e-300)
         return {"statistic": "excess covariance along the mean direction (the rank-one part a common gain adds)",
                 "z": res.over_inputs(T), "value": float(np.mean(T))}

@@ -80,9 +80,18 @@ def lattice_step(layers):
     The candidate step is the smallest clear gap between distinct measured values; the
     values are on the lattice when every one is within 1e-3 step of a multiple of it.
     """
-    vals = np.concatenate([np.ravel(a) for a in layers])
-    u = np.unique(np.round(vals, 9))
-    if len(u) > 0.5 * len(vals) or len(u) < 2:
+    total, u = sum(np.size(a) for a in layers), np.empty(0)
+    for a in sorted(layers, key=np.size, reverse=True):  # a layer at a time: a continuous file stops early
+        v = np.round(np.ravel(a), 9)  # ours: sorted and thinned in place (np.unique's numbers, one copy)
+        v.sort()
+        keep = np.empty(v.size, bool)
+        keep[:1] = True
+        np.not_equal(v[1:], v[:-1], out=keep[1:])
+        u = np.union1d(u, v[keep]) if u.size else v[keep]
+        del v, keep
+        if len(u) > 0.5 * total:
+            return None
+    if len(u) < 2:
         return None
     gaps = np.diff(u)
     scale = max(np.max(np.abs(u)), 1e-12)

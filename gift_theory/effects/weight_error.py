@@ -40,11 +40,11 @@ class WeightError(Effect):
     def signature(cls, res):
         # offsets fixed per device repeat in both halves of the shots; noise does not
         T = 0.0
-        for Y, MA, MB, vB in zip(res.Y, res.MA, res.MB, res.vB):
+        for Y, mA, mB, vB, k in zip(res.Y, res.mA, res.mB, res.vB, res.model_half_shots()):
             h = Y.shape[1] // 2
-            se = np.sqrt(vB * (1.0 / max(h, 1) + 1.0 / MA.shape[1]) + 1e-300)
-            ra = (Y[:, :h].mean(1) - MA.mean(1)) / se
-            rb = (Y[:, h:2 * h].mean(1) - MB.mean(1)) / se
+            se = np.sqrt(vB * (1.0 / max(h, 1) + 1.0 / k) + 1e-300)
+            ra = (Y[:, :h].mean(1) - mA) / se
+            rb = (Y[:, h:2 * h].mean(1) - mB) / se
             T = T + np.sum(ra * rb, axis=1)
         return {"statistic": "split-half reproducibility of the mean residuals (products of two halves' residuals)",
                 "z": res.over_inputs(T), "value": float(np.mean(T))}

@@ -30,7 +30,8 @@ from ._channels import (
     reference,
 )
 from ._qtest import log_variance_bias, over_inputs, q_test, replicate_null
-from ._shots import Model, model_shots, one_step_shots, to32
+from ._channels import _input_chunk, variance_floor
+from ._shots import Model, model_shots, one_step_block_inputs, one_step_rows, one_step_shots, to32
 
 
 @dataclasses.dataclass(frozen=True)
@@ -167,6 +168,37 @@ def discrepancy_difference(a: Comparison, b: Comparison, replicates: int = DIFFE
 BOOTSTRAP_BYTES = 16 << 20
 
 
+def one_step_blocks(key, model: Model, meas: Measurement, layer: int, draws: int = 0):
+    """:func:`~._shots.one_step_shots` of layer ``layer`` a block of inputs at a time: yields
+    ``(slice of inputs, their shots)`` (float32 numpy, bit for bit the whole array's rows), one
+    block when the layer's shots fit in :data:`~._shots.SHOT_BLOCK_BYTES`."""
+    B = one_step_block_inputs(meas, (layer,), draws)
+    if B >= meas.n:
+        yield slice(0, meas.n), np.asarray(one_step_shots(key, model, meas, layer, draws=draws))
+        return
+    for i0 in range(0, meas.n, B):
+        yield slice(i0, min(i0 + B, meas.n)), np.asarray(one_step_rows(key, model, meas, layer, draws, i0, B))
+
+
+def one_step_cells(key, model: Model, meas: Measurement, layer: int, f, draws: int = 0) -> np.ndarray:
+    """``f(rows, M)`` of each block of layer ``layer``'s one-step shots (:func:`one_step_blocks`),
+    put together over the inputs: a statistic of each input's shots (a (b, ...) array for the
+    block's b inputs) with one block of shots in memory at a time."""
+    out = None
+    for sl, M in one_step_blocks(key, model, meas, layer, draws):
+        v = np.asarray(f(sl, M))
+        if out is None:
+            out = np.empty((meas.n,) + v.shape[1:], v.dtype)
+        out[sl] = v
+        del M
+    return out
+
+
+def _cell_var(sl, M):
+    """Each cell's variance (ddof 1) of a block of shots, in float64."""
+    return np.var(np.asarray(M, np.float64), axis=1, ddof=1)
+
+
 def layer_level(key, model: Model, meas: Measurement, layer: int, xtol: float = 1e-4) -> float:
     """The additive noise level s at which layer ``layer``'s one-step shots are as variable as the
     measured ones (mean log variance over the layer's cells, both from r shots, so their
@@ -186,8 +218,7 @@ def layer_level(key, model: Model, meas: Measurement, layer: int, xtol: float = 
     @functools.lru_cache(maxsize=None)  # brentq evaluates the ends again
     def gap(log_s):
         m = Model(model.physics.replace(s=float(np.exp(log_s))), model.params, model.offsets)
-        M = np.asarray(one_step_shots(key, m, meas, layer), np.float64)
-        return float(np.mean(np.log(np.var(M, axis=1, ddof=1) + tiny))) - target
+        return float(np.mean(np.log(one_step_cells(key, m, meas, layer, _cell_var) + tiny))) - target
 
     lo, hi = float(np.log(s0 / 20.0)), float(np.log(s0 * 20.0))
     if gap(lo) >= 0:
@@ -244,21 +275,23 @@ def transfer_level(key, model: Model, meas: Measurement, layer: int, start: floa
     Y = np.asarray(meas.layers()[li], np.float64)
     target = float(np.mean(np.log(np.var(Y, axis=1, ddof=1) + 1e-30)))
 
-    def shots(s):
+    def cells(s, g):
         m = Model(model.physics.replace(s=float(s)), model.params, model.offsets)
-        return np.asarray(one_step_shots(key, m, meas, layer), np.float64)
+        return one_step_cells(key, m, meas, layer, lambda sl, M: g(np.asarray(M, np.float64)))
 
-    M0 = shots(start)
-    f = _transfer(Y.mean(1), M0.mean(1))
+    def var(M):
+        return np.var(M, axis=1, ddof=1)
+
+    f = _transfer(Y.mean(1), cells(start, lambda M: M.mean(1)))
+    both = cells(start, lambda M: np.stack([var(f(M)), var(M)]).swapaxes(0, 1))  # (n, 2, d)
     with np.errstate(divide="ignore"):
-        bend = float(np.sqrt(np.mean((np.log(np.var(f(M0), axis=1, ddof=1) + 1e-30)
-                                      - np.log(np.var(M0, axis=1, ddof=1) + 1e-30)) ** 2)))
+        bend = float(np.sqrt(np.mean((np.log(both[:, 0] + 1e-30) - np.log(both[:, 1] + 1e-30)) ** 2)))
     if bend < TRANSFER_MIN_LOG_VAR:
         return None
 
     @functools.lru_cache(maxsize=None)
     def gap(log_s):
-        return float(np.mean(np.log(np.var(f(shots(np.exp(log_s))), axis=1, ddof=1) + 1e-30))) - target
+        return float(np.mean(np.log(cells(np.exp(log_s), lambda M: var(f(M))) + 1e-30))) - target
 
     lo, hi = float(np.log(start / 20.0)), float(np.log(start * 20.0))
     if gap(lo) >= 0:
@@ -268,7 +301,7 @@ def transfer_level(key, model: Model, meas: Measurement, layer: int, start: floa
     else:
         level = float(np.exp(optimize.brentq(gap, lo, hi, xtol=xtol)))
     joint = np.mean(np.log(np.var(Y, axis=1, ddof=1) + 1e-30)
-                    - np.log(np.var(f(shots(max(float(model.physics.s), 1e-4))), axis=1, ddof=1) + 1e-30), 1)
+                    - np.log(cells(max(float(model.physics.s), 1e-4), lambda M: var(f(M))) + 1e-30), 1)
     return level, over_inputs(joint)
 
 
@@ -303,17 +336,24 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
         if own_level and "awgn" in model.physics:
             # how far the layer's variability is from the joint level's (log variances of r shots
             # on both sides: the same small-sample bias), then the layer at its own level
-            M0 = np.asarray(one_step_shots(k_l, model, meas, l), np.float64)
             vy = np.var(Y, axis=1, ddof=1)
             tiny = 1e-12 * max(float(np.mean(vy)), np.finfo(np.float64).tiny)
-            gap = np.mean(np.log(vy + tiny) - np.log(np.var(M0, axis=1, ddof=1) + tiny), 1)
+            gap = np.mean(np.log(vy + tiny) - np.log(one_step_cells(k_l, model, meas, l, _cell_var) + tiny), 1)
             level_z = over_inputs(gap)
             level = layer_level(k_l, model, meas, l)
             m = Model(model.physics.replace(s=level), model.params, model.offsets)
-        M = one_step_shots(k_l, m, meas, l)
-        C = cell_statistic(M, to32(Y), paired=True, scales=ref.scales[li])
-        if len(ref.channels) > 2:
-            C = np.concatenate([C, paired_moment_channels(np.asarray(M, np.float64), Y, ref.split)], axis=1)
+        Y32, moments = np.asarray(to32(Y)), len(ref.channels) > 2
+        eps = variance_floor(np.asarray(Y, np.float64)) if moments else None
+        chunk = _input_chunk(meas.n, meas.r, meas.r, Y.shape[2])  # every block in the whole array's program
+
+        def channels(sl, M):
+            blocked = sl.stop - sl.start < meas.n
+            C = cell_statistic(M, Y32[sl], paired=True, scales=ref.scales[li], chunk=chunk if blocked else None)
+            if moments:
+                C = np.concatenate([C, paired_moment_channels(np.asarray(M, np.float64), Y[sl], ref.split[sl], eps)],
+                                   axis=1)
+            return C
+        C = one_step_cells(k_l, m, meas, l, channels)
         Q, p, null_mean, null_sd, _ = q_test(C)
         row = {"layer": l, "discrepancy": Q, "se": null_sd, "z": (Q - null_mean) / null_sd if null_sd > 0
                else float("nan"), "p_value": p, "s": level, "level_z": level_z}

@@ -388,6 +388,49 @@ def one_step_shots(key, model: Model, meas: Measurement, layer: int, draws: int 
     return out
 
 
+def one_step_block_inputs(meas: Measurement, layers, draws: int) -> int:
+    """Inputs per block of :func:`one_step_rows` for the one-step shots of ``layers`` with
+    ``draws`` model draws per measured shot (float32): all of them when they fit in
+    :data:`SHOT_BLOCK_BYTES`."""
+    per_input = 4 * max(int(draws), 1) * meas.r * sum(meas.arch.widths[l] for l in layers)
+    return int(max(1, min(meas.n, SHOT_BLOCK_BYTES // max(per_input, 1))))
+
+
+def one_step_rows(key, model: Model, meas: Measurement, layer: int, draws: int, start: int, size: int):
+    """Inputs ``start .. start + size - 1`` of :func:`one_step_shots` (key, model, meas, layer,
+    draws), bit for bit, made without the other inputs' draws (each site's rows, as
+    :func:`draw_rows` makes them; a law with parameters or a plugin's is drawn whole and sliced)
+    by the program of a block of ``size`` inputs (the last block padded)."""
+    W, b = params32(model.weights(meas))[layer - 1]
+    k = min(size, meas.n - start)
+    if layer == 1:
+        x = _host_rows(meas.x, start, k, size)
+        a = jnp.broadcast_to(x[:, None, :], (size, meas.r, x.shape[1]))
+    else:
+        a = _host_rows(meas.taps[layer - 2], start, k, size)
+    t = None if meas.t is None else _host_rows(meas.t, start, k, size)
+    phys, q = strong32(model.physics), int(draws)
+    full = (meas.n, meas.r) + ((q,) if q else ())
+    sites = _step_sites(W, b, a, phys, t, meas.arch, layer, q)
+    laws = site_laws(meas.arch, phys)
+    law = noise_law(phys)
+    whole = law is not None and law.param_dict()
+    noise, every = {}, None
+    for name in (laws if sites is None else sites):
+        event, site_law = laws[name]
+        v = None if whole else _site_rows(key, name, full + tuple(event), site_law, start, size)
+        if v is None:
+            if every is None:
+                every = compiled_draws(key, phys, arch=meas.arch, shape=full, dtype=jnp.float32, sites=sites)
+            v = padded_rows(every[name], start, start + k, size)
+        noise[name] = v
+    out = _one_step_forward(W, b, a, noise, phys, t, meas.arch, layer, q)
+    out = out if k == size else out[:k]
+    check_finite(out, lambda: f"the one-step shots of layer {layer} ({model.describe()})",
+                 lambda i: _eager_one_step(key, W, b, a, phys, t, meas.arch, layer, q))
+    return out
+
+
 def _eager_one_step(key, W, b, a, physics, t, arch, layer, q):
     """:func:`_one_step` again, eagerly (a plugin hook that returned a non-finite value is named
     where it returns)."""

@@ -661,6 +661,35 @@ def _blocks_give_the_whole_array_s_numbers(spec, monkeypatch, _shots):
         np.testing.assert_array_equal(getattr(blocked, f), getattr(whole, f), err_msg=f)
 
 
+@pytest.mark.parametrize("spec", [{"shot": 0.05}, {"saturation": 0.4, "drift": 0.05}])
+def test_the_one_step_checks_read_a_large_file_a_block_of_inputs_at_a_time_with_the_same_numbers(spec, monkeypatch):
+    """The one-step checks (each layer's level, its channels, and a failing layer's level read
+    through its measured transfer) make each layer's one-step shots a block of inputs at a time
+    on a large file: every number is the whole array's, bit for bit -- on a saturating chip,
+    whose failing layers take the transfer's path, and with times. The block size is the private
+    SHOT_BLOCK_BYTES, shrunk so that this file's layers go in blocks of 7 inputs and a last of 2."""
+    from gift_theory.lab import _shots  # private: the block size, shrunk to reach blocks on a small file
+    from gift_theory.lab._compare import transfer_level  # private: run on every layer, failing or not
+
+    arch = gt.Architecture((5, 12, 6, 4))
+    params = gt.init_params(jax.random.PRNGKey(1), arch, gain=1.5)
+    x = np.asarray(jax.random.uniform(jax.random.PRNGKey(2), (30, 5)))
+    meas = simulate_measurement(jax.random.PRNGKey(3), params, x, gt.Physics.create(s=0.1, **spec), shots=8,
+                                taps=True, times="drift" in spec)
+    model = Model(gt.Physics.create(s=0.1))
+    key = jax.random.PRNGKey(5)
+
+    def run():
+        return (one_step_check(key, model, meas), one_step_check(key, model, meas, own_level=False),
+                [transfer_level(jax.random.fold_in(key, l), model, meas, l, 0.1) for l in (1, 2, 3)])
+    whole = run()
+    monkeypatch.setattr(_shots, "SHOT_BLOCK_BYTES", 7 * 4 * 8 * 12)
+    assert [_shots.one_step_block_inputs(meas, (l,), 0) for l in (1, 2, 3)] == [7, 14, 21]
+    assert run() == whole
+    if "saturation" in spec:
+        assert all(r.get("s_through_transfer") for r in whole[0]) and None not in whole[2]
+
+
 def test_a_draw_past_a_block_s_word_index_is_drawn_whole_and_sliced():
     """A block's draws are found by a 32-bit word index, where the whole-array sampler counts to
     2^33 words: a site of 2^32 words or more (or whose last block's padding reaches it) is drawn

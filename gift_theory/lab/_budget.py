@@ -1,10 +1,13 @@
 """The lab's memory budget: how many threads a diagnosis runs for the size of its file.
 
 A candidate's fit holds the moment fit's draws and shots (2 r per input of every measured layer,
-float32) and its offset fits' tangents; its held-out score makes and reads its model shots (4 r per
-input) a block of inputs at a time (:data:`~._shots.SHOT_BLOCK_BYTES`) and the channels' pair
-distances in chunks of inputs (:data:`~._channels.CHUNK_BYTES`): measured on a 50 MB file
-(16-32-16-8 with taps, 1740 inputs x 64 shots), some 20 times the file's float32 shots per thread.
+float32) and its offset fits' draws and tangents; its held-out score makes and reads its model
+shots (4 r per input) a block of inputs at a time (:data:`~._shots.SHOT_BLOCK_BYTES`) and the
+channels' pair distances in chunks of inputs (:data:`~._channels.CHUNK_BYTES`). Measured on a 50 MB
+file (16-32-16-8 with taps, 1740 inputs x 64 shots, 25 MB of float32 shots), each candidate alone
+in one thread after the session: weight_error (fitted offsets, with its refit null) raised the
+peak by 0.86 GB, bias_offset by 0.65 GB, shot by 0.57 GB, crosstalk by 0.44 GB -- the largest 35
+times the file's float32 shots, :data:`PER_THREAD`.
 The candidates run in up to 4 threads; for a large file fewer, so that all of them together stay
 within :func:`lab_memory` (the numbers do not depend on the thread count). A candidate with fitted
 offsets makes its refit null's replicates in threads of its own (:func:`replicate_threads`): they
@@ -28,7 +31,7 @@ from .._errors import GiftInputError
 #: together, unless ``$GIFT_LAB_MEMORY`` says otherwise (:func:`lab_memory`)
 LAB_MEMORY = 2 << 30
 #: a candidate thread's working memory over the file's float32 shots (measured, see above)
-PER_THREAD = 20
+PER_THREAD = 35
 
 _UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 

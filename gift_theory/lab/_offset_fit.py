@@ -29,7 +29,7 @@ from .._model import (
     noisy_input,
 )
 from .._process import release_freed_memory
-from ._shots import Model, params32, tiled_times, to32
+from ._shots import Model, _step_sites, params32, tiled_times, to32
 from ._offset_kinds import _initial_scale, _split_by_kind, apply_all, apply_layer, kinds_of, reset, unflat_vector
 
 
@@ -67,12 +67,26 @@ def _layer_vg(ds, W, b, a, noise, physics, t, target, inv_v, inv_e2, arch, layer
     return jax.value_and_grad(loss)(ds)
 
 
+def _layer_sites(meas: Measurement, physics, layer: int, K: int, q: int):
+    """The draw sites layer ``layer``'s step reads (:func:`~._shots._step_sites`, traced on
+    shapes alone), for inputs of K shots (layer 1) or r shots of q draws each; None: every site."""
+    arch, f32 = meas.arch, jnp.float32
+    W = jax.ShapeDtypeStruct((arch.widths[layer], arch.widths[layer - 1]), f32)
+    b = jax.ShapeDtypeStruct((arch.widths[layer],), f32)
+    shots = K if layer == 1 else meas.r
+    a = jax.ShapeDtypeStruct((meas.n, shots, arch.widths[layer - 1]), f32)
+    t = None if meas.t is None else jax.ShapeDtypeStruct((meas.n, shots), f32)
+    return _step_sites(W, b, a, physics, t, arch, layer, 0 if layer == 1 else q)
+
+
 def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: int = 4):
-    """Inputs, draws, times and targets of layer ``layer``'s offset fit (taps)."""
+    """Inputs, draws, times and targets of layer ``layer``'s offset fit (taps). Only the sites the
+    layer reads are drawn (each site's draws are its own: the same numbers as drawing them all)."""
     arch, n, r = meas.arch, meas.n, meas.r
     if layer == 1:
         K = 256  # the model's mean response must be much sharper than the measured mean (r shots)
-        noise = compiled_draws(key, physics, arch=arch, shape=(n, K), dtype=jnp.float32)
+        noise = compiled_draws(key, physics, arch=arch, shape=(n, K), dtype=jnp.float32,
+                               sites=_layer_sites(meas, physics, 1, K, 0))
         a = to32(np.asarray(meas.x)[:, None, :])
         t = tiled_times(meas, K)
         Y = meas.layers()[0]
@@ -80,7 +94,8 @@ def _layer_setup(key, meas: Measurement, physics, layer: int, draws_per_shot: in
         resid_var = float(np.mean(np.var(Y, axis=1))) / r
         axis = 1
     else:
-        noise = compiled_draws(key, physics, arch=arch, shape=(n, r, draws_per_shot), dtype=jnp.float32)
+        noise = compiled_draws(key, physics, arch=arch, shape=(n, r, draws_per_shot), dtype=jnp.float32,
+                               sites=_layer_sites(meas, physics, layer, r, draws_per_shot))
         a = to32(np.asarray(meas.taps[layer - 2])[:, :, None, :])
         t = None if meas.t is None else to32(np.broadcast_to(np.asarray(meas.t)[:, :, None], (n, r, draws_per_shot)))
         Y = meas.layers()[layer - 1]

@@ -665,6 +665,25 @@ def test_the_localisation_reads_a_large_file_s_model_shots_a_block_at_a_time_wit
     assert whole["where"]["qq"][1]["kurtosis_model"] == blocked["where"]["qq"][1]["kurtosis_model"]
 
 
+def test_an_offset_fit_draws_only_the_sites_its_layer_reads_with_the_same_numbers(monkeypatch):
+    """With taps each layer's offset fit (and its refit null and intervals) draws only the noise
+    sites its layer reads: a site's draws are its own, so the fitted offsets, their held-out
+    score against the refit null and the fit's JSON are those of drawing every site, bit for bit
+    -- on a chip with shot noise and a common-mode gain (sites of their own in every layer).
+    Private: which sites are drawn is memory, nothing public shows it."""
+    from gift_theory.lab import _offset_fit, fit_effects
+
+    meas = _chip({"shot": 0.02, "common_mode": 0.05}, seed=7, n=40, r=8)
+    assert _offset_fit._layer_sites(meas, gt.Physics.create(s=0.1, shot=0.02), 2, 8, 4) == ("w2", "a2", "shot2")
+    few = fit_effects(jax.random.PRNGKey(9), meas, ["bias_offset"])
+    monkeypatch.setattr(_offset_fit, "_layer_sites", lambda *args: None)  # every site, as before
+    every = fit_effects(jax.random.PRNGKey(9), meas, ["bias_offset"])
+    assert few.comparison_after.replicates and few.as_json() == every.as_json()
+    assert few.after.offsets == every.after.offsets and few.after.params is not None
+    for (W, b), (W2, b2) in zip(few.after.params, every.after.params):  # the programmed weights plus the offsets
+        assert np.array_equal(W, W2) and np.array_equal(b, b2)
+
+
 def test_the_pooled_kurtosis_is_scipy_s_bit_for_bit():
     """The qq panel's kurtosis (private ``_pooled_kurtosis``: one temporary instead of scipy's
     three) is ``scipy.stats.kurtosis``'s number, bit for bit, on skewed, heavy-tailed, offset and

@@ -5,9 +5,10 @@ float32) and its offset fits' draws and tangents; its held-out score makes and r
 shots (4 r per input) a block of inputs at a time (:data:`~._shots.SHOT_BLOCK_BYTES`) and the
 channels' pair distances in chunks of inputs (:data:`~._channels.CHUNK_BYTES`). Measured on a 50 MB
 file (16-32-16-8 with taps, 1740 inputs x 64 shots, 25 MB of float32 shots), each candidate alone
-in one thread after the session: weight_error (fitted offsets, with its refit null) raised the
-peak by 0.86 GB, bias_offset by 0.65 GB, shot by 0.57 GB, crosstalk by 0.44 GB -- the largest 35
-times the file's float32 shots, :data:`PER_THREAD`.
+in one thread after the session: bias_offset (fitted offsets, with its refit null) raised the
+peak by 0.55 GB, weight_error by 0.52 GB, shot by 0.40 GB. :data:`PER_THREAD` counts 35 times the
+file's float32 shots (0.87 GB there): what weight_error took when each layer's offset fit still
+drew every noise site of the network, a margin for physics with more sites per layer.
 The candidates run in up to 4 threads; for a large file fewer, so that all of them together stay
 within :func:`lab_memory` (the numbers do not depend on the thread count). A candidate with fitted
 offsets makes its refit null's replicates in threads of its own (:func:`replicate_threads`): they

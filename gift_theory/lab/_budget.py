@@ -14,8 +14,9 @@ within :func:`lab_memory` (the numbers do not depend on the thread count). A can
 offsets makes its refit null's replicates in threads of its own (:func:`replicate_threads`): they
 come out of the same budget (on that file two candidates with two replicate threads each raised the
 peak by 1.1 GB within seconds). The localisation (the baseline's residuals, one-step residuals and
-signatures) holds about as much as a candidate: it runs beside the candidates only when the budget
-has a thread left for it (:func:`localise_beside`), after them otherwise. The same threads
+signatures) reads the model's shots a block of inputs at a time (on that file its stages peaked
+0.1-0.25 GB above the session) and is counted as one more thread: it runs beside the candidates
+only when the budget has a thread left for it (:func:`localise_beside`), after them otherwise. The same threads
 (:func:`default_workers`) run the other loops of independent, keyed work (:func:`map_in_threads`,
 which the candidates and the refit null's replicates also run in): a tapped file's layers in the
 identification, the next measurement's candidate designs, the test's power probes.

@@ -241,7 +241,8 @@ def _directions(model: Model, meas: Measurement, layer: int, pre):
     return slope * u, slope
 
 
-def _residuals_from(meas: Measurement, model: Model, layer_ids, shots: ModelShots, pres, paired: bool = False) -> Residuals:
+def _residuals_from(meas: Measurement, model: Model, layer_ids, shots: ModelShots, pres,
+                    paired: bool = False) -> Residuals:
     """The residuals of ``layer_ids`` against the model's ``shots``, made in one pass over their
     blocks: every statistic below is a function of one input's shots, so it is the same, bit for
     bit, whatever the blocks."""

@@ -548,13 +548,12 @@ def _below(Y, M):
     return below
 
 
-def _pit(key, Y, M):
+def _pit(key, below, K: int):
     """(n, r, d) randomised PIT of each measured shot among the model's K shots of its cell:
     (number of model shots below it + U) / (K + 1), U ~ Uniform(0, 1) -- exactly uniform under
-    the model (the shot's rank among K + 1 exchangeable values). ``M``: the model's shots, or
-    :func:`_below`'s counts and K as ``(below, K)``."""
-    below, K = M if isinstance(M, tuple) else (_below(Y, M), M.shape[1])
-    u = np.array(_random.uniform01(key, Y.shape), np.float64)  # jax.random.uniform's numbers, ours to write
+    the model (the shot's rank among K + 1 exchangeable values). ``below``: :func:`_below`'s
+    counts."""
+    u = np.array(_random.uniform01(key, below.shape), np.float64)  # jax.random.uniform's numbers, ours to write
     u += below
     u /= K + 1
     return u
@@ -570,14 +569,12 @@ def _fisher(S):
     return np.arctanh(R), R
 
 
-def _correlation_z(Y, M):
+def _correlation_z(Y, fm, Rm, K: int):
     """(d, d): per pair of neurons, the measured shots' correlation within a cell against the
     model's (Fisher z, each net of its small-sample bias rho / (2 (m - 1)) at its own shot count),
     averaged over inputs and tested over inputs (Student t on the normal scale); 0 on the
-    diagonal. ``M``: the model's shots, or :func:`_fisher` of them and their count as
-    ``(fm, Rm, K)``."""
+    diagonal. ``fm``, ``Rm``: :func:`_fisher` of the model's K shots per cell."""
     fy, _ = _fisher(Y)
-    fm, Rm, K = M if isinstance(M, tuple) else _fisher(M) + (M.shape[1],)
     diff = fy - fm - Rm * (1.0 / (2 * (Y.shape[1] - 1)) - 1.0 / (2 * (K - 1)))
     n = diff.shape[0]
     mean, se = diff.mean(0), diff.std(0, ddof=1) / np.sqrt(n)
@@ -674,13 +671,13 @@ def where_it_fails(key, model: Model, meas: Measurement, bins: int = 6, shots: i
             if with_corr:
                 fm[sl], Rm[sl] = _fisher(MB)
         del MB
-        u = _pit(jax.random.fold_in(k_pit, l), Y, (below, K2))
+        u = _pit(jax.random.fold_in(k_pit, l), below, K2)
         del below
         pit[int(l)] = np.histogram(u, bins=PIT_BINS, range=(0.0, 1.0))[0]
         del u
         pit_cells[int(l)] = int(Y.shape[0] * Y.shape[2])
         if with_corr:
-            corr[int(l)] = _correlation_z(Y, (fm, Rm, K2))
+            corr[int(l)] = _correlation_z(Y, fm, Rm, K2)
         del fm, Rm
         # the quantiles of the standardised shots: the measured ones, then the model's (each
         # with its kurtosis first: the quantiles reorder the array they are given)

@@ -1,7 +1,9 @@
 """python probe.py FILE: the arrays over 1 MB a Session holds, and the RSS after loading and after the session."""
-import sys, gc, jax, numpy as np
+import gc, os, sys
+import jax, numpy as np
 from gift_theory.lab._io import load_measurement
 from gift_theory.lab._session import Session
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "2026-11-30", "memory"))  # _rss
 from _rss import rss
 meas = load_measurement(sys.argv[1]); print("loaded", rss())
 s = Session.create(jax.random.PRNGKey(4), meas, None, 1); print("session", rss())

@@ -219,9 +219,6 @@ def _variance_floor(Y):
     return 1e-3 * float(np.mean(np.var(Y, axis=1)) + 1e-30)
 
 
-variance_floor = _variance_floor
-
-
 def _top_eigenvalue(c, iters: int = 24):
     """The top eigenvalue of each cell's scatter c^T c (c: (n, h, d) centred shots), by power
     iteration from a fixed start on the smaller of the two Gram forms. A deterministic function
@@ -323,7 +320,7 @@ def paired_moment_channels(M, Y, split, eps: float | None = None):
     of shot k, so the model's halves are the data's (``split``): each half's difference then
     depends on that half's shots only, and the product of the two has mean zero under the model.
     ``eps``: the layer's variance floor (default from ``Y``; a block of a layer's inputs passes
-    the whole layer's, :func:`variance_floor`)."""
+    the whole layer's, :func:`_variance_floor`)."""
     M = np.asarray(M, np.float64)
     Y = np.asarray(Y, np.float64)
     h = Y.shape[1] // 2

@@ -30,7 +30,7 @@ from ._channels import (
     reference,
 )
 from ._qtest import log_variance_bias, over_inputs, q_test, replicate_null
-from ._channels import _input_chunk, variance_floor
+from ._channels import _input_chunk, _variance_floor
 from ._shots import Model, model_shots, one_step_block_inputs, one_step_rows, one_step_shots, to32
 
 
@@ -343,7 +343,7 @@ def one_step_check(key, model: Model, meas: Measurement, ref: Reference | None =
             level = layer_level(k_l, model, meas, l)
             m = Model(model.physics.replace(s=level), model.params, model.offsets)
         Y32, moments = np.asarray(to32(Y)), len(ref.channels) > 2
-        eps = variance_floor(np.asarray(Y, np.float64)) if moments else None
+        eps = _variance_floor(np.asarray(Y, np.float64)) if moments else None
         chunk = _input_chunk(meas.n, meas.r, meas.r, Y.shape[2])  # every block in the whole array's program
 
         def channels(sl, M):

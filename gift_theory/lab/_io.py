@@ -126,6 +126,10 @@ def load_netcdf(path, *, weights=None) -> Measurement:
     path = os.fspath(path)
     engine = "scipy" if detect_format(path) == "netcdf3" else "h5netcdf"
     kw = {"phony_dims": "sort"} if engine == "h5netcdf" else {}  # plain HDF5 has no dimension names
+    if engine == "h5netcdf":
+        damage = global_heap_damage(path)
+        if damage is not None:
+            raise GiftInputError(f"{path}: not a readable netCDF / HDF5 file ({damage})")
     hook, failure = sys.unraisablehook, None
     try:
         with xr.open_dataset(path, engine=engine, mask_and_scale=False, decode_times=False, **kw) as ds:
@@ -143,6 +147,50 @@ def load_netcdf(path, *, weights=None) -> Measurement:
             sys.unraisablehook = hook
         raise GiftInputError(failure) from None
     return validate_arrays(_needs_weights(path, arrays, weights), where=path)
+
+
+def global_heap_damage(path) -> str | None:
+    """What is wrong with the HDF5 global heap collections of ``path`` (None: nothing found).
+
+    A collection (signature ``GCOL``, version 1) holds the variable-length data -- netCDF-4 keeps
+    each variable's dimension list there -- as objects of a 16-byte header (index, references,
+    size) and the data padded to 8 bytes; the last may be the free space (index 0), whose size
+    counts its header. It carries no checksum, and the HDF5 library parses it without bounds: a
+    free-space object of size 0 before the collection's end makes it loop forever, an object that
+    runs past the end makes it read past its buffer. Such a collection is found here, by walking
+    every collection's objects, before the library reads the file.
+    """
+    import mmap
+    import struct
+
+    with open(path, "rb") as fh:
+        try:
+            data = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        except ValueError:  # an empty file: nothing to walk (the library refuses it)
+            return None
+    with data:
+        start = 0
+        while (at := data.find(b"GCOL\x01\x00\x00\x00", start)) >= 0:
+            start = at + 4
+            if at + 16 > len(data):
+                return f"a global heap collection at byte {at} is cut off by the file's end"
+            size, = struct.unpack_from("<Q", data, at + 8)
+            end = at + size
+            if size < 4096 or end > len(data):
+                return (f"the global heap collection at byte {at} claims {size} bytes (at least 4096, "
+                        f"and the file has {len(data) - at} from there)")
+            p = at + 16
+            while p + 16 <= end:
+                index, = struct.unpack_from("<H", data, p)
+                length, = struct.unpack_from("<Q", data, p + 8)
+                step = length if index == 0 else 16 + -(-length // 8) * 8
+                if step == 0 or p + step > end:
+                    what = "its free space" if index == 0 else f"its object {index}"
+                    return (f"the global heap collection at byte {at}: {what}, at byte {p}, has size {length}, which "
+                            + ("does not reach past its own header" if step == 0 else
+                               f"runs past the collection's end at byte {end}"))
+                p += step
+    return None
 
 
 def _quiet_half_open(hook):

@@ -6,6 +6,8 @@ format, and random corruptions that give exit 2 and one line, never exit 1 or a 
 import os
 import random
 import re
+import subprocess
+import sys
 import threading
 import warnings
 
@@ -324,6 +326,62 @@ def test_an_archive_zipfile_cannot_open_is_a_bad_input(tmp_path, capsys, meas, f
         assert one_line(err).startswith(f"{bad}: not a readable .npz"), (field, err)
         assert bad.read_bytes() == before
         bad.write_bytes(good)
+
+
+def _heap_objects(data: bytes):
+    """(collection start, collection end, [(object start, index, size)]) of the first HDF5 global
+    heap collection in ``data``, read by the file format's layout (not by gift's walk)."""
+    at = data.index(b"GCOL\x01\x00\x00\x00")
+    end = at + int.from_bytes(data[at + 8:at + 16], "little")
+    objects, p = [], at + 16
+    while p + 16 <= end:
+        index, size = int.from_bytes(data[p:p + 2], "little"), int.from_bytes(data[p + 8:p + 16], "little")
+        objects.append((p, index, size))
+        p += size if index == 0 else 16 + -(-size // 8) * 8
+    return at, end, objects
+
+
+def test_a_damaged_global_heap_in_a_netcdf_file_is_a_bad_input_not_a_hang(tmp_path, capsys, meas):
+    """netCDF-4 keeps each variable's dimension list in the HDF5 global heap, which has no checksum.
+    A free-space object of size 0 there sends the HDF5 library into an endless loop (found by the
+    corruption test below: one bit flipped, 8 -> 10 in an object's size, misaligns the walk onto
+    a zero); an object running past its collection makes it read past its buffer. Both, and a
+    collection longer than the file, are one line and exit 2, the file left as it was. The hang is
+    tried in a child process with a time limit, so that a regression fails instead of hanging."""
+    path = tmp_path / "m.nc"
+    save_netcdf(path, meas)
+    save_weights(tmp_path / "w.npz", meas)
+    good = path.read_bytes()
+    at, end, objects = _heap_objects(good)
+    free = [p for p, index, _ in objects if index == 0]
+    first = next(p for p, index, _ in objects if index > 0)
+    assert free and objects[-1][1] == 0, objects  # h5netcdf leaves free space at the collection's end
+
+    def with_field(offset, value):
+        b = bytearray(good)
+        b[offset:offset + 8] = value.to_bytes(8, "little")
+        return bytes(b)
+
+    cases = {"free space of size 0": (with_field(free[0] + 8, 0), "does not reach past its own header"),
+             "an object past the end": (with_field(first + 8, end - first), "runs past the collection's end"),
+             "a collection past the file": (with_field(at + 8, len(good)), "claims")}
+    args = ["compare", str(path), "--weights", str(tmp_path / "w.npz"), "--effect", "awgn=0.1", "--json",
+            "--power-replicates", "0"]
+    for name, (data, says) in cases.items():
+        path.write_bytes(data)
+        if name == "free space of size 0":
+            r = subprocess.run([sys.executable, "-c", "import sys; from gift_theory.cli import main; "
+                                "sys.exit(main(sys.argv[1:]))", *args], capture_output=True, text=True, timeout=120)
+            code, out, err = r.returncode, r.stdout, r.stderr
+        else:
+            code, out, err = run(capsys, *args)
+        assert code == 2 and out == "", (name, code, err)
+        line = one_line(err)
+        assert line.startswith(f"{path}: not a readable netCDF / HDF5 file (the global heap collection at byte {at}")
+        assert says in line, (name, line)
+        assert path.read_bytes() == data
+    path.write_bytes(good)
+    assert load_measurement(path, weights=tmp_path / "w.npz").y.shape == meas.y.shape
 
 
 @settings(max_examples=40, deadline=None)

@@ -220,8 +220,10 @@ def _propagate(x, params, act, s, seed, scales=None, deform=None, columns=False,
             alpha = deform.get(("alpha", l), 0.0)
             u = u_raw * (1.0 + alpha) if l == L else u_raw
             z = u + b + deform.get(("bias", l), 0.0) + s * next(normals)
-            layer = {"a_in": a, "z": z, "u_prog": a @ W.T, "u_raw": u_raw, "Wd": Wd * (1.0 + alpha)[:, None]
-                     if l == L and np.ndim(alpha) else Wd, "alpha": alpha}
+            layer = {"z": z}
+            if columns:  # what the derivative columns read (the programmed sum: one more product)
+                layer.update({"a_in": a, "u_prog": a @ W.T, "u_raw": u_raw, "Wd": Wd * (1.0 + alpha)[:, None]
+                              if l == L and np.ndim(alpha) else Wd, "alpha": alpha})
             rec.append(layer)
             if l == L:
                 break

@@ -648,3 +648,15 @@ def test_the_layers_are_read_in_threads_and_one_thread_reads_the_same(monkeypatc
         np.testing.assert_array_equal(a.W_eff, b.W_eff)
         assert (a.s, a.choice) == (b.s, b.choice)
     assert any(r["class"] == "gain_error" and r["layer"] == 2 and r["p"] < 0.01 for r in many.rows())
+
+
+def test_the_no_taps_propagation_s_kept_draws_are_the_draws_made_again(monkeypatch):
+    # private: the bound below which the no-taps propagation keeps its standard normal draws
+    # between the noise level's fixed-point steps. Kept or drawn again, every number is the same:
+    # a replay out of order (a draw given to the wrong site) would move them.
+    from gift_theory.lab.identification import _layers
+
+    meas = sim(31, widths=(5, 9, 7, 3), n=48, r=8, s=0.08, taps=False)
+    kept = identify(meas).rows()
+    monkeypatch.setattr(_layers, "KEEP_PROPAGATION_DRAWS", 0)
+    assert identify(meas).rows() == kept

@@ -97,7 +97,7 @@ class _Layer:
         return 1.0 + (self.Y.shape[1] / self.draws if self.draws else 0.0)
 
 
-def _propagate(meas: Measurement, s: float):
+def _propagate(meas: Measurement, s: float, kept: dict | None = None):
     """Per input, the model's mean (n, d) and unit covariance per s^2 (n, d, d) of a_{L-1}, the
     output layer's input, without taps: by Monte Carlo through the model (reference §1, awgn at
     level s), the standard normal draws fixed (the same numbers at every s), inputs in chunks.
@@ -111,11 +111,12 @@ def _propagate(meas: Measurement, s: float):
     ``basis``; up to :data:`WIDE` outputs): the output's own noise is a larger share of its minor
     components than of any neuron, where the hidden layers' propagated noise dilutes a law
     change of the output's own. The draws: see :data:`MC_DRAWS` and :data:`MC_ATTENUATION`.
-    Returns (mean, cov, draws, law or None, basis or None)."""
+    ``kept``: a dict in which the standard normal draws are kept for the next call on the same
+    measurement (:class:`_Kept`). Returns (mean, cov, draws, law or None, basis or None)."""
     n, p = np.shape(meas.x)
     macs = sum(np.size(W) for W, _ in meas.params[:-1]) + p
     M = int(max(MC_MIN_DRAWS, min(MC_DRAWS, MC_FLOPS / max(n * macs, 1))))
-    out = _propagate_draws(meas, s, M, M)
+    out = _propagate_draws(meas, s, M, M, kept)
     mean, cov = out[0], out[1]
     spread = float(np.mean(np.var(mean, axis=0)))
     err = s * s * float(np.mean(np.einsum("nii->ni", cov))) / M  # the per-input mean's variance from the draws
@@ -124,12 +125,41 @@ def _propagate(meas: Measurement, s: float):
         want = M * err / (MC_ATTENUATION * max(spread, np.finfo(np.float64).tiny))
         M2 = int(min(cap, M * 2 ** int(np.ceil(np.log2(want / M)))))  # powers of 2: the same draws across nearby s
         if M2 > M:
-            out = _propagate_draws(meas, s, M2, M)
+            out = _propagate_draws(meas, s, M2, M, kept)
     return out
 
 
-def _propagate_draws(meas: Measurement, s: float, M: int, M_law: int):
-    """:func:`_propagate` with M draws per input (the law from the first ``M_law`` of them)."""
+#: the propagation's standard normal draws are kept between the calls of one identification (the
+#: noise level's fixed point propagates again at each level, with the same draws) up to this many
+#: floats per draw count, else drawn again (the same numbers either way)
+KEEP_PROPAGATION_DRAWS = 2e7
+
+
+class _Kept:
+    """A generator's ``standard_normal`` whose draws are kept in ``store`` (a list) and given again,
+    in the same order, to the next propagation that reads the same list: the numbers of a fresh
+    generator of the same seed, without drawing them twice. ``keep`` False: draws as the generator."""
+
+    def __init__(self, rng, store: list, keep: bool):
+        self.rng, self.store, self.keep, self.i = rng, store, keep, 0
+
+    def standard_normal(self, shape):
+        if self.i < len(self.store):
+            out = self.store[self.i]
+            if out.shape != tuple(shape):
+                raise RuntimeError(f"kept draws of shape {out.shape} read as {tuple(shape)} (another measurement?)")
+        else:
+            out = self.rng.standard_normal(shape)
+            if self.keep:
+                self.store.append(out)
+        self.i += 1
+        return out
+
+
+def _propagate_draws(meas: Measurement, s: float, M: int, M_law: int, kept: dict | None = None):
+    """:func:`_propagate` with M draws per input (the law from the first ``M_law`` of them); the
+    draws kept in ``kept`` (keyed by the draw counts) when it is given and they fit
+    :data:`KEEP_PROPAGATION_DRAWS`."""
     act = _ACT[meas.activation if meas.activation in _ACT else "tanh"][0]
     x = np.asarray(meas.x, np.float64)
     params = [(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in meas.params[:-1]]
@@ -138,8 +168,11 @@ def _propagate_draws(meas: Measurement, s: float, M: int, M_law: int):
     W_L = np.asarray(meas.params[-1][0], np.float64)
     r = meas.r
     G = min(M, M_law) // r if r >= 5 else 0
-    rng = np.random.default_rng(20261127)
-    rng_law = np.random.default_rng(20261128)
+    size = x.shape[0] * (M * (p + 2 * sum(W.shape[0] for W, _ in params)) + G * r * W_L.shape[0])
+    keep = kept is not None and size <= KEEP_PROPAGATION_DRAWS
+    stores = kept.setdefault((M, M_law), ([], [])) if keep else ([], [])
+    rng = _Kept(np.random.default_rng(20261127), stores[0], keep)
+    rng_law = _Kept(np.random.default_rng(20261128), stores[1], keep)
     chunk = max(1, int(4e6 // (M * max(p, W_L.shape[0], *(W.shape[0] for W, _ in params)))))
     mean = np.empty((n, d))
     cov = np.empty((n, d, d))
@@ -168,8 +201,9 @@ def _propagate_draws(meas: Measurement, s: float, M: int, M_law: int):
     return mean, cov, M, law, basis
 
 
-def layer_inputs(meas: Measurement, s: float) -> list:
-    """What each identified layer reads (:class:`_Layer`): every layer (taps) or the output (no taps)."""
+def layer_inputs(meas: Measurement, s: float, kept: dict | None = None) -> list:
+    """What each identified layer reads (:class:`_Layer`): every layer (taps) or the output (no taps;
+    ``kept``: see :func:`_propagate`)."""
     L = len(meas.params)
     taps = meas.has_taps
     out = []
@@ -189,7 +223,7 @@ def layer_inputs(meas: Measurement, s: float) -> list:
     y = np.asarray(meas.y, np.float64)
     if L == 1:
         return [_Layer(1, x[:, None, :], y, np.eye(p), W, b, False, res_var=resolution_var(y))]
-    m, C, M, law, basis = _propagate(meas, s)
+    m, C, M, law, basis = _propagate(meas, s, kept)
     return [_Layer(L, m[:, None, :], y, C, W, b, False, M, law=law, basis=basis, res_var=resolution_var(y))]
 
 

@@ -128,7 +128,8 @@ def _identify(meas: Measurement, s: float | None, output_candidates: bool = True
         s = float(np.sqrt(np.mean(np.var(Y0, axis=1, ddof=1)) / 2.0)) if meas.r > 1 else 0.05
         # relative to the data, not a fixed floor: a constant layer still gets a level > 0
         s = max(s, 1e-7 * float(np.sqrt(np.mean(Y0 ** 2))), np.finfo(np.float32).tiny)
-    lays = layer_inputs(meas, s)
+    kept = {}  # the no-taps propagation's draws, the same at every level of the fixed point below
+    lays = layer_inputs(meas, s, kept)
     # each layer reads only its own inputs and shots: the layers in the lab's threads
     out = map_in_threads(lambda lay: identify_layer(lay, act, s, meas.t, meas.arch.depth, meas.has_taps), lays,
                          default_workers(meas))
@@ -140,7 +141,7 @@ def _identify(meas: Measurement, s: float | None, output_candidates: bool = True
             if abs(out[-1].s / s - 1.0) < 1e-3:
                 break
             s = out[-1].s
-            out = [identify_layer(lay, act, s, meas.t, meas.arch.depth, False) for lay in layer_inputs(meas, s)]
+            out = [identify_layer(lay, act, s, meas.t, meas.arch.depth, False) for lay in layer_inputs(meas, s, kept)]
     # a layer on a lattice (a quantizing readout): a finding of its own
     ids, Ys = meas.layer_ids(), meas.layers()
     out = [dataclasses.replace(li, rows=li.rows + tuple(rw for rw in [lattice_row(Ys[ids.index(li.layer)], li.layer)]

@@ -142,6 +142,7 @@ class _Kept:
 
     def __init__(self, rng, store: list, keep: bool):
         self.rng, self.store, self.keep, self.i = rng, store, keep, 0
+        self.replaying = bool(store)
 
     def standard_normal(self, shape):
         if self.i < len(self.store):
@@ -149,6 +150,8 @@ class _Kept:
             if out.shape != tuple(shape):
                 raise RuntimeError(f"kept draws of shape {out.shape} read as {tuple(shape)} (another measurement?)")
         else:
+            if self.replaying:  # the generator is still at its start: a fresh draw here would repeat the kept ones
+                raise RuntimeError(f"the {len(self.store)} kept draws ran out (another measurement?)")
             out = self.rng.standard_normal(shape)
             if self.keep:
                 self.store.append(out)

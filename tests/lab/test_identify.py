@@ -660,3 +660,12 @@ def test_the_no_taps_propagation_s_kept_draws_are_the_draws_made_again(monkeypat
     kept = identify(meas).rows()
     monkeypatch.setattr(_layers, "KEEP_PROPAGATION_DRAWS", 0)
     assert identify(meas).rows() == kept
+    # and a replay asked for more draws than were kept says so (a fresh draw there would repeat
+    # the generator's first draws, not continue them)
+    store = []
+    first = _layers._Kept(np.random.default_rng(0), store, True)
+    a = first.standard_normal((2, 3))
+    again = _layers._Kept(np.random.default_rng(0), store, True)
+    assert again.standard_normal((2, 3)) is a
+    with pytest.raises(RuntimeError, match="ran out"):
+        again.standard_normal((2, 3))

@@ -663,9 +663,9 @@ def test_the_no_taps_propagation_s_kept_draws_are_the_draws_made_again(monkeypat
     # and a replay asked for more draws than were kept says so (a fresh draw there would repeat
     # the generator's first draws, not continue them)
     store = []
-    first = _layers._Kept(np.random.default_rng(0), store, True)
+    first = _layers._Kept(np.random.default_rng(0), store)
     a = first.standard_normal((2, 3))
-    again = _layers._Kept(np.random.default_rng(0), store, True)
+    again = _layers._Kept(np.random.default_rng(0), store)
     assert again.standard_normal((2, 3)) is a
     with pytest.raises(RuntimeError, match="ran out"):
         again.standard_normal((2, 3))

@@ -138,10 +138,10 @@ KEEP_PROPAGATION_DRAWS = 2e7
 class _Kept:
     """A generator's ``standard_normal`` whose draws are kept in ``store`` (a list) and given again,
     in the same order, to the next propagation that reads the same list: the numbers of a fresh
-    generator of the same seed, without drawing them twice. ``keep`` False: draws as the generator."""
+    generator of the same seed, without drawing them twice."""
 
-    def __init__(self, rng, store: list, keep: bool):
-        self.rng, self.store, self.keep, self.i = rng, store, keep, 0
+    def __init__(self, rng, store: list):
+        self.rng, self.store, self.i = rng, store, 0
         self.replaying = bool(store)
 
     def standard_normal(self, shape):
@@ -153,8 +153,7 @@ class _Kept:
             if self.replaying:  # the generator is still at its start: a fresh draw here would repeat the kept ones
                 raise RuntimeError(f"the {len(self.store)} kept draws ran out (another measurement?)")
             out = self.rng.standard_normal(shape)
-            if self.keep:
-                self.store.append(out)
+            self.store.append(out)
         self.i += 1
         return out
 
@@ -172,10 +171,10 @@ def _propagate_draws(meas: Measurement, s: float, M: int, M_law: int, kept: dict
     r = meas.r
     G = min(M, M_law) // r if r >= 5 else 0
     size = x.shape[0] * (M * (p + 2 * sum(W.shape[0] for W, _ in params)) + G * r * W_L.shape[0])
-    keep = kept is not None and size <= KEEP_PROPAGATION_DRAWS
-    stores = kept.setdefault((M, M_law), ([], [])) if keep else ([], [])
-    rng = _Kept(np.random.default_rng(20261127), stores[0], keep)
-    rng_law = _Kept(np.random.default_rng(20261128), stores[1], keep)
+    rng, rng_law = np.random.default_rng(20261127), np.random.default_rng(20261128)
+    if kept is not None and size <= KEEP_PROPAGATION_DRAWS:
+        stores = kept.setdefault((M, M_law), ([], []))
+        rng, rng_law = _Kept(rng, stores[0]), _Kept(rng_law, stores[1])
     chunk = max(1, int(4e6 // (M * max(p, W_L.shape[0], *(W.shape[0] for W, _ in params)))))
     mean = np.empty((n, d))
     cov = np.empty((n, d, d))

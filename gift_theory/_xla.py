@@ -19,6 +19,14 @@ The option is an experimental XLA flag: :func:`jit` probes once, on first use, w
 installed XLA knows it, and compiles without it otherwise -- same numbers up to float
 rounding, only slower. ``GIFT_XLA_DEFAULTS=1`` in the environment turns the options off.
 
+A program marked *run-bound* (``jit(..., run_bound=True)``: one program run many times over
+large arrays, such as the lab's Gaussian smoothing of tanh) also compiles at XLA's default
+backend optimisation level (:data:`RUN_BOUND_LEVEL`) where ``XLA_FLAGS`` lowers it for every
+program (the test run does, to compile its thousands of small programs cheaply). Its run time
+outweighs its compile time: at level 0 LLVM leaves its loops unvectorised (the smoothing's
+wide rule ran 4x slower). Where no flag lowers the level -- any run of ``gift`` -- it compiles
+as every other program does, so the mark changes no number there.
+
 Compiled programs are also kept on disk (JAX's persistent compilation cache), so a new
 process -- a Dask worker of a sweep, the next ``gift`` command -- loads the programs an
 earlier one compiled instead of compiling them again: :func:`use_compilation_cache`, called
@@ -89,31 +97,56 @@ def use_compilation_cache() -> str | None:
     return folder
 
 
+#: XLA's default backend (LLVM) optimisation level: a run-bound program compiles at least at it
+RUN_BOUND_LEVEL = 2
+
+
 @functools.lru_cache(maxsize=None)
-def compiler_options() -> tuple:
-    """The options this JAX/XLA accepts, as sorted (name, value) pairs (empty off CPU)."""
+def compiler_options(run_bound: bool = False, cpu: bool = True) -> tuple:
+    """The options this JAX/XLA accepts, as sorted (name, value) pairs (empty off CPU):
+    :data:`CPU_OPTIONS` (``cpu``) and, ``run_bound``, :data:`RUN_BOUND_LEVEL` where
+    ``XLA_FLAGS`` sets a lower level."""
     if os.environ.get("GIFT_XLA_DEFAULTS", "") not in ("", "0"):
         return ()
+    opts = dict(_accepted(tuple(sorted(CPU_OPTIONS.items()))) if cpu else ())
+    if run_bound and _flag_level() is not None and _flag_level() < RUN_BOUND_LEVEL:
+        opts.update(_accepted((("xla_backend_optimization_level", RUN_BOUND_LEVEL),)))
+    return tuple(sorted(opts.items()))
+
+
+def _flag_level() -> int | None:
+    """The backend optimisation level ``XLA_FLAGS`` sets (its last mention), or None."""
+    import re
+
+    found = re.findall(r"--xla_backend_optimization_level=(\d+)", os.environ.get("XLA_FLAGS", ""))
+    return int(found[-1]) if found else None
+
+
+@functools.lru_cache(maxsize=None)
+def _accepted(options: tuple) -> tuple:
+    """``options`` if this JAX/XLA compiles a program with them on the CPU, else ()."""
     try:
         if jax.default_backend() != "cpu":
             return ()
-        jax.jit(lambda a: a + 1, compiler_options=dict(CPU_OPTIONS)).lower(jnp.zeros(2)).compile()
+        jax.jit(lambda a: a + 1, compiler_options=dict(options)).lower(jnp.zeros(2)).compile()
     except Exception:  # an older jax without compiler_options, or an XLA without the flag
         return ()
-    return tuple(sorted(CPU_OPTIONS.items()))
+    return options
 
 
-def jit(fun=None, **jit_kwargs):
-    """``jax.jit(fun, **jit_kwargs)`` plus :data:`CPU_OPTIONS` where accepted; usable as
-    ``@jit`` or ``@partial(jit, static_argnames=...)``. The options are looked up on the first
-    call, so importing gift does not start a backend."""
+def jit(fun=None, *, run_bound: bool = False, cpu_options: bool = True, **jit_kwargs):
+    """``jax.jit(fun, **jit_kwargs)`` plus :data:`CPU_OPTIONS` where accepted (unless
+    ``cpu_options`` is false: XLA's own choices); usable as ``@jit`` or
+    ``@partial(jit, static_argnames=...)``. ``run_bound``: the program compiles at XLA's
+    default optimisation level even where ``XLA_FLAGS`` lowers it (see the module). The options
+    are looked up on the first call, so importing gift does not start a backend."""
     if fun is None:
-        return functools.partial(jit, **jit_kwargs)
+        return functools.partial(jit, run_bound=run_bound, cpu_options=cpu_options, **jit_kwargs)
     compiled = {}
 
     @functools.wraps(fun)
     def call(*args, **kwargs):
-        opts = compiler_options()
+        opts = compiler_options(run_bound, cpu_options)
         f = compiled.get(opts)
         if f is None:
             f = compiled[opts] = jax.jit(fun, **jit_kwargs, **({"compiler_options": dict(opts)} if opts else {}))

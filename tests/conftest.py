@@ -4,7 +4,8 @@
 * The weight cache goes to a temporary folder so tests never touch the user's cache.
 * hypothesis: a profile with a deadline that tolerates JAX compilation.
 * XLA compiles at backend optimisation level 0 with its classic emitters (:func:`_xla_flags`:
-  the suite is compile-bound).
+  the suite is compile-bound); the programs gift marks run-bound keep XLA's default level
+  (``gift_theory._xla.jit``).
 * Each xdist worker (and every command it starts) runs OpenBLAS on one thread
   (``OPENBLAS_NUM_THREADS=1`` unless set) and draws figures without a helper process
   (``GIFT_FIGURE_PROCESSES=1``): two workers share two cores, and a worker's BLAS threads or

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 
 import jax
 import jax.numpy as jnp
@@ -109,15 +110,14 @@ def compiler_options(run_bound: bool = False, cpu: bool = True) -> tuple:
     if os.environ.get("GIFT_XLA_DEFAULTS", "") not in ("", "0"):
         return ()
     opts = dict(_accepted(tuple(sorted(CPU_OPTIONS.items()))) if cpu else ())
-    if run_bound and _flag_level() is not None and _flag_level() < RUN_BOUND_LEVEL:
+    level = _flag_level() if run_bound else None
+    if level is not None and level < RUN_BOUND_LEVEL:
         opts.update(_accepted((("xla_backend_optimization_level", RUN_BOUND_LEVEL),)))
     return tuple(sorted(opts.items()))
 
 
 def _flag_level() -> int | None:
     """The backend optimisation level ``XLA_FLAGS`` sets (its last mention), or None."""
-    import re
-
     found = re.findall(r"--xla_backend_optimization_level=(\d+)", os.environ.get("XLA_FLAGS", ""))
     return int(found[-1]) if found else None
 

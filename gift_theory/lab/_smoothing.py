@@ -77,16 +77,10 @@ def _x64():
     return ctx
 
 
-@functools.lru_cache(maxsize=1)
-def _wide_program():
-    """The wide rule compiled in float64 (XLA's exp is vectorised where numpy's float64 exp may
-    not be: the (cells, nodes) Gaussian densities are most of a wide layer's identification),
-    run-bound (:func:`gift_theory._xla.jit`: one program, run over every chunk of every map
-    step), with XLA's own choices otherwise."""
+def _wide_rule():
+    """The wide rule as a function of (z, sd) for JAX to compile, its nodes in float64."""
     import jax
     import jax.numpy as jnp
-
-    from .._xla import jit
 
     with _x64()(True):
         U, Q, S2 = (jnp.asarray(v, jnp.float64) for v in (_U, _Q, _SECH2))
@@ -98,7 +92,18 @@ def _wide_program():
         b = jnp.exp(-0.5 * ((U + zc) / sc) ** 2) * c
         return jax.scipy.special.erf(z / (sd * np.sqrt(2.0))) - 2.0 * ((a - b) @ Q), (a + b) @ S2
 
-    return jit(rule, run_bound=True, cpu_options=False)
+    return rule
+
+
+@functools.lru_cache(maxsize=1)
+def _wide_program():
+    """The wide rule compiled in float64 (XLA's exp is vectorised where numpy's float64 exp may
+    not be: the (cells, nodes) Gaussian densities are most of a wide layer's identification),
+    run-bound (:func:`gift_theory._xla.jit`: one program, run over every chunk of every map
+    step), with XLA's own choices otherwise."""
+    from .._xla import jit
+
+    return jit(_wide_rule(), run_bound=True, cpu_options=False)
 
 
 def _tanh_wide(z, sd):
